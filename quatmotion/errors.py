@@ -1,0 +1,29 @@
+"""The exceptions quatmotion raises for bad input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class FormatError(ValueError):
+    """A motion file is malformed. The message names the file and, where known, the line.
+
+    Attributes
+    ----------
+    path : pathlib.Path or None
+        The file that failed to parse.
+    line : int or None
+        1-based line number of the offending text, where one can be named.
+    """
+
+    def __init__(self, message: str, path: str | Path | None = None, line: int | None = None):
+        self.path = Path(path) if path is not None else None
+        self.line = line
+        where = ""
+        if self.path is not None:
+            where = f"{self.path}"
+            if line is not None:
+                where += f":{line}"
+            where += ": "
+        super().__init__(f"{where}{message}")
+        self.reason = message
