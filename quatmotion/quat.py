@@ -136,7 +136,9 @@ def log(q: ArrayLike) -> FloatArray:
     half_angle = np.arctan2(vnorm, w)
     # a / |v| -> 1/|q| as |v| -> 0 with w > 0; guard the division instead of dividing 0/0.
     safe = (vnorm > 1e-12) | ((w < 0.0) & (vnorm > 0.0))
-    scale = np.where(safe, half_angle / np.where(safe, vnorm, 1.0), 1.0 / np.maximum(np.abs(w), 1e-300))
+    scale = np.where(
+        safe, half_angle / np.where(safe, vnorm, 1.0), 1.0 / np.maximum(np.abs(w), 1e-300)
+    )
     out = v * scale[..., None]
     # q = -1 has no axis; any pi * u is a log of it. Pick the x axis so exp(log(-1)) == -1.
     minus_one = (w < 0.0) & (vnorm == 0.0)
@@ -157,7 +159,7 @@ def exp(v: ArrayLike) -> FloatArray:
 
 
 def power(q: ArrayLike, t: ArrayLike) -> FloatArray:
-    """``q ** t = exp(t log q)`` with array ``t`` broadcast against ``q[..., 0]``: ``-> (..., 4)``."""
+    """``q ** t = exp(t log q)``, ``t`` broadcast against ``q[..., 0]``: ``-> (..., 4)``."""
     t = np.asarray(t, dtype=np.float64)
     return exp(log(q) * t[..., None])
 
@@ -185,13 +187,15 @@ def make_continuous(q: ArrayLike, axis: int = 0) -> FloatArray:
         return np.moveaxis(q.copy(), 0, axis)
     flips = np.sum(q[1:] * q[:-1], axis=-1) < 0.0
     # A flip at step t changes the sign of every later quaternion: cumulative parity.
-    parity = np.concatenate((np.zeros((1, *flips.shape[1:]), dtype=bool), np.cumsum(flips, axis=0) % 2 == 1))
+    parity = np.concatenate(
+        (np.zeros((1, *flips.shape[1:]), dtype=bool), np.cumsum(flips, axis=0) % 2 == 1)
+    )
     out = np.where(parity[..., None], -q, q)
     return np.moveaxis(out, 0, axis)
 
 
 def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike) -> FloatArray:
-    """Spherical interpolation along the shorter arc: ``p (p^-1 q)^t``, ``t`` broadcast: ``-> (..., 4)``."""
+    """Interpolation on the shorter arc, ``p (p^-1 q)^t``, ``t`` broadcast: ``-> (..., 4)``."""
     p = _as_quat(p)
     q = _as_quat(q)
     q = np.where((dot(p, q) < 0.0)[..., None], -q, q)
@@ -242,8 +246,15 @@ def from_matrix(m: ArrayLike) -> FloatArray:
 
 
 def _check_order(order: str) -> None:
-    if len(order) != 3 or not (order.isupper() or order.islower()) or set(order.lower()) - set("xyz"):
-        raise ValueError(f"Euler order must be 3 letters of xyz, all upper (intrinsic) or all lower (extrinsic), got {order!r}")
+    if (
+        len(order) != 3
+        or not (order.isupper() or order.islower())
+        or set(order.lower()) - set("xyz")
+    ):
+        raise ValueError(
+            "Euler order must be 3 letters of xyz, all upper (intrinsic) or all lower "
+            f"(extrinsic), got {order!r}"
+        )
     if order[0].lower() == order[1].lower() or order[1].lower() == order[2].lower():
         raise ValueError(f"Euler order {order!r} repeats an axis in consecutive places")
 

@@ -68,7 +68,9 @@ def test_joint_translations_replace_offsets():
 
 def test_motion_makes_rotations_continuous_and_validates():
     sk = chain(2)
-    path = quat.exp(np.linspace(0, 2, 30)[:, None, None] * np.array([[0.1, 0.4, 0.0], [0.0, 0.2, 0.3]]))
+    path = quat.exp(
+        np.linspace(0, 2, 30)[:, None, None] * np.array([[0.1, 0.4, 0.0], [0.0, 0.2, 0.3]])
+    )
     signs = np.where(np.arange(30) % 3 == 0, -1.0, 1.0)[:, None, None]
     m = Motion(sk, 60.0, np.zeros((30, 3)), path * signs)
     assert np.all(quat.dot(m.rotations[1:], m.rotations[:-1]) > 0)

@@ -34,8 +34,11 @@ def test_exp_inverts_log(q):
     np.testing.assert_allclose(quat.exp(quat.log(q)), q, atol=1e-12)
 
 
-@given(unit_quats(), arrays(np.float64, (8,), elements=st.floats(-3, 3)),
-       arrays(np.float64, (8,), elements=st.floats(-3, 3)))
+@given(
+    unit_quats(),
+    arrays(np.float64, (8,), elements=st.floats(-3, 3)),
+    arrays(np.float64, (8,), elements=st.floats(-3, 3)),
+)
 def test_powers_of_one_axis_add(q, a, b):
     np.testing.assert_allclose(
         quat.multiply(quat.power(q, a), quat.power(q, b)), quat.power(q, a + b), atol=1e-10
@@ -80,7 +83,9 @@ def test_euler_principal_range_gives_back_the_angles():
         back = quat.to_euler(quat.from_euler(angles, order), order)
         np.testing.assert_allclose(back, angles, atol=1e-10)
         np.testing.assert_allclose(
-            quat.to_euler(quat.from_euler(np.rad2deg(angles), order, degrees=True), order, degrees=True),
+            quat.to_euler(
+                quat.from_euler(np.rad2deg(angles), order, degrees=True), order, degrees=True
+            ),
             np.rad2deg(angles),
             atol=1e-8,
         )

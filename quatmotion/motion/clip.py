@@ -88,7 +88,9 @@ class Motion:
         """Length in seconds, ``n_frames / fps``."""
         return self.n_frames / self.fps
 
-    def slice(self, start: int | None = None, stop: int | None = None, step: int | None = None) -> Motion:
+    def slice(
+        self, start: int | None = None, stop: int | None = None, step: int | None = None
+    ) -> Motion:
         """Frames ``start:stop:step`` as a new clip (fps divided by ``step``)."""
         s = slice(start, stop, step)
         jt = None if self.joint_translations is None else self.joint_translations[s]

@@ -83,7 +83,9 @@ class Skeleton:
         if offsets.shape != (n, 3):
             raise ValueError(f"offsets has shape {offsets.shape}, expected ({n}, 3)")
         if parents[0] != -1 or np.any(parents[1:] < 0) or np.any(parents[1:] >= np.arange(1, n)):
-            raise ValueError("parents must be -1 for joint 0 and point to an earlier joint otherwise")
+            raise ValueError(
+                "parents must be -1 for joint 0 and point to an earlier joint otherwise"
+            )
         if len(set(self.joint_names)) != n:
             raise ValueError("joint names must be unique")
         if len(self.channels) != n:
@@ -94,12 +96,18 @@ class Skeleton:
                 raise ValueError(f"joint {name!r} has bad channels {chans}")
         if self.euler not in ("intrinsic", "extrinsic"):
             raise ValueError(f"euler must be 'intrinsic' or 'extrinsic', got {self.euler!r}")
-        axes = quat.identity((n,)) if self.axes is None else quat.normalize(np.asarray(self.axes, dtype=np.float64))
+        axes = (
+            quat.identity((n,))
+            if self.axes is None
+            else quat.normalize(np.asarray(self.axes, dtype=np.float64))
+        )
         if axes.shape != (n, 4):
             raise ValueError(f"axes has shape {axes.shape}, expected ({n}, 4)")
         site_parents = np.asarray(self.site_parents, dtype=np.int64).copy()
         site_offsets = np.asarray(self.site_offsets, dtype=np.float64).reshape(-1, 3).copy()
-        if site_parents.shape != (len(self.site_names),) or site_offsets.shape[0] != len(self.site_names):
+        if site_parents.shape != (len(self.site_names),) or site_offsets.shape[0] != len(
+            self.site_names
+        ):
             raise ValueError("site_names, site_parents and site_offsets disagree in length")
         if np.any((site_parents < 0) | (site_parents >= n)):
             raise ValueError("site_parents must index joints")
