@@ -1,0 +1,253 @@
+"""I/O and forward-kinematics throughput.
+
+``run(out, quick, seed)`` measures, on the files of the data folder (``$QUATMOTION_DATA``, else
+``<project root>/../shared/data``):
+
+* **Parse throughput**, MB/s (10^6 bytes of file text per second, one thread; ``mb_per_s`` by
+  wall clock, ``mb_per_s_cpu`` by process CPU time, which a loaded machine distorts less): every
+  AMC file (skeletons read once beforehand, not timed) and every BVH file; ``quick`` takes a
+  seeded random subset. The Numba kernels are compiled (or loaded from cache) before timing.
+  Per-file rates go to the JSON and to a histogram ``<stem>_parse.png`` beside ``out``.
+* **Write throughput**, MB/s of text written, on a subset (writers are not the hot path).
+* **Forward kinematics**, frames/s on a 31-joint CMU skeleton: the longest CMU clip tiled to at
+  least 100,000 frames, median of 5 runs (wall and CPU time), joints only and joints plus end
+  sites.
+* **Reference agreement**: the largest distance, in cm, between our forward kinematics and the
+  reference positions (``reference/*.npz``), which the tests bound by 1e-3 cm.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import platform
+import statistics
+import tempfile
+import time
+from typing import Any
+
+import numpy as np
+
+from quatmotion.io import (
+    asf_bone_end_positions,
+    find_asf_for_amc,
+    read_amc,
+    read_asf,
+    read_bvh,
+    write_amc,
+    write_bvh,
+)
+from quatmotion.motion import Motion, forward_kinematics
+
+FK_FRAMES = 100_000
+REPEATS = 5
+
+
+def _data_root() -> pathlib.Path:
+    env = os.environ.get("QUATMOTION_DATA")
+    if env:
+        return pathlib.Path(env).resolve()
+    return (pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "data").resolve()
+
+
+def _write_json(path: pathlib.Path, payload: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as handle:
+            json.dump(payload, handle, indent=2, default=float)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _subset(files: list[pathlib.Path], quick: bool, rng: np.random.Generator, n: int) -> list:
+    if not quick or len(files) <= n:
+        return files
+    return [files[i] for i in sorted(rng.choice(len(files), size=n, replace=False))]
+
+
+def _parse_rates(files: list[pathlib.Path], read) -> dict[str, Any]:
+    sizes, seconds, frames = [], [], 0
+    cpu_seconds = 0.0
+    for path in files:
+        size = path.stat().st_size
+        start, cpu_start = time.perf_counter(), time.process_time()
+        motion = read(path)
+        seconds.append(time.perf_counter() - start)
+        cpu_seconds += time.process_time() - cpu_start
+        sizes.append(size)
+        frames += motion.n_frames
+    rates = np.asarray(sizes) / np.maximum(np.asarray(seconds), 1e-12) / 1e6
+    return {
+        "files": len(files),
+        "megabytes": float(np.sum(sizes) / 1e6),
+        "frames": frames,
+        "seconds": float(np.sum(seconds)),
+        "mb_per_s": float(np.sum(sizes) / 1e6 / max(np.sum(seconds), 1e-12)),
+        "cpu_seconds": cpu_seconds,
+        "mb_per_s_cpu": float(np.sum(sizes) / 1e6 / max(cpu_seconds, 1e-12)),
+        "frames_per_s": float(frames / max(np.sum(seconds), 1e-12)),
+        "per_file_mb_per_s": {p.name: float(r) for p, r in zip(files, rates, strict=True)},
+    }
+
+
+def _write_rate(motions: list[Motion], write, suffix: str) -> dict[str, Any]:
+    total_bytes, total_seconds = 0, 0.0
+    with tempfile.TemporaryDirectory() as folder:
+        for k, motion in enumerate(motions):
+            path = pathlib.Path(folder) / f"{k}{suffix}"
+            start = time.perf_counter()
+            write(motion, path)
+            total_seconds += time.perf_counter() - start
+            total_bytes += path.stat().st_size
+    return {
+        "files": len(motions),
+        "megabytes": total_bytes / 1e6,
+        "seconds": total_seconds,
+        "mb_per_s": total_bytes / 1e6 / max(total_seconds, 1e-12),
+    }
+
+
+def _fk_rate(motion: Motion) -> dict[str, Any]:
+    tiles = -(-FK_FRAMES // motion.n_frames)
+    big = Motion(
+        skeleton=motion.skeleton,
+        fps=motion.fps,
+        root_translation=np.tile(motion.root_translation, (tiles, 1)),
+        rotations=np.tile(motion.rotations, (tiles, 1, 1)),
+    )
+    out: dict[str, Any] = {"joints": big.n_joints, "sites": big.skeleton.n_sites}
+    out["frames"] = big.n_frames
+    for label, sites in (("joints", False), ("joints_and_sites", True)):
+        forward_kinematics(big.slice(0, 100), include_sites=sites)
+        timings, cpu_timings = [], []
+        for _ in range(REPEATS):
+            start, cpu_start = time.perf_counter(), time.process_time()
+            forward_kinematics(big, include_sites=sites)
+            timings.append(time.perf_counter() - start)
+            cpu_timings.append(time.process_time() - cpu_start)
+        out[f"{label}_frames_per_s"] = big.n_frames / statistics.median(timings)
+        out[f"{label}_frames_per_s_cpu"] = big.n_frames / statistics.median(cpu_timings)
+    return out
+
+
+def _reference_errors(root: pathlib.Path) -> dict[str, float]:
+    errors = {}
+    for reference in sorted((root / "reference").glob("*.npz")):
+        ref = np.load(reference)
+        source = root / str(ref["source"])
+        if "positions_cm" in ref.files:
+            expected = ref["positions_cm"]
+            motion = read_amc(source, root / str(ref["skeleton"])).slice(0, len(expected))
+            actual = asf_bone_end_positions(motion)
+        else:
+            expected = ref["positions_file_units"]
+            motion = read_bvh(source).slice(0, len(expected))
+            actual = forward_kinematics(motion).positions / motion.skeleton.extras["bvh_scale"]
+        errors[reference.stem] = float(np.abs(actual - expected).max())
+    return errors
+
+
+def _figure(out: pathlib.Path, result: dict[str, Any]) -> str | None:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:  # pragma: no cover - matplotlib is a dependency
+        return None
+    figure, axis = plt.subplots(figsize=(6, 3.5))
+    for kind in ("amc", "bvh"):
+        rates = list(result["parse"][kind]["per_file_mb_per_s"].values())
+        if rates:
+            axis.hist(rates, bins=30, alpha=0.6, label=f"{kind.upper()} ({len(rates)} files)")
+    axis.axvline(20.0, color="k", linestyle="--", linewidth=1, label="target 20 MB/s")
+    axis.set_xlabel("parse throughput per file (MB/s)")
+    axis.set_ylabel("files")
+    axis.legend()
+    figure.tight_layout()
+    path = out.with_name(f"{out.stem}_parse.png")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
+    os.close(fd)
+    figure.savefig(tmp, dpi=120)
+    plt.close(figure)
+    os.replace(tmp, path)
+    return path.name
+
+
+def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
+    """Measure parse, write and forward-kinematics throughput; write JSON to ``out``.
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        JSON destination; the figure ``<stem>_parse.png`` goes beside it.
+    quick : bool
+        A seeded subset of the files (about 20 AMC and 20 BVH) instead of all.
+    seed : int
+        Chooses the subset.
+
+    Returns
+    -------
+    dict
+        The JSON content: ``parse.amc`` / ``parse.bvh`` (``mb_per_s``...), ``write``,
+        ``forward_kinematics`` (``joints_frames_per_s``...), ``reference_max_error_cm``.
+    """
+    out = pathlib.Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    root = _data_root()
+    if not root.is_dir():
+        raise FileNotFoundError(f"data folder {root} not found (set QUATMOTION_DATA)")
+    rng = np.random.default_rng(seed)
+    amcs = sorted(root.glob("cmu/*/*.amc")) + sorted(root.glob("hdm05/clips/*/*.amc"))
+    bvhs = sorted(root.glob("bandai1/clips/*.bvh")) + sorted(root.glob("cmu_bvh/*/*.bvh"))
+    amcs = _subset(amcs, quick, rng, 20)
+    bvhs = _subset(bvhs, quick, rng, 20)
+    skeletons = {}
+    for amc in amcs:
+        asf = find_asf_for_amc(amc)
+        if asf not in skeletons:
+            skeletons[asf] = read_asf(asf)
+    asf_of = {amc: skeletons[find_asf_for_amc(amc)] for amc in amcs}
+    # Compile or load the Numba kernels before any timing.
+    if amcs:
+        read_amc(amcs[0], asf_of[amcs[0]])
+    if bvhs:
+        read_bvh(bvhs[0])
+
+    result: dict[str, Any] = {
+        "benchmark": "io",
+        "quick": quick,
+        "seed": seed,
+        "data": str(root),
+        "machine": {
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "processor": platform.processor() or platform.machine(),
+            "cpus": os.cpu_count(),
+        },
+    }
+    result["parse"] = {
+        "amc": _parse_rates(amcs, lambda p: read_amc(p, asf_of[p])),
+        "bvh": _parse_rates(bvhs, read_bvh),
+    }
+    write_amcs = [read_amc(p, asf_of[p]) for p in amcs[:: max(1, len(amcs) // 5)]]
+    write_bvhs = [read_bvh(p) for p in bvhs[:: max(1, len(bvhs) // 5)]]
+    result["write"] = {
+        "amc": _write_rate(write_amcs, write_amc, ".amc"),
+        "bvh": _write_rate(write_bvhs, write_bvh, ".bvh"),
+    }
+    cmu = sorted(root.glob("cmu/*/*.amc"))
+    if cmu:
+        longest = max(cmu, key=lambda p: p.stat().st_size)
+        result["forward_kinematics"] = {"clip": longest.name, **_fk_rate(read_amc(longest))}
+    errors = _reference_errors(root)
+    result["reference_errors_cm"] = errors
+    result["reference_max_error_cm"] = max(errors.values()) if errors else None
+    figure = _figure(out, result)
+    result["figures"] = [figure] if figure else []
+    _write_json(out, result)
+    return result

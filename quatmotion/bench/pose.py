@@ -1,0 +1,638 @@
+"""Benchmark of pose distances (GPD paper sections 5-6) and of the ANN pose index.
+
+``run(out, quick, seed)`` measures, on the real data of ``QUATMOTION_DATA``:
+
+* **Transition decision** (section 5, Fig. 5): every method of
+  :data:`quatmotion.pose.methods.METHODS` is fitted on training subjects (5000 unlabeled poses,
+  500 positive + 500 negative pairs labelled by Kovar's windowed point-cloud distance, see
+  :mod:`quatmotion.pose.labels`) and scored on pairs of other subjects by Eq. 36-37.
+* **Features x learners** (Fig. 6): the ``FEATURE+LEARNER`` methods arranged as a matrix.
+* **Rank sweep** (Fig. 4): GPD+RDSR at several ranks.
+* **Unlabeled count sweep** (Fig. 7): GPD+RDSR (and SDA) with N' unlabeled poses.
+* **Pose retrieval** (section 6, Fig. 8): k-means poses per subject, correct = same class and
+  DTW phase within 10 %; methods trained on correct / other-class pairs of training subjects;
+  precision at scopes 5..50 on the test subjects (results from the query's own clip excluded).
+* Fit and query times of every method.
+* **ANN index**: hnswlib over 1,000,000 synthetic 50-dimensional "projected poses" (100,000 in
+  quick mode): build time, median / p95 per-query latency (one query at a time, one thread)
+  and recall@10 against exact search.
+
+Datasets: ``hdm05`` (groups are actors, 11 classes), ``cmu`` (ASF subjects 01-03 and BVH
+subjects 07-08; transition only, no classes), ``bandai`` (one performer: groups are *styles*,
+classes are contents). Every third group in sorted order is held out for testing (HDM05: dg;
+CMU: 03 and 08), the others train.
+Clips are resampled to 30 frames/s and every body scaled to 170 cm (the paper normalises body
+height). A dataset whose folder or reader is missing is skipped and listed in ``skipped``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import tempfile
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quatmotion.pose import evaluate, labels, skeleton16
+from quatmotion.pose.data import PoseData
+from quatmotion.pose.index import PoseIndex, exact_knn, recall_at_k
+
+TARGET_FPS = 30.0
+BODY_HEIGHT = 170.0  # cm: every subject is scaled to this standing height
+RANKS = (5, 10, 20, 30, 50, 80, 120, 200)
+UNLABELED_COUNTS = (0, 1000, 2000, 5000, 10000)
+FEATURES = ("JO", "JC", "JRF", "GPD")
+LEARNERS = ("L2", "LMS", "Xing", "SDA", "RDSR")
+
+
+def data_root() -> pathlib.Path:
+    """The data folder: ``$QUATMOTION_DATA`` or ``../shared/data`` from the project root."""
+    env = os.environ.get("QUATMOTION_DATA")
+    if env:
+        return pathlib.Path(env)
+    return pathlib.Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+
+@dataclass
+class Clip:
+    """One clip prepared for the pose benchmark (30 fps, 170 cm body)."""
+
+    name: str
+    group: str
+    cls: str
+    local: NDArray[np.float64]  # (T, 16, 3) body frame, Hip at (0, h, 0)
+    world: NDArray[np.float64]  # (T, 16, 3) world, scaled
+    poses: PoseData
+
+
+def _prepare(motion: Any, name: str, group: str, cls: str) -> Clip | None:
+    step = max(1, int(round(motion.fps / TARGET_FPS)))
+    if step > 1:
+        motion = motion.slice(step=step)
+    if motion.n_frames < 8:
+        return None
+    scale = skeleton16.height_scale(motion.skeleton, BODY_HEIGHT)
+    world = skeleton16.world_positions16(motion) * scale
+    local = skeleton16.to_body_frame(world, keep_height=True)
+    return Clip(name, group, cls, local, world, PoseData.from_clip(local, motion.fps))
+
+
+def _load(kind: str, root: pathlib.Path, quick: bool) -> list[Clip]:
+    from quatmotion import io as qio
+
+    clips: list[Clip] = []
+    if kind == "hdm05":
+        files = sorted((root / "hdm05" / "clips").glob("*/*.amc"))
+        if quick:  # a few clips per class and actor keep every split populated
+            seen: dict[tuple[str, str], int] = {}
+            kept = []
+            for f in files:
+                key = (f.parent.name, f.name.split("_")[1])
+                if seen.get(key, 0) < 2:
+                    kept.append(f)
+                    seen[key] = seen.get(key, 0) + 1
+            files = kept
+        for f in files:
+            clip = _prepare(qio.read_amc(f), f.stem, f.name.split("_")[1], f.parent.name)
+            if clip is not None:
+                clips.append(clip)
+    elif kind == "cmu":
+        for f in sorted((root / "cmu").glob("*/*.amc")):
+            clip = _prepare(qio.read_amc(f), f.stem, f.parent.name, "")
+            if clip is not None:
+                clips.append(clip)
+        read_bvh = getattr(qio, "read_bvh", None)
+        if read_bvh is not None:
+            for f in sorted((root / "cmu_bvh").glob("*/*.bvh")):
+                clip = _prepare(read_bvh(f), f.stem, f.parent.name, "")
+                if clip is not None:
+                    clips.append(clip)
+        if quick:
+            clips = [c for c in clips if c.poses.positions.shape[0] > 0][::2]
+    elif kind == "bandai":
+        read_bvh = getattr(qio, "read_bvh", None)
+        if read_bvh is None:
+            raise RuntimeError("quatmotion.io.read_bvh is not available")
+        folder = root / "bandai1"
+        contents = (folder / "content_label.txt").read_text().split()
+        styles = (folder / "style_label.txt").read_text().split()
+        files = sorted((folder / "clips").glob("*.bvh"))
+        if quick:
+            files = files[::3]
+        for f in files:
+            tag = json.loads(f.with_suffix(".json").read_text())
+            cls = contents[int(tag["content"])].removeprefix("dataset-1_")
+            style = styles[int(tag["style"])].removeprefix("dataset-1_")
+            clip = _prepare(read_bvh(f), f.stem, style, cls)
+            if clip is not None:
+                clips.append(clip)
+    else:
+        raise ValueError(f"unknown dataset {kind!r}")
+    return clips
+
+
+def _split(clips: list[Clip]) -> tuple[list[int], list[int]]:
+    """Hold out every third group (subject, or style for Bandai) in sorted order for testing."""
+    groups = sorted({c.group for c in clips})
+    test_groups = set(groups[2::3])
+    train = [i for i, c in enumerate(clips) if c.group not in test_groups]
+    test = [i for i, c in enumerate(clips) if c.group in test_groups]
+    return train, test
+
+
+def _methods() -> dict[str, Callable[..., Any]]:
+    from quatmotion.pose.methods import METHODS
+
+    return dict(METHODS)
+
+
+def _timed_fit(
+    factory: Callable[..., Any], kwargs: dict[str, Any], *fit_args: Any
+) -> tuple[Any, float]:
+    t0 = time.perf_counter()
+    method = factory(**kwargs).fit(*fit_args)
+    return method, time.perf_counter() - t0
+
+
+class _Task:
+    """Training and test material of one dataset for one task."""
+
+    def __init__(
+        self,
+        all_poses: PoseData,
+        unlabeled: NDArray[np.int64],
+        train_pairs: NDArray[np.int64],
+        train_labels: NDArray[np.bool_],
+    ) -> None:
+        self.all = all_poses
+        self.unlabeled = unlabeled
+        self.train_pairs = train_pairs
+        self.train_labels = train_labels
+
+    def fit(
+        self, factory: Callable[..., Any], n_unlabeled: int | None = None, **kwargs: Any
+    ) -> tuple[Any, float]:
+        unl = self.unlabeled if n_unlabeled is None else self.unlabeled[:n_unlabeled]
+        return _timed_fit(
+            factory,
+            kwargs,
+            self.all[unl],
+            self.all[self.train_pairs[:, 0]],
+            self.all[self.train_pairs[:, 1]],
+            self.train_labels,
+        )
+
+
+def _transition_experiment(
+    clips: list[Clip],
+    train: list[int],
+    test: list[int],
+    methods: dict[str, Callable[..., Any]],
+    quick: bool,
+    rng: np.random.Generator,
+    log: Callable[[str], None],
+    sweeps: bool = True,
+) -> dict[str, Any]:
+    local = [c.local for c in clips]
+    world = [c.world for c in clips]
+    n_pairs = 150 if quick else 500
+    tr, thresholds = labels.transition_labels(
+        local, world, TARGET_FPS, clips=train, n_positive=n_pairs, n_negative=n_pairs,
+        n_queries=1500 if quick else 6000, random_state=rng,
+    )  # fmt: skip
+    te, _ = labels.transition_labels(
+        local, world, TARGET_FPS, clips=test, thresholds=thresholds, n_positive=n_pairs,
+        n_negative=n_pairs, n_queries=1500 if quick else 6000, random_state=rng,
+    )  # fmt: skip
+    indexer = labels.PoseIndexer(np.array([len(c.local) for c in clips]))
+    all_poses = PoseData.concat([c.poses for c in clips])
+    train_pose_ids = np.concatenate(
+        [indexer.offsets[c] + np.arange(len(clips[c].local)) for c in train]
+    )
+    n_unl = 1500 if quick else 10000
+    unlabeled = rng.permutation(train_pose_ids)[:n_unl]
+    tr_pairs = np.stack(
+        [indexer(tr.pairs[:, 0], tr.pairs[:, 1]), indexer(tr.pairs[:, 2], tr.pairs[:, 3])], 1
+    )
+    te_pairs = np.stack(
+        [indexer(te.pairs[:, 0], te.pairs[:, 1]), indexer(te.pairs[:, 2], te.pairs[:, 3])], 1
+    )
+    task = _Task(all_poses, unlabeled, tr_pairs, tr.labels)
+    default_unl = min(5000, len(unlabeled))
+    test_a, test_b = all_poses[te_pairs[:, 0]], all_poses[te_pairs[:, 1]]
+    # Warm the GPD cache once so no method's timing pays for the shared features.
+    _ = all_poses.gpd
+    test_a, test_b = all_poses[te_pairs[:, 0]], all_poses[te_pairs[:, 1]]
+
+    result: dict[str, Any] = {
+        "thresholds_cm": list(thresholds),
+        "train": {"pairs": len(tr), "positive": int(tr.labels.sum()), "clips": len(train)},
+        "test": {"pairs": len(te), "positive": int(te.labels.sum()), "clips": len(test)},
+        "n_unlabeled": default_unl,
+        "baseline_eq35_precision": evaluate.transition_precision(te.mean_distance, te.labels)[0],
+        "methods": {},
+    }
+    for name, factory in methods.items():
+        entry: dict[str, Any] = {}
+        try:
+            method, fit_s = task.fit(factory, default_unl)
+            t0 = time.perf_counter()
+            d = np.asarray(method.distances(test_a, test_b), dtype=np.float64)
+            query_s = time.perf_counter() - t0
+            prec, thr = evaluate.transition_precision(d, te.labels)
+            entry = {
+                "precision": prec,
+                "threshold": thr,
+                "fit_seconds": fit_s,
+                "query_ms_per_pair": 1e3 * query_s / len(te),
+            }
+        except Exception as exc:  # one broken method must not sink the benchmark
+            entry = {
+                "error": f"{type(exc).__name__}: {exc}",
+                "trace": traceback.format_exc(limit=3),
+            }
+        log(f"  transition {name}: {entry.get('precision', entry.get('error'))}")
+        result["methods"][name] = entry
+
+    if sweeps and "GPD+RDSR" in methods:
+        sweep = {}
+        for r in RANKS[:4] if quick else RANKS:
+            try:
+                method, fit_s = task.fit(methods["GPD+RDSR"], default_unl, n_components=r)
+                d = method.distances(test_a, test_b)
+                sweep[str(r)] = {
+                    "precision": evaluate.transition_precision(d, te.labels)[0],
+                    "fit_seconds": fit_s,
+                }
+            except Exception as exc:
+                sweep[str(r)] = {"error": f"{type(exc).__name__}: {exc}"}
+            log(f"  rank {r}: {sweep[str(r)]}")
+        result["rank_sweep"] = sweep
+        unl_sweep: dict[str, dict[str, Any]] = {}
+        for name in ("GPD+RDSR", "GPD+SDA" if "GPD+SDA" in methods else "SDA"):
+            if name not in methods:
+                continue
+            unl_sweep[name] = {}
+            for n in UNLABELED_COUNTS:
+                if n > len(unlabeled) or (quick and n > 1000):
+                    continue
+                try:
+                    method, fit_s = task.fit(methods[name], n)
+                    d = method.distances(test_a, test_b)
+                    unl_sweep[name][str(n)] = {
+                        "precision": evaluate.transition_precision(d, te.labels)[0],
+                        "fit_seconds": fit_s,
+                    }
+                except Exception as exc:
+                    unl_sweep[name][str(n)] = {"error": f"{type(exc).__name__}: {exc}"}
+                log(f"  unlabeled {name} {n}: {unl_sweep[name][str(n)]}")
+        result["unlabeled_sweep"] = unl_sweep
+    return result
+
+
+def _retrieval_experiment(
+    clips: list[Clip],
+    train: list[int],
+    test: list[int],
+    methods: dict[str, Callable[..., Any]],
+    quick: bool,
+    seed: int,
+    rng: np.random.Generator,
+    log: Callable[[str], None],
+) -> dict[str, Any]:
+    local = [c.local for c in clips]
+    class_names = sorted({c.cls for c in clips})
+    group_names = sorted({c.group for c in clips})
+    classes = np.array([class_names.index(c.cls) for c in clips])
+    groups = np.array([group_names.index(c.group) for c in clips])
+    # The paper took 200 k-means poses per subject over 15 subjects (3000). With one or two
+    # test groups, 200 would leave a query only a handful of correct answers (same class, phase
+    # within 10 %), so the test groups get more poses to keep precision@50 informative.
+    train_per_group = 100 if quick else 200
+    test_per_group = 300 if quick else 1000
+    # k-means on body-frame poses with the Hip at the origin: facing and height ignored
+    centred = [loc - loc[:, :1] for loc in local]
+    train_set = labels.retrieval_set(
+        centred, classes, groups, train_per_group, clips=train, random_state=seed
+    )
+    test_set = labels.retrieval_set(
+        centred, classes, groups, test_per_group, clips=test, random_state=seed
+    )
+    n_pairs = 150 if quick else 500
+    pairs, pair_labels = labels.retrieval_pairs(train_set, n_pairs, n_pairs, random_state=rng)
+    indexer = labels.PoseIndexer(np.array([len(c.local) for c in clips]))
+    all_poses = PoseData.concat([c.poses for c in clips])
+    _ = all_poses.gpd
+    train_pose_ids = np.concatenate(
+        [indexer.offsets[c] + np.arange(len(clips[c].local)) for c in train]
+    )
+    unlabeled = rng.permutation(train_pose_ids)[: (1500 if quick else 5000)]
+    task = _Task(all_poses, unlabeled, pairs, pair_labels)
+    q = np.arange(len(test_set))
+    correct = test_set.correct(q, q)
+    exclude = test_set.same_clip(q, q)
+    scopes = evaluate.DEFAULT_SCOPES
+    max_scope = min(max(scopes), int(np.min(np.count_nonzero(~exclude, axis=1))))
+    scopes = tuple(s for s in scopes if s <= max_scope)
+    base = all_poses[test_set.poses]
+    result: dict[str, Any] = {
+        "classes": class_names,
+        "train_poses": len(train_set),
+        "test_poses": len(test_set),
+        "train_pairs": len(pair_labels),
+        "scopes": list(scopes),
+        "chance": float(correct[~exclude].mean()),
+        # the best any distance can do: all available correct poses ranked first
+        "oracle": evaluate.precision_at(
+            evaluate.ranked_correct(~correct, correct, max_scope, exclude=exclude), scopes
+        ).tolist(),
+        "methods": {},
+    }
+    for name, factory in methods.items():
+        try:
+            method, fit_s = task.fit(factory)
+            t0 = time.perf_counter()
+            dist = np.asarray(method.pairwise(base, base), dtype=np.float64)
+            query_s = time.perf_counter() - t0
+            ranked = evaluate.ranked_correct(dist, correct, max_scope, exclude=exclude)
+            prec = evaluate.precision_at(ranked, scopes)
+            entry = {
+                "precision_at": dict(zip(map(str, scopes), prec.tolist(), strict=True)),
+                "fit_seconds": fit_s,
+                "query_ms_per_query": 1e3 * query_s / len(test_set),
+            }
+        except Exception as exc:
+            entry = {
+                "error": f"{type(exc).__name__}: {exc}",
+                "trace": traceback.format_exc(limit=3),
+            }
+        log(f"  retrieval {name}: {entry.get('precision_at', entry.get('error'))}")
+        result["methods"][name] = entry
+    return result
+
+
+def _ann_benchmark(quick: bool, seed: int, log: Callable[[str], None]) -> dict[str, Any]:
+    """hnswlib on synthetic projected poses: build time, latency, recall@10 vs exact."""
+    rng = np.random.default_rng(seed)
+    n, dim, n_queries, k = (100_000 if quick else 1_000_000), 50, 1000, 10
+    # Projected poses lie near a low-dimensional manifold (a body has ~40 degrees of freedom
+    # and motion is smooth): model them as a random smooth map of a 12-d latent plus noise.
+    latent_dim = 12
+
+    def sample(m: int) -> NDArray[np.float32]:
+        z = rng.normal(size=(m, latent_dim))
+        h = np.tanh(z @ proj1) @ proj2 + 0.05 * rng.normal(size=(m, dim))
+        return h.astype(np.float32)
+
+    proj1 = rng.normal(size=(latent_dim, 64)) / np.sqrt(latent_dim)
+    proj2 = rng.normal(size=(64, dim)) / 8.0
+    X = np.concatenate([sample(min(100_000, n - s)) for s in range(0, n, 100_000)])
+    Q = sample(n_queries)
+    params = {"M": 16, "ef_construction": 64, "ef_search": 64}
+    t0 = time.perf_counter()
+    index = PoseIndex(**params, n_threads=-1, random_state=seed).fit(X)
+    build_s = time.perf_counter() - t0
+    log(f"  ann build {n}: {build_s:.1f} s")
+    exact, _ = exact_knn(X, Q, k)
+    out: dict[str, Any] = {
+        "n_items": n,
+        "dim": dim,
+        "n_queries": n_queries,
+        "build_seconds": build_s,
+        "params": params,
+        "latent_dim": latent_dim,
+        "settings": [],
+    }
+    index.n_threads = 1
+    for ef in (16, 32, 64, 128, 256):
+        index.ef_search = ef
+        approx, _ = index.query(Q, k)  # batch for recall
+        lat = []
+        for row in Q[:300]:
+            t = time.perf_counter()
+            index.query(row, k)
+            lat.append(time.perf_counter() - t)
+        entry = {
+            "ef_search": ef,
+            "recall_at_10": recall_at_k(approx, exact),
+            "median_ms": 1e3 * float(np.median(lat)),
+            "p95_ms": 1e3 * float(np.percentile(lat, 95)),
+        }
+        out["settings"].append(entry)
+        log(f"  ann ef={ef}: {entry}")
+    good = [s for s in out["settings"] if s["recall_at_10"] >= 0.95]
+    out["chosen"] = min(good, key=lambda s: s["median_ms"]) if good else None
+    out["meets_target"] = bool(good) and out["chosen"]["median_ms"] <= 2.0
+    return out
+
+
+def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written: list[str] = []
+
+    def save(fig: Any, suffix: str) -> None:
+        path = out.with_name(f"{out.stem}_{suffix}.png")
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(str(path))
+
+    for ds, res in results["datasets"].items():
+        tr = res.get("transition")
+        if tr:
+            names = [n for n, e in tr["methods"].items() if "precision" in e]
+            if names:
+                fig, ax = plt.subplots(figsize=(max(6, 0.45 * len(names)), 4))
+                vals = [tr["methods"][n]["precision"] for n in names]
+                colors = ["tab:red" if n == "GPD+RDSR" else "tab:blue" for n in names]
+                ax.bar(range(len(names)), vals, color=colors)
+                ax.set_xticks(range(len(names)), names, rotation=70, fontsize=8)
+                ax.set_ylim(min(vals) - 0.05, 1.0)
+                ax.set_ylabel("transition precision (Eq. 37)")
+                ax.set_title(f"{ds}: pose distances (Fig. 5)")
+                save(fig, f"{ds}_fig5_transition")
+                grid = np.full((len(LEARNERS), len(FEATURES)), np.nan)
+                for i, lrn in enumerate(LEARNERS):
+                    for j, feat in enumerate(FEATURES):
+                        e = tr["methods"].get(f"{feat}+{lrn}", {})
+                        if "precision" in e:
+                            grid[i, j] = e["precision"]
+                if np.isfinite(grid).any():
+                    fig, ax = plt.subplots(figsize=(5, 4))
+                    im = ax.imshow(grid, cmap="viridis")
+                    ax.set_xticks(range(len(FEATURES)), FEATURES)
+                    ax.set_yticks(range(len(LEARNERS)), LEARNERS)
+                    for (i, j), v in np.ndenumerate(grid):
+                        if np.isfinite(v):
+                            ax.text(
+                                j, i, f"{v:.3f}", ha="center", va="center", color="w", fontsize=8
+                            )
+                    fig.colorbar(im)
+                    ax.set_title(f"{ds}: features x learners (Fig. 6)")
+                    save(fig, f"{ds}_fig6_features_learners")
+            sweep = tr.get("rank_sweep", {})
+            pts = [(int(r), e["precision"]) for r, e in sweep.items() if "precision" in e]
+            if pts:
+                fig, ax = plt.subplots(figsize=(5, 3.5))
+                ax.plot(*zip(*sorted(pts), strict=True), "o-")
+                ax.set_xscale("log")
+                ax.set_xlabel("rank of W")
+                ax.set_ylabel("transition precision")
+                ax.set_title(f"{ds}: GPD+RDSR rank (Fig. 4)")
+                save(fig, f"{ds}_fig4_rank")
+            us = tr.get("unlabeled_sweep", {})
+            if any(us.values()):
+                fig, ax = plt.subplots(figsize=(5, 3.5))
+                for name, ent in us.items():
+                    pts = [(int(n), e["precision"]) for n, e in ent.items() if "precision" in e]
+                    if pts:
+                        ax.plot(*zip(*sorted(pts), strict=True), "o-", label=name)
+                ax.set_xlabel("unlabeled poses N'")
+                ax.set_ylabel("transition precision")
+                ax.legend()
+                ax.set_title(f"{ds}: unlabeled data (Fig. 7)")
+                save(fig, f"{ds}_fig7_unlabeled")
+        rt = res.get("retrieval")
+        if rt and rt["methods"]:
+            fig, ax = plt.subplots(figsize=(6, 4))
+            for name, e in rt["methods"].items():
+                if "precision_at" in e:
+                    xs = [int(s) for s in e["precision_at"]]
+                    style = "o-" if name == "GPD+RDSR" else ".-"
+                    ax.plot(
+                        xs,
+                        list(e["precision_at"].values()),
+                        style,
+                        label=name,
+                        lw=2 if name == "GPD+RDSR" else 1,
+                    )
+            ax.set_xlabel("scope s")
+            ax.set_ylabel("precision@s")
+            ax.legend(fontsize=6, ncol=2)
+            ax.set_title(f"{ds}: pose retrieval (Fig. 8)")
+            save(fig, f"{ds}_fig8_retrieval")
+    return written
+
+
+def _write_json(path: pathlib.Path, payload: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(payload, fh, indent=2, default=float)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def run(
+    out: pathlib.Path,
+    quick: bool = False,
+    seed: int = 0,
+    datasets: tuple[str, ...] = ("hdm05", "cmu", "bandai"),
+    ann: bool = True,
+    verbose: bool = True,
+    sweep_datasets: tuple[str, ...] = ("hdm05",),
+) -> dict:
+    """Run the pose benchmark, write JSON to ``out`` and PNG figures next to it.
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        JSON output path; figures are ``<stem>_<dataset>_fig*.png`` beside it.
+    quick : bool
+        Fewer clips, pairs, poses, sweep points and a 100,000-item ANN index.
+    seed : int
+        Seeds every random choice (pairs, unlabeled poses, k-means, synthetic index data).
+    datasets : tuple of str
+        Which of ``hdm05``, ``cmu``, ``bandai`` to run.
+    ann : bool
+        Also run the ANN index benchmark.
+    sweep_datasets : tuple of str
+        Datasets on which the rank and unlabeled-count sweeps run (each sweep point is a full
+        RDSR fit on 1683-dimensional features, minutes each on a shared 2-core machine).
+    verbose : bool
+        Print progress lines.
+
+    Returns
+    -------
+    dict
+        The JSON payload: per dataset ``transition`` (per-method precision, thresholds, fit and
+        query times, ``rank_sweep``, ``unlabeled_sweep``) and ``retrieval`` (precision@s), plus
+        ``ann`` and ``figures``.
+    """
+    out = pathlib.Path(out)
+    t_start = time.perf_counter()
+
+    def log(msg: str) -> None:
+        if verbose:
+            print(f"[{time.perf_counter() - t_start:7.1f}s] {msg}", flush=True)
+
+    root = data_root()
+    results: dict[str, Any] = {
+        "benchmark": "pose",
+        "quick": quick,
+        "seed": seed,
+        "data_root": str(root),
+        "fps": TARGET_FPS,
+        "body_height_cm": BODY_HEIGHT,
+        "datasets": {},
+        "skipped": {},
+    }
+    methods = _methods()
+    results["methods"] = list(methods)
+    for kind in datasets:
+        rng = np.random.default_rng(seed)
+        try:
+            clips = _load(kind, root, quick)
+        except Exception as exc:
+            results["skipped"][kind] = f"{type(exc).__name__}: {exc}"
+            log(f"skip {kind}: {exc}")
+            continue
+        if len(clips) < 4:
+            results["skipped"][kind] = f"only {len(clips)} clips found under {root}"
+            continue
+        train, test = _split(clips)
+        log(f"{kind}: {len(clips)} clips ({len(train)} train, {len(test)} test)")
+        res: dict[str, Any] = {
+            "clips": len(clips),
+            "poses": int(sum(len(c.local) for c in clips)),
+            "train_groups": sorted({clips[i].group for i in train}),
+            "test_groups": sorted({clips[i].group for i in test}),
+        }
+        try:
+            res["transition"] = _transition_experiment(
+                clips, train, test, methods, quick, rng, log, sweeps=kind in sweep_datasets
+            )
+        except Exception as exc:
+            res["transition_error"] = f"{type(exc).__name__}: {exc}"
+            log(f"  transition failed: {exc}")
+        if all(c.cls for c in clips):
+            try:
+                res["retrieval"] = _retrieval_experiment(
+                    clips, train, test, methods, quick, seed, rng, log
+                )
+            except Exception as exc:
+                res["retrieval_error"] = f"{type(exc).__name__}: {exc}"
+                log(f"  retrieval failed: {exc}")
+        results["datasets"][kind] = res
+        _write_json(out, results)  # partial results survive a later failure
+    if ann:
+        results["ann"] = _ann_benchmark(quick, seed, log)
+    results["figures"] = _figures(out, results)
+    results["seconds"] = time.perf_counter() - t_start
+    _write_json(out, results)
+    return results

@@ -1,0 +1,278 @@
+"""The demo behind ``make demo`` / ``quatmotion demo``: a tour of the main job in under a minute.
+
+Steps: generate a labelled library of procedural clips (or read the clips given), print what
+they are, draw one as a stick figure (PNG), then learn a QSSD dictionary and a K-SVD dictionary
+on the clips' angular displacements and compare their reconstruction errors on held-out frames.
+
+Conventions
+-----------
+* Angular displacement (QSSD paper, Sec. 4.2): for each clip and joint, ``d_t = q_0^-1 q_t``,
+  the local rotation at frame ``t`` relative to the reference (first) frame. A sample is one
+  frame's displacements of every joint with rotation channels: ``(n, 4)`` unit quaternions.
+* Clips are subsampled to at most 30 frames/s before sampling frames (neighbouring frames at
+  120 frames/s are near-duplicates); 80 % of the frames train, 20 % test (random split).
+* Errors are the mean rotation angle between sample and reconstruction, degrees per joint per
+  frame (METRICS.md "Angular error", with the factor 2).
+* Outputs go to ``out_dir``: ``stick_<clip>.png`` and ``summary.json`` (written atomically).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from rich.console import Console
+from rich.table import Table
+
+from quatmotion import quat
+from quatmotion.motion import Motion, forward_kinematics
+
+__all__ = ["angular_displacements", "plot_stick_figure", "run_demo"]
+
+_MAX_SAMPLE_FPS = 30.0
+_MAX_USER_CLIPS = 60
+_TEST_FRACTION = 0.2
+
+
+def angular_displacements(motion: Motion, max_fps: float = _MAX_SAMPLE_FPS) -> NDArray[np.float64]:
+    """Rotation of every rotating joint relative to the clip's first frame.
+
+    Parameters
+    ----------
+    motion : Motion
+        ``T`` frames, ``J`` joints.
+    max_fps : float
+        Keep every ``ceil(fps / max_fps)``-th frame.
+
+    Returns
+    -------
+    ndarray, shape (T', n, 4)
+        ``q_0^-1 q_t`` for the kept frames and the ``n`` joints with rotation channels (the root
+        included), unit quaternions, w first.
+    """
+    sk = motion.skeleton
+    step = max(1, int(np.ceil(motion.fps / max_fps - 1e-9)))
+    keep = [j for j in range(sk.n_joints) if j == 0 or sk.rotation_dofs(j)]
+    rotations = motion.rotations[::step][:, keep]
+    return quat.multiply(quat.conjugate(rotations[:1]), rotations)
+
+
+def _find_clips(paths: Sequence[Path]) -> list[Path]:
+    found: list[Path] = []
+    for path in paths:
+        path = Path(path)
+        if path.is_dir():
+            found += sorted(p for p in path.rglob("*") if p.suffix.lower() in (".amc", ".bvh"))
+        elif path.exists():
+            found.append(path)
+        else:
+            raise FileNotFoundError(f"{path}: no such file or folder")
+    if not found:
+        raise ValueError("no .amc or .bvh clips in the given paths")
+    return list(dict.fromkeys(found))[:_MAX_USER_CLIPS]
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "w", encoding="utf-8") as out:
+            out.write(text)
+        os.replace(temp, path)
+    except BaseException:
+        Path(temp).unlink(missing_ok=True)
+        raise
+
+
+def plot_stick_figure(motion: Motion, path: str | Path, n_poses: int = 8) -> Path:
+    """Draw ``n_poses`` evenly spaced frames of ``motion`` as stick figures, saved as PNG.
+
+    The left panel looks at the body from its side along the direction of travel (or along the
+    world X axis when it stays in place, poses spread out); the right panel from the front.
+    Written to a temporary file and renamed.
+
+    Parameters
+    ----------
+    motion : Motion
+    path : str or Path
+        Output ``.png``.
+    n_poses : int
+        Frames to draw.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    points = forward_kinematics(motion).positions  # (T, J, 3) cm
+    parents = motion.skeleton.parents
+    frames = np.linspace(0, motion.n_frames - 1, min(n_poses, motion.n_frames)).astype(int)
+    travel = points[-1, 0, [0, 2]] - points[0, 0, [0, 2]]
+    if np.linalg.norm(travel) > 30.0:
+        forward = travel / np.linalg.norm(travel)
+    else:
+        forward = np.array([0.0, 1.0])
+    side = np.array([forward[1], -forward[0]])
+    along = points[..., [0, 2]] @ forward  # (T, J)
+    across = points[..., [0, 2]] @ side
+    height = points[..., 1]
+    spread = np.linalg.norm(travel) <= 30.0
+    fig, axes = plt.subplots(1, 2, figsize=(14, 4.5), gridspec_kw={"width_ratios": [3, 2]})
+    colours = plt.cm.viridis(np.linspace(0.0, 0.9, len(frames)))
+    for k, (f, colour) in enumerate(zip(frames, colours, strict=True)):
+        shift_side = k * 80.0 if spread else 0.0
+        shift_front = k * 90.0
+        for j in range(1, len(parents)):
+            p = parents[j]
+            axes[0].plot(along[f, [p, j]] + shift_side, height[f, [p, j]], color=colour, lw=1.6)
+            axes[1].plot(across[f, [p, j]] - across[f, 0] + shift_front, height[f, [p, j]],
+                         color=colour, lw=1.6)
+        axes[0].plot(along[f, 0] + shift_side, height[f, 0], "o", color=colour, ms=3)
+    for ax, title in zip(axes, ("side view (cm)", "front view (cm, poses spread)"), strict=True):
+        ax.axhline(0.0, color="0.6", lw=0.8)
+        ax.set_aspect("equal")
+        ax.set_title(title)
+    fig.suptitle(f"{motion.name}: {motion.n_frames} frames at {motion.fps:g} fps, "
+                 f"{len(frames)} poses (dark = early)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png")
+    os.close(handle)
+    try:
+        fig.savefig(temp, dpi=90)
+        os.replace(temp, path)
+    finally:
+        plt.close(fig)
+        Path(temp).unlink(missing_ok=True)
+    return path
+
+
+def _load(paths: Sequence[Path], seed: int, quick: bool) -> list[tuple[Motion, str]]:
+    if paths:
+        from quatmotion.io import read_motion
+
+        return [(read_motion(p), p.parent.name) for p in _find_clips(paths)]
+    from quatmotion.motion.synthetic import generate_library
+
+    return generate_library(1 if quick else 2, seed=seed)
+
+
+def _compare(train: NDArray[np.float64], test: NDArray[np.float64], seed: int, quick: bool,
+             console: Console) -> list[dict[str, Any]] | None:
+    try:
+        from quatmotion.sparse import KSVD, QSSD, angular_error_deg
+    except ImportError as error:
+        console.print(f"[yellow]quatmotion.sparse is not available ({error}); "
+                      "skipping the QSSD / K-SVD comparison.[/yellow]")
+        return None
+    params = {"n_atoms": 16 if quick else 32, "sparsity": 3,
+              "max_iter": 3 if quick else 6, "random_state": seed}
+    rows = []
+    for name, cls in (("QSSD", QSSD), ("K-SVD", KSVD)):
+        start = time.perf_counter()
+        model = cls(**params).fit(train)
+        fit_s = time.perf_counter() - start
+        start = time.perf_counter()
+        test_hat = model.inverse_transform(model.transform(test))
+        code_s = time.perf_counter() - start
+        train_hat = model.inverse_transform(model.transform(train))
+        rows.append({
+            "method": name, **{k: v for k, v in params.items() if k != "random_state"},
+            "train_error_deg": angular_error_deg(train, train_hat),
+            "test_error_deg": angular_error_deg(test, test_hat),
+            "fit_seconds": fit_s, "test_coding_seconds": code_s,
+        })
+    return rows
+
+
+def run_demo(paths: Sequence[Path] = (), out_dir: str | Path = "demo-out", seed: int = 0,
+             quick: bool = False, console: Console | None = None) -> dict[str, Any]:
+    """Run the demo and print a Rich summary; returns what it wrote to ``summary.json``.
+
+    Parameters
+    ----------
+    paths : sequence of Path
+        Clips or folders (``.amc`` with their ASF found by name, ``.bvh``); empty: the built-in
+        generated library (2 clips of each kind, 1 with ``quick``).
+    out_dir : str or Path
+        Folder for ``stick_<clip>.png`` and ``summary.json``.
+    seed : int
+        Seed of the library, the train/test split and the dictionary initialisation.
+    quick : bool
+        Fewer clips, atoms and iterations.
+    console : rich.console.Console, optional
+
+    Returns
+    -------
+    dict
+        Clips, sample counts, the figure's path and one row per method (errors in degrees).
+    """
+    console = console or Console()
+    out_dir = Path(out_dir)
+    start = time.perf_counter()
+    clips = _load(list(paths), seed, quick)
+    source = "given clips" if paths else "generated library"
+    table = Table(title=f"{len(clips)} clips ({source})", title_justify="left")
+    for column in ("clip", "label", "frames", "fps", "seconds", "joints", "height cm"):
+        table.add_column(column, justify="left" if column in ("clip", "label") else "right")
+    for motion, label in clips:
+        table.add_row(motion.name, label, str(motion.n_frames), f"{motion.fps:g}",
+                      f"{motion.duration:.2f}", str(motion.n_joints),
+                      f"{motion.skeleton.height():.0f}")
+    console.print(table)
+
+    figure = plot_stick_figure(clips[0][0], out_dir / f"stick_{clips[0][0].name}.png")
+    console.print(f"stick figure of {clips[0][0].name}: {figure}")
+
+    samples = [angular_displacements(m) for m, _ in clips]
+    shapes = {s.shape[1] for s in samples}
+    summary: dict[str, Any] = {
+        "source": source, "seed": seed, "quick": quick,
+        "clips": [{"name": m.name, "label": lab, "frames": m.n_frames, "fps": m.fps}
+                  for m, lab in clips],
+        "figure": str(figure),
+    }
+    if len(shapes) != 1:
+        console.print("[yellow]the clips have different skeletons; the dictionary comparison "
+                      "needs one skeleton, so it is skipped.[/yellow]")
+        rows = None
+    else:
+        Y = np.concatenate(samples)
+        order = np.random.default_rng(seed).permutation(len(Y))
+        n_test = max(1, int(round(_TEST_FRACTION * len(Y))))
+        train, test = Y[order[n_test:]], Y[order[:n_test]]
+        summary.update({"n_train": int(len(train)), "n_test": int(len(test)),
+                        "quaternions_per_sample": int(Y.shape[1])})
+        console.print(f"angular displacements: {len(train)} training and {len(test)} test "
+                      f"frames of {Y.shape[1]} joint quaternions; learning dictionaries...")
+        rows = _compare(train, test, seed, quick, console)
+    if rows:
+        result = Table(title="reconstruction of angular displacements "
+                             "(mean rotation error, degrees per joint per frame)",
+                       title_justify="left")
+        for column in ("method", "atoms K", "sparsity L", "iterations", "train error",
+                       "test error", "fit s"):
+            result.add_column(column, justify="left" if column == "method" else "right")
+        for row in rows:
+            result.add_row(row["method"], str(row["n_atoms"]), str(row["sparsity"]),
+                           str(row["max_iter"]), f"{row['train_error_deg']:.3f}",
+                           f"{row['test_error_deg']:.3f}", f"{row['fit_seconds']:.1f}")
+        console.print(result)
+    summary["methods"] = rows or []
+    summary["seconds"] = time.perf_counter() - start
+    _atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
+    console.print(f"summary: {out_dir / 'summary.json'} ({summary['seconds']:.1f} s)")
+    return summary

@@ -1,0 +1,65 @@
+"""Pose distance: the 16-joint skeleton, GPD features, RDSR metric learning, baselines, labels,
+evaluation and approximate-nearest-neighbour pose search (Chen et al., TVCG 2010).
+
+Submodules
+----------
+skeleton16
+    ``JOINTS_16``, ``PARENTS_16``; world and body-local 16-joint positions of a clip.
+data
+    ``PoseData``: body-local positions with velocities and accelerations.
+gpd
+    The 1683-dimensional Geometric Pose Descriptor and its normalisation (``GPD``).
+metric
+    ``RDSR``: semi-supervised metric learning with sparse representation.
+baselines, methods
+    The compared pose distances and the ``METHODS`` registry.
+labels
+    Transition labels (Kovar's point-cloud distance) and retrieval labels (k-means, DTW phase).
+evaluate
+    Transition precision (Eq. 36-37) and retrieval precision@s.
+index
+    ``PoseIndex`` (hnswlib) and ``PoseLibrary`` (a saved, searchable library).
+cli
+    The ``quatmotion pose`` Typer sub-app (``index``, ``search``).
+
+Names are loaded on first use, so ``import quatmotion.pose`` stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "JOINTS_16": "skeleton16",
+    "PARENTS_16": "skeleton16",
+    "local_positions16": "skeleton16",
+    "world_positions16": "skeleton16",
+    "PoseData": "data",
+    "GPD": "gpd",
+    "gpd_features": "gpd",
+    "FEATURE_NAMES": "gpd",
+    "RDSR": "metric",
+    "METHODS": "methods",
+    "transition_precision": "evaluate",
+    "precision_at": "evaluate",
+    "transition_labels": "labels",
+    "retrieval_set": "labels",
+    "PoseIndex": "index",
+    "PoseLibrary": "index",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'quatmotion.pose' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"quatmotion.pose.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -1,0 +1,375 @@
+"""Geometric Pose Descriptor (GPD): 1337 features in 1683 dimensions per pose.
+
+Section 3 of Chen et al., "Learning a 3D Human Pose Distance Metric from Geometric Pose
+Descriptor" (TVCG 2010).
+
+Conventions
+-----------
+- Input positions are the 16 joints of :data:`JOINTS` (the order of
+  ``quatmotion.pose.skeleton16.JOINTS_16``) in the body's local frame: centimetres, Y up, the
+  Hip at the origin, yaw removed. Velocities are cm/s and accelerations cm/s^2 of those local
+  coordinates; row 0 (Hip) carries the *world* vertical velocity and acceleration of the hip in
+  its Y component (see :class:`quatmotion.pose.data.PoseData`).
+- The world height of the Hip (cm) is the one coordinate of the Hip kept (Eq. 1).
+- Angles are radians in ``[0, pi]``; distances are centimetres.
+- Geometry (section 3.1): 16 joints, 30 lines (15 limbs ``parent -> child``, 5 lines from an
+  end site's grandparent to the end site, 10 lines between end sites), 5 planes (torso, arms,
+  legs) as oriented triangles ``J1 -> J2 -> J3`` with normal ``unit((J2-J1) x (J3-J1))``.
+- Degenerate features are removed as the paper says, and the geometry fixes the counts
+  (Table 1 of our copy is garbled): a joint's distance to a line through it (420 = 16 x 30 - 60
+  kept), a joint's distance to a plane through it (65 = 16 x 5 - 15 kept), and the angle between
+  a line lying in a plane and that plane's normal (always pi/2; 135 = 30 x 5 - 15 kept).
+
+  ======  =====  =====  ====  ====  ====  ====  ====  ====  ===  =====
+  type    J_c    JJ_d   JJ_o  JL_d  LL_a  JP_d  LP_a  PP_a  J_k  total
+  count   16     120    120   420   435   65    135   10    16   1337
+  dims    46     120    360   420   435   65    135   10    92   1683
+  ======  =====  =====  ====  ====  ====  ====  ====  ====  ===  =====
+
+  ``J_c`` is the 15 non-Hip joints' coordinates plus the Hip's world height (15 x 3 + 1);
+  ``J_k`` is velocity and acceleration of the same 15 joints plus the Hip's vertical velocity
+  and acceleration (15 x 6 + 2), the temporal counterpart of the same choice.
+- Joint-plane distance (Eq. 6) is the *signed* distance ``(J - J1) . n`` in cm, as the feature's
+  name says; the printed Eq. 6 dots the normal with the unit vector ``J1 -> J`` (the sine of the
+  elevation), which is scale-free but not a distance. A joint on the plane scores 0 either way.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils.validation import check_is_fitted
+
+__all__ = [
+    "FEATURE_COUNTS",
+    "FEATURE_NAMES",
+    "FEATURE_SLICES",
+    "FEATURE_TYPES",
+    "GPD",
+    "JOINTS",
+    "LINES",
+    "N_DIMENSIONS",
+    "N_FEATURES",
+    "PARENTS",
+    "PLANES",
+    "gpd_features",
+]
+
+#: The 16-joint pose skeleton of Fig. 1(a), in the order of ``skeleton16.JOINTS_16``.
+JOINTS: tuple[str, ...] = (
+    "Hip", "Chest", "Neck", "Head",
+    "LShoulder", "LElbow", "LHand",
+    "RShoulder", "RElbow", "RHand",
+    "LHip", "LKnee", "LFoot",
+    "RHip", "RKnee", "RFoot",
+)  # fmt: skip
+#: Parent of every joint (-1 for the Hip); parents come first.
+PARENTS: tuple[int, ...] = (-1, 0, 1, 2, 1, 4, 5, 1, 7, 8, 0, 10, 11, 0, 13, 14)
+_J = {name: k for k, name in enumerate(JOINTS)}
+_END_SITES: tuple[int, ...] = tuple(_J[n] for n in ("Head", "LHand", "RHand", "LFoot", "RFoot"))
+
+
+def _build_lines() -> tuple[tuple[int, int], ...]:
+    limbs = [(PARENTS[k], k) for k in range(1, len(JOINTS))]
+    to_grandparent = [(PARENTS[PARENTS[e]], e) for e in _END_SITES]
+    between_ends = list(itertools.combinations(_END_SITES, 2))
+    return tuple(limbs + to_grandparent + between_ends)
+
+
+#: The 30 lines ``(J1, J2)``, directed from J1 to J2.
+LINES: tuple[tuple[int, int], ...] = _build_lines()
+#: The 5 planes ``(J1, J2, J3)``: torso, left arm, right arm, left leg, right leg.
+PLANES: tuple[tuple[int, int, int], ...] = tuple(
+    (_J[a], _J[b], _J[c])
+    for a, b, c in (
+        ("Chest", "Neck", "Head"),
+        ("LShoulder", "LElbow", "LHand"),
+        ("RShoulder", "RElbow", "RHand"),
+        ("LHip", "LKnee", "LFoot"),
+        ("RHip", "RKnee", "RFoot"),
+    )
+)
+
+_JOINT_PAIRS = np.array(list(itertools.combinations(range(len(JOINTS)), 2)), dtype=np.intp)
+_LINES = np.array(LINES, dtype=np.intp)
+_PLANES = np.array(PLANES, dtype=np.intp)
+_LINE_PAIRS = np.array(list(itertools.combinations(range(len(LINES)), 2)), dtype=np.intp)
+_PLANE_PAIRS = np.array(list(itertools.combinations(range(len(PLANES)), 2)), dtype=np.intp)
+# (joint, line) with the joint off the line: the distance to a line through it is always 0.
+_JOINT_LINE = np.array(
+    [(j, m) for m, line in enumerate(LINES) for j in range(len(JOINTS)) if j not in line],
+    dtype=np.intp,
+)
+_JOINT_PLANE = np.array(
+    [(j, p) for p, plane in enumerate(PLANES) for j in range(len(JOINTS)) if j not in plane],
+    dtype=np.intp,
+)
+# A line with both ends on a plane's vertices lies in the plane: its angle to the normal is pi/2.
+_LINE_PLANE = np.array(
+    [
+        (m, p)
+        for p, plane in enumerate(PLANES)
+        for m, line in enumerate(LINES)
+        if not set(line) <= set(plane)
+    ],
+    dtype=np.intp,
+)
+
+_EPS = 1e-9
+
+
+def _line_name(m: int) -> str:
+    a, b = LINES[m]
+    return f"L({JOINTS[a]}->{JOINTS[b]})"
+
+
+def _plane_name(p: int) -> str:
+    return "P(" + "->".join(JOINTS[k] for k in PLANES[p]) + ")"
+
+
+def _build_names() -> tuple[dict[str, tuple[str, ...]], dict[str, int]]:
+    names: dict[str, tuple[str, ...]] = {}
+    counts: dict[str, int] = {}
+    xyz = ("x", "y", "z")
+    jc = [f"J_c({JOINTS[j]}).{c}" for j in range(1, len(JOINTS)) for c in xyz]
+    names["J_c"] = (*jc, "J_c(Hip).y_world")
+    counts["J_c"] = len(JOINTS)
+    names["JJ_d"] = tuple(f"JJ_d({JOINTS[a]},{JOINTS[b]})" for a, b in _JOINT_PAIRS)
+    counts["JJ_d"] = len(_JOINT_PAIRS)
+    names["JJ_o"] = tuple(
+        f"JJ_o({JOINTS[a]},{JOINTS[b]}).{c}" for a, b in _JOINT_PAIRS for c in xyz
+    )
+    counts["JJ_o"] = len(_JOINT_PAIRS)
+    names["JL_d"] = tuple(f"JL_d({JOINTS[j]},{_line_name(m)})" for j, m in _JOINT_LINE)
+    counts["JL_d"] = len(_JOINT_LINE)
+    names["LL_a"] = tuple(f"LL_a({_line_name(a)},{_line_name(b)})" for a, b in _LINE_PAIRS)
+    counts["LL_a"] = len(_LINE_PAIRS)
+    names["JP_d"] = tuple(f"JP_d({JOINTS[j]},{_plane_name(p)})" for j, p in _JOINT_PLANE)
+    counts["JP_d"] = len(_JOINT_PLANE)
+    names["LP_a"] = tuple(f"LP_a({_line_name(m)},{_plane_name(p)})" for m, p in _LINE_PLANE)
+    counts["LP_a"] = len(_LINE_PLANE)
+    names["PP_a"] = tuple(f"PP_a({_plane_name(a)},{_plane_name(b)})" for a, b in _PLANE_PAIRS)
+    counts["PP_a"] = len(_PLANE_PAIRS)
+    kinetic = ("vx", "vy", "vz", "ax", "ay", "az")
+    jk = [f"J_k({JOINTS[j]}).{c}" for j in range(1, len(JOINTS)) for c in kinetic]
+    names["J_k"] = (*jk, "J_k(Hip).vy_world", "J_k(Hip).ay_world")
+    counts["J_k"] = len(JOINTS)
+    return names, counts
+
+
+_NAMES_BY_TYPE, _COUNTS = _build_names()
+#: The nine feature types in descriptor order.
+FEATURE_TYPES: tuple[str, ...] = tuple(_NAMES_BY_TYPE)
+#: Number of features (not dimensions) of each type (Table 1, "Count").
+FEATURE_COUNTS: dict[str, int] = dict(_COUNTS)
+#: Name of every one of the 1683 dimensions, in descriptor order.
+FEATURE_NAMES: tuple[str, ...] = tuple(n for names in _NAMES_BY_TYPE.values() for n in names)
+
+
+def _build_slices() -> dict[str, slice]:
+    out: dict[str, slice] = {}
+    start = 0
+    for kind, names in _NAMES_BY_TYPE.items():
+        out[kind] = slice(start, start + len(names))
+        start += len(names)
+    return out
+
+
+#: Columns of each feature type in the descriptor.
+FEATURE_SLICES: dict[str, slice] = _build_slices()
+N_FEATURES: int = sum(FEATURE_COUNTS.values())
+N_DIMENSIONS: int = len(FEATURE_NAMES)
+
+
+def _unit(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.maximum(norm, _EPS)
+
+
+def _angle(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.arccos(np.clip(np.einsum("...k,...k->...", u, v), -1.0, 1.0))
+
+
+def _check_joint_array(name: str, a: ArrayLike, n: int | None) -> NDArray[np.float64]:
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim != 3 or arr.shape[1:] != (len(JOINTS), 3):
+        raise ValueError(f"{name} has shape {arr.shape}, expected (N, {len(JOINTS)}, 3)")
+    if n is not None and arr.shape[0] != n:
+        raise ValueError(f"{name} has {arr.shape[0]} poses, expected {n}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite")
+    return arr
+
+
+def gpd_features(
+    positions: ArrayLike,
+    velocities: ArrayLike | None = None,
+    accelerations: ArrayLike | None = None,
+    hip_height: ArrayLike | None = None,
+) -> NDArray[np.float64]:
+    """Raw (unnormalised) Geometric Pose Descriptor of every pose.
+
+    Parameters
+    ----------
+    positions : array_like, shape (N, 16, 3)
+        Joint positions in the body's local frame, cm (Hip at the origin, yaw removed).
+    velocities, accelerations : array_like, shape (N, 16, 3), optional
+        Time derivatives of the local positions, cm/s and cm/s^2; the Hip row's Y component is
+        the Hip's world vertical velocity / acceleration. ``None`` means zero (static poses:
+        the temporal dimensions are then constant and carry no information).
+    hip_height : array_like, shape (N,), optional
+        World height of the Hip, cm. ``None`` means the Hip row of ``positions`` holds it in its
+        Y component (so a pose given in a frame translated only horizontally works as is).
+
+    Returns
+    -------
+    ndarray, shape (N, 1683)
+        Columns named by :data:`FEATURE_NAMES`, grouped by :data:`FEATURE_SLICES`. Distances
+        in cm, angles in radians, kinetics in cm/s and cm/s^2.
+    """
+    pos = _check_joint_array("positions", positions, None)
+    n = pos.shape[0]
+    vel = np.zeros_like(pos) if velocities is None else _check_joint_array("velocities", velocities, n)
+    acc = (
+        np.zeros_like(pos)
+        if accelerations is None
+        else _check_joint_array("accelerations", accelerations, n)
+    )
+    if hip_height is None:
+        height = pos[:, 0, 1].copy()
+    else:
+        height = np.asarray(hip_height, dtype=np.float64).reshape(-1)
+        if height.shape != (n,):
+            raise ValueError(f"hip_height has shape {height.shape}, expected ({n},)")
+    # Every geometric feature is relative, so subtracting the Hip is a no-op for them; it makes
+    # J_c body-local even when the caller kept the Hip's height in row 0.
+    pos = pos - pos[:, :1, :]
+
+    diff = pos[:, _JOINT_PAIRS[:, 1]] - pos[:, _JOINT_PAIRS[:, 0]]  # (N, 120, 3)
+    jj_d = np.linalg.norm(diff, axis=-1)
+    jj_o = diff / np.maximum(jj_d, _EPS)[..., None]
+
+    line_dir = _unit(pos[:, _LINES[:, 1]] - pos[:, _LINES[:, 0]])  # (N, 30, 3)
+    # |(J - J1) x u| = 2 * area(J, J1, J2) / |J1 J2| (Eq. 4) without Heron's cancellation.
+    rel = pos[:, _JOINT_LINE[:, 0]] - pos[:, _LINES[_JOINT_LINE[:, 1], 0]]
+    jl_d = np.linalg.norm(np.cross(rel, line_dir[:, _JOINT_LINE[:, 1]]), axis=-1)
+
+    ll_a = _angle(line_dir[:, _LINE_PAIRS[:, 0]], line_dir[:, _LINE_PAIRS[:, 1]])
+
+    p1 = pos[:, _PLANES[:, 0]]
+    normal = _unit(np.cross(pos[:, _PLANES[:, 1]] - p1, pos[:, _PLANES[:, 2]] - p1))  # (N, 5, 3)
+    jp_rel = pos[:, _JOINT_PLANE[:, 0]] - p1[:, _JOINT_PLANE[:, 1]]
+    jp_d = np.einsum("nfk,nfk->nf", jp_rel, normal[:, _JOINT_PLANE[:, 1]])
+
+    lp_a = _angle(line_dir[:, _LINE_PLANE[:, 0]], normal[:, _LINE_PLANE[:, 1]])
+    pp_a = _angle(normal[:, _PLANE_PAIRS[:, 0]], normal[:, _PLANE_PAIRS[:, 1]])
+
+    kinetic = np.concatenate((vel[:, 1:], acc[:, 1:]), axis=-1).reshape(n, -1)
+    return np.concatenate(
+        (
+            pos[:, 1:].reshape(n, -1),
+            height[:, None],
+            jj_d,
+            jj_o.reshape(n, -1),
+            jl_d,
+            ll_a,
+            jp_d,
+            lp_a,
+            pp_a,
+            kinetic,
+            vel[:, 0, 1:2],
+            acc[:, 0, 1:2],
+        ),
+        axis=1,
+    )
+
+
+class GPD(TransformerMixin, BaseEstimator):
+    """The paper's GPD normalisation (Eq. 38): per-dimension min-max, then unit length.
+
+    ``fit`` learns each dimension's range on training poses; ``transform`` maps it linearly to
+    ``[0, 1]`` (values of new poses outside the training range are not clipped, so they stay
+    distinguishable) and scales every pose vector to unit Euclidean length. Dimensions constant
+    on the training poses map to 0.
+
+    Parameters
+    ----------
+    clip : bool
+        Clip the min-max output to ``[0, 1]`` before the unit-length step.
+
+    Attributes
+    ----------
+    data_min_, data_max_ : ndarray, shape (D,)
+        Per-dimension range on the training poses.
+    scale_, offset_ : ndarray, shape (D,)
+        ``U`` and ``v`` of Eq. 38: ``x' = scale_ * x + offset_``.
+    feature_names_ : ndarray of str, shape (D,)
+        :data:`FEATURE_NAMES` when D is 1683, else ``x0 .. x{D-1}``.
+    n_features_in_ : int
+    """
+
+    def __init__(self, clip: bool = False) -> None:
+        self.clip = clip
+
+    @staticmethod
+    def _as_matrix(X: ArrayLike) -> NDArray[np.float64]:
+        gpd = getattr(X, "gpd", None)  # a PoseData works as input too
+        arr = np.asarray(gpd if gpd is not None else X, dtype=np.float64)
+        if arr.ndim != 2:
+            raise ValueError(f"expected a (N, D) feature matrix, got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError("features must be finite")
+        return arr
+
+    def fit(self, X: ArrayLike, y: object = None) -> GPD:
+        """Learn per-dimension ranges.
+
+        Parameters
+        ----------
+        X : array_like, shape (N, D), or PoseData
+            Raw features (:func:`gpd_features`), N >= 1.
+        y : ignored
+        """
+        arr = self._as_matrix(X)
+        if arr.shape[0] == 0:
+            raise ValueError("GPD.fit needs at least one pose")
+        self.data_min_ = arr.min(axis=0)
+        self.data_max_ = arr.max(axis=0)
+        span = self.data_max_ - self.data_min_
+        constant = span <= 1e-12 * np.maximum(1.0, np.abs(self.data_max_))
+        self.scale_ = np.where(constant, 0.0, 1.0 / np.where(constant, 1.0, span))
+        self.offset_ = -self.data_min_ * self.scale_
+        self.n_features_in_ = arr.shape[1]
+        self.feature_names_ = np.asarray(
+            FEATURE_NAMES if arr.shape[1] == N_DIMENSIONS else [f"x{k}" for k in range(arr.shape[1])]
+        )
+        return self
+
+    def transform(self, X: ArrayLike) -> NDArray[np.float64]:
+        """Normalise features.
+
+        Parameters
+        ----------
+        X : array_like, shape (N, D), or PoseData
+
+        Returns
+        -------
+        ndarray, shape (N, D)
+            Unit-length rows (a row that is all zero after min-max stays zero).
+        """
+        check_is_fitted(self, "scale_")
+        arr = self._as_matrix(X)
+        if arr.shape[1] != self.n_features_in_:
+            raise ValueError(f"expected {self.n_features_in_} features, got {arr.shape[1]}")
+        out = arr * self.scale_ + self.offset_
+        if self.clip:
+            np.clip(out, 0.0, 1.0, out=out)
+        norm = np.linalg.norm(out, axis=1, keepdims=True)
+        return out / np.where(norm > 0.0, norm, 1.0)
+
+    def get_feature_names_out(self, input_features: object = None) -> NDArray[np.str_]:
+        check_is_fitted(self, "feature_names_")
+        return self.feature_names_

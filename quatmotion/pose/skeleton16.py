@@ -1,0 +1,334 @@
+"""The 16-joint pose skeleton of the GPD paper and its body-local frame.
+
+Every pose-distance computation in :mod:`quatmotion.pose` works on the same 16 joints, whatever
+skeleton the file defines (Chen et al., "Learning a 3D Human Pose Distance Metric from Geometric
+Pose Descriptor", section 3.1, Fig. 1a)::
+
+    0 Hip                                   root
+    1 Chest      2 Neck      3 Head         spine chain (Head is an end site)
+    4 LShoulder  5 LElbow    6 LHand        left arm  (LHand is an end site)
+    7 RShoulder  8 RElbow    9 RHand        right arm (RHand is an end site)
+    10 LHip      11 LKnee    12 LFoot       left leg  (LFoot is an end site)
+    13 RHip      14 RKnee    15 RFoot       right leg (RFoot is an end site)
+
+Conventions
+-----------
+* Positions are in centimetres, Y up (the file skeleton's units after I/O).
+* The shoulders hang from the Chest (as in the Bandai and most 16/17-joint skeletons), the hips
+  from the Hip; the Head's grandparent is the Chest.
+* Joint placement per supported skeleton (an ASF bone's joint sits at the bone's *start*, see
+  :mod:`quatmotion.motion.skeleton`):
+
+  - Hip: ``root`` (ASF), ``Hips`` (CMU BVH, Bandai)
+  - Chest: ``thorax``, ``Spine``, ``Chest`` (Hahne's ``Spine1`` sits exactly at ``Neck``: the
+    conversion folds the thorax into the neck base, so the bone below stands in)
+  - Neck: ``lowerneck``, ``Neck``, ``Neck``
+  - Head: ``head``, ``Head``, ``Head``
+  - Shoulder: ``(l|r)humerus``, ``(Left|Right)Arm``, ``UpperArm_(L|R)``
+  - Elbow: ``(l|r)radius``, ``(Left|Right)ForeArm``, ``LowerArm_(L|R)``
+  - Hand: ``(l|r)wrist``, ``(Left|Right)Hand``, ``Hand_(L|R)``
+  - Hip (leg): ``(l|r)femur``, ``(Left|Right)UpLeg``, ``UpperLeg_(L|R)``
+  - Knee: ``(l|r)tibia``, ``(Left|Right)Leg``, ``LowerLeg_(L|R)``
+  - Foot: ``(l|r)foot``, ``(Left|Right)Foot``, ``Foot_(L|R)``
+
+  So Hand is the wrist and Foot the ankle in every skeleton: the points all three skeletons
+  place alike.
+* **Body-local frame** (paper section 3.1): translated so the Hip is at the origin and rotated
+  about the vertical (Y) axis by the body's yaw so that it faces +Z. The facing direction is the
+  horizontal part of ``(LHip - RHip) x Y``: the hip line is defined on every skeleton, does
+  not depend on a file's root-axis convention, and points sideways whatever the torso does.
+  Left is then +X. A pose whose hip line is vertical (lying on the side) has no yaw; it keeps
+  the last valid yaw of its clip (or 0).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quatmotion import quat
+from quatmotion.motion import Motion, Skeleton, forward_kinematics
+
+JOINTS_16: tuple[str, ...] = (
+    "Hip",
+    "Chest",
+    "Neck",
+    "Head",
+    "LShoulder",
+    "LElbow",
+    "LHand",
+    "RShoulder",
+    "RElbow",
+    "RHand",
+    "LHip",
+    "LKnee",
+    "LFoot",
+    "RHip",
+    "RKnee",
+    "RFoot",
+)
+PARENTS_16: tuple[int, ...] = (-1, 0, 1, 2, 1, 4, 5, 1, 7, 8, 0, 10, 11, 0, 13, 14)
+END_SITES_16: tuple[int, ...] = (3, 6, 9, 12, 15)
+"""Indices of the five end sites of the paper: Head, LHand, RHand, LFoot, RFoot."""
+
+SkeletonKind = Literal["asf", "cmu_bvh", "bandai"]
+
+_JOINT_MAPS: dict[str, tuple[str, ...]] = {
+    "asf": (
+        "root", "thorax", "lowerneck", "head",
+        "lhumerus", "lradius", "lwrist", "rhumerus", "rradius", "rwrist",
+        "lfemur", "ltibia", "lfoot", "rfemur", "rtibia", "rfoot",
+    ),
+    "cmu_bvh": (
+        "Hips", "Spine", "Neck", "Head",
+        "LeftArm", "LeftForeArm", "LeftHand", "RightArm", "RightForeArm", "RightHand",
+        "LeftUpLeg", "LeftLeg", "LeftFoot", "RightUpLeg", "RightLeg", "RightFoot",
+    ),
+    "bandai": (
+        "Hips", "Chest", "Neck", "Head",
+        "UpperArm_L", "LowerArm_L", "Hand_L", "UpperArm_R", "LowerArm_R", "Hand_R",
+        "UpperLeg_L", "LowerLeg_L", "Foot_L", "UpperLeg_R", "LowerLeg_R", "Foot_R",
+    ),
+}  # fmt: skip
+
+_HIP_L, _HIP_R = JOINTS_16.index("LHip"), JOINTS_16.index("RHip")
+_MIN_HIP_LINE = 1e-6  # cm: a shorter horizontal hip line gives no usable yaw
+
+
+def skeleton_kind(skeleton: Skeleton) -> SkeletonKind:
+    """Which supported skeleton family ``skeleton`` belongs to (matched by joint names).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+
+    Returns
+    -------
+    {"asf", "cmu_bvh", "bandai"}
+        ``"asf"`` for CMU and HDM05 ASF skeletons, ``"cmu_bvh"`` for the CMU BVH conversion
+        (B. Hahne's MotionBuilder-friendly skeleton), ``"bandai"`` for the Bandai-Namco BVH.
+
+    Raises
+    ------
+    ValueError
+        If no supported family has all 16 joints, naming the joints that are missing from the
+        closest family.
+    """
+    names = {n.lower() for n in skeleton.joint_names}
+    best, best_missing = None, None
+    for kind, mapping in _JOINT_MAPS.items():
+        missing = [m for m in mapping if m.lower() not in names]
+        if not missing:
+            return kind  # type: ignore[return-value]
+        if best_missing is None or len(missing) < len(best_missing):
+            best, best_missing = kind, missing
+    raise ValueError(
+        f"skeleton {skeleton.name!r} is not a supported 16-joint source (CMU/HDM05 ASF, CMU BVH, "
+        f"Bandai BVH); closest is {best!r}, which lacks joints {best_missing}"
+    )
+
+
+def joint_indices16(skeleton: Skeleton) -> NDArray[np.int64]:
+    """Indices into ``skeleton``'s joints of the 16 pose joints, in :data:`JOINTS_16` order.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+
+    Returns
+    -------
+    ndarray of int, shape (16,)
+
+    Raises
+    ------
+    ValueError
+        For a skeleton of no supported family (see :func:`skeleton_kind`).
+    """
+    kind = skeleton_kind(skeleton)
+    lower = {n.lower(): i for i, n in enumerate(skeleton.joint_names)}
+    return np.array([lower[m.lower()] for m in _JOINT_MAPS[kind]], dtype=np.int64)
+
+
+def world_positions16(motion: Motion) -> NDArray[np.float64]:
+    """World positions of the 16 pose joints over a clip.
+
+    Parameters
+    ----------
+    motion : Motion
+        A clip of a supported skeleton (see :func:`skeleton_kind`), ``T`` frames.
+
+    Returns
+    -------
+    ndarray, shape (T, 16, 3)
+        Centimetres, Y up, in :data:`JOINTS_16` order.
+    """
+    idx = joint_indices16(motion.skeleton)
+    return forward_kinematics(motion, include_sites=False).positions[:, idx]
+
+
+def facing_yaw(positions16: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Yaw of the body's facing direction, from the hip line.
+
+    Parameters
+    ----------
+    positions16 : ndarray, shape (..., 16, 3)
+        Joint positions in :data:`JOINTS_16` order, Y up.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Radians, ``atan2(f_x, f_z)`` of the facing direction ``f = (LHip - RHip) x Y``: 0 when
+        the body faces +Z, ``pi/2`` when it faces +X. Where the hip line is vertical the yaw is
+        carried forward from the previous pose along the second-to-last leading axis (0 if none).
+    """
+    p = np.asarray(positions16, dtype=np.float64)
+    if p.shape[-2:] != (16, 3):
+        raise ValueError(f"positions16 has shape {p.shape}, expected (..., 16, 3)")
+    left = p[..., _HIP_L, :] - p[..., _HIP_R, :]
+    # (lx, ly, lz) x (0, 1, 0) = (-lz, 0, lx)
+    fx, fz = -left[..., 2], left[..., 0]
+    yaw = np.arctan2(fx, fz)
+    bad = np.hypot(fx, fz) < _MIN_HIP_LINE
+    if np.any(bad):
+        yaw = np.where(bad, np.nan, yaw)
+        flat = yaw.reshape(-1)
+        last = 0.0
+        for i in range(flat.size):  # rare: only poses whose hips are stacked vertically
+            if np.isnan(flat[i]):
+                flat[i] = last
+            else:
+                last = flat[i]
+        yaw = flat.reshape(yaw.shape)
+    return yaw
+
+
+def to_body_frame(
+    positions16: NDArray[np.float64], keep_height: bool = False
+) -> NDArray[np.float64]:
+    """Express world poses in the body-local frame (Hip at the origin, facing +Z).
+
+    Parameters
+    ----------
+    positions16 : ndarray, shape (..., 16, 3)
+        World positions, centimetres, Y up, :data:`JOINTS_16` order.
+    keep_height : bool
+        Translate only horizontally, so that Y stays the height above the floor and the Hip
+        sits at ``(0, hip_height, 0)`` (the GPD's extra "Hip height" coordinate needs it).
+
+    Returns
+    -------
+    ndarray, shape (..., 16, 3)
+        Centimetres in the body frame; left is +X.
+    """
+    p = np.asarray(positions16, dtype=np.float64)
+    yaw = facing_yaw(p)
+    hip = p[..., :1, :].copy()
+    if keep_height:
+        hip[..., 1] = 0.0
+    rel = p - hip
+    c, s = np.cos(yaw)[..., None], np.sin(yaw)[..., None]
+    out = np.empty_like(rel)
+    # rotate by -yaw about Y: the facing direction (sin yaw, 0, cos yaw) goes to +Z
+    out[..., 0] = rel[..., 0] * c - rel[..., 2] * s
+    out[..., 1] = rel[..., 1]
+    out[..., 2] = rel[..., 0] * s + rel[..., 2] * c
+    return out
+
+
+def local_positions16(
+    motion: Motion, keep_height: bool = False, height: float | None = None
+) -> NDArray[np.float64]:
+    """Positions of the 16 pose joints in the body-local frame of each frame.
+
+    Parameters
+    ----------
+    motion : Motion
+        A clip of a supported skeleton, ``T`` frames.
+    keep_height : bool
+        See :func:`to_body_frame`: keep Y as height above the floor (Hip at ``(0, h, 0)``).
+    height : float, optional
+        Rescale uniformly so that the skeleton's stature (:func:`stature16`) becomes ``height``
+        centimetres, as the paper does to compare subjects of different builds.
+
+    Returns
+    -------
+    ndarray, shape (T, 16, 3)
+        Centimetres; Hip at the origin (unless ``keep_height``), facing +Z, left +X, Y up.
+    """
+    local = to_body_frame(world_positions16(motion), keep_height=keep_height)
+    if height is not None:
+        local *= height_scale(motion.skeleton, height)
+    return local
+
+
+def stature16(skeleton: Skeleton) -> float:
+    """A rotation-free proxy of standing height: the ankle-to-head chain length at rest.
+
+    The sum of the rest distances LFoot-LKnee, LKnee-LHip, LHip-Hip, Hip-Chest, Chest-Neck and
+    Neck-Head. It needs no standing rest pose (the Bandai BVH rest pose lies along X), and
+    comes within about 5 % of the standing height of the CMU and HDM05 skeletons (the foot below
+    the ankle and the skull above the head point roughly make up for the slack of the chain).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        Of a supported family.
+
+    Returns
+    -------
+    float
+        Centimetres.
+    """
+    rest = skeleton.rest_positions(include_sites=False)[joint_indices16(skeleton)]
+    chain = [JOINTS_16.index(n) for n in ("LFoot", "LKnee", "LHip", "Hip", "Chest", "Neck", "Head")]
+    return float(np.sum(np.linalg.norm(np.diff(rest[chain], axis=0), axis=1)))
+
+
+def height_scale(skeleton: Skeleton, height: float) -> float:
+    """Uniform factor that brings ``skeleton``'s stature (:func:`stature16`) to ``height`` cm.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    height : float
+        Target standing height, centimetres (positive).
+
+    Returns
+    -------
+    float
+    """
+    if not height > 0:
+        raise ValueError(f"height must be positive, got {height}")
+    rest = stature16(skeleton)
+    if not rest > 0:
+        raise ValueError(f"skeleton {skeleton.name!r} has a zero-length body at rest")
+    return float(height / rest)
+
+
+def local_rotations16(motion: Motion) -> NDArray[np.float64]:
+    """Global rotations of the 16 pose joints with the body's facing yaw removed.
+
+    For the orientation-based distances (JOD, WJOD, LJOD): the rotation of each mapped joint
+    in the body-local frame of :func:`local_positions16`. Joint rest orientations differ
+    between skeleton families, so compare these only within one family.
+
+    Parameters
+    ----------
+    motion : Motion
+        A clip of a supported skeleton, ``T`` frames.
+
+    Returns
+    -------
+    ndarray, shape (T, 16, 4)
+        Unit quaternions, w first, hemisphere-continuous over frames.
+    """
+    idx = joint_indices16(motion.skeleton)
+    pose = forward_kinematics(motion, include_sites=False)
+    yaw = facing_yaw(pose.positions[:, idx])
+    unyaw = np.zeros((yaw.shape[0], 4))  # rotation by -yaw about Y
+    unyaw[:, 0] = np.cos(-yaw / 2)
+    unyaw[:, 2] = np.sin(-yaw / 2)
+    rot = quat.multiply(unyaw[:, None, :], pose.rotations[:, idx])
+    return quat.make_continuous(quat.canonicalize(rot), axis=0)

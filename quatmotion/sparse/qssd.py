@@ -1,0 +1,526 @@
+"""Quaternion space sparse decomposition (QSSD, Zhu, Sun & Deng 2012, section 3).
+
+A sample is ``n`` unit quaternions (one per joint, w first). It is modelled as the quaternion
+combination (Eq. 2) of at most ``L`` dictionary atoms, each an ``n``-tuple of unit quaternions
+raised to a real weight::
+
+    Y_i  ~  D_{o1} ** x_{o1}  D_{o2} ** x_{o2}  ...  D_{om} ** x_{om}      (per joint)
+
+with the atoms ordered by descending ``|x|`` (largest on the left). ``q ** x = exp(x ln q)``.
+
+Conventions and what the paper leaves open
+------------------------------------------
+* **Atom normalisation.** An atom is stored by its logarithm, an ``(n, 3)`` array whose
+  flattened ``3n``-vector has unit norm (the first left singular vector of Algorithm 3). Scaling
+  a log by ``c`` and its weight by ``1/c`` is the same model, so this fixes the scale. Every
+  joint's half angle is then at most 1 rad, so atoms have ``w > 0`` and ``exp``/``ln`` are
+  inverse to each other on them.
+* **Double cover.** Data and every residual are taken on the ``w >= 0`` hemisphere before a log
+  (the shortest-arc log), and the objective uses ``|<q, q_hat>|``. An atom and its inverse with
+  negated weights are the same model; the SVD sign is fixed so that an atom does not flip
+  between iterations.
+* **Zero-angle logs.** ``ln`` of the identity is exactly 0 and a joint whose atom half angle is
+  0 carries no information about the weight: it is skipped in Eq. 6 (it would divide 0 by 0).
+  A residual whose log vanishes stops the coding of that sample (Algorithm 2 "convergence").
+* **Unused atoms.** An atom no sample uses is re-seeded, before the dictionary update, with the
+  normalised log residual of the worst-fit sample not yet used for re-seeding.
+* **Objective.** ``sum_i sum_j 1 - |<Y_ji, Yhat_ji>|``: Eq. 4 turned into a minimisation.
+  ``errors_`` reports Eq. 11 (mean angle per quaternion, degrees) after each coding stage.
+
+Changes to the algorithm as printed (each switchable, to measure its effect)
+----------------------------------------------------------------------------
+* ``residual="left"``: Algorithm 2 line 8 prints ``R = Y (D_P (x) X_P)^-1``. The next atom is
+  appended on the right of the combination (its weight is smaller), so what it must explain is
+  ``C^-1 Y``; ``Y C^-1 = C (C^-1 Y) C^-1`` is that residual rotated by ``C``, whose log points
+  the wrong way once ``C`` is far from the identity. ``residual="right"`` is the printed rule.
+* ``coef_solver="weighted"``: Eq. 6 solves ``x a_j = b_j`` by plain least squares; each joint's
+  term of Eq. 5 is ``rho_j cos(x a_j - b_j)``, so weighting the squares by ``rho_j`` is the
+  second-order model of the actual objective. ``coef_solver="paper"`` is plain Eq. 6.
+* ``safeguard=True``: the rank-1 SVD of ``ln E`` minimises a log-space surrogate, and new weights
+  may reorder the product. An atom update is kept only if the objective over the samples that
+  use the atom (recomputed with the re-sorted order) does not increase; the dictionary stage is
+  therefore monotone. ``safeguard=False`` always accepts (the algorithm as printed).
+* ``n_sweeps``: block coordinate descent sweeps per added atom (the paper does not say).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils import check_random_state
+
+from quatmotion import quat
+from quatmotion.sparse import _kernels as kern
+from quatmotion.sparse.ksvd import learn_linear_dictionary
+from quatmotion.sparse._common import (
+    Codes,
+    check_positive_int,
+    compute_threads,
+    check_quaternion_samples,
+    codes_to_matrix,
+    group_by_atom,
+    matrix_to_codes,
+    rank1,
+)
+
+__all__ = ["QSSD", "DictionaryUpdateResult", "quaternion_combination", "sparse_code", "update_dictionary"]
+
+_PROJECTION_CHUNK = 8192
+_CODE_TOL = 1e-10
+_SOLVERS = {"paper": 0, "weighted": 1, "gauss-newton": 2}
+
+
+def _atom_geometry(Dlog: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per-joint half angles ``(K, n)`` and unit axes ``(K, n, 3)`` (zero for a zero log)."""
+    Dnorm = np.linalg.norm(Dlog, axis=-1)
+    Daxis = np.where(Dnorm[..., None] > 0.0, Dlog / np.where(Dnorm > 0.0, Dnorm, 1.0)[..., None], 0.0)
+    return np.ascontiguousarray(Dnorm), np.ascontiguousarray(Daxis)
+
+
+def _empty_codes(N: int, L: int) -> Codes:
+    return Codes(np.zeros((N, L), dtype=np.int64), np.zeros((N, L)), np.zeros(N, dtype=np.int64))
+
+
+def _combine_codes(Dlog: NDArray[np.float64], codes: Codes) -> NDArray[np.float64]:
+    out = np.empty((codes.idx.shape[0], Dlog.shape[1], 4))
+    kern.combine(Dlog, codes.idx, codes.coef, codes.count, out)
+    return out
+
+
+def _objective_rows(Y: NDArray[np.float64], Yhat: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.sum(1.0 - np.minimum(np.abs(np.sum(Y * Yhat, axis=-1)), 1.0), axis=-1)
+
+
+def _check_dictionary_log(Dlog: ArrayLike, n: int | None = None) -> NDArray[np.float64]:
+    D = np.ascontiguousarray(np.asarray(Dlog, dtype=np.float64))
+    if D.ndim != 3 or D.shape[-1] != 3:
+        raise ValueError(f"dictionary logs must have shape (K, n, 3), got {D.shape}")
+    if n is not None and D.shape[1] != n:
+        raise ValueError(f"dictionary has {D.shape[1]} quaternions per atom, samples have {n}")
+    if not np.all(np.isfinite(D)):
+        raise ValueError("dictionary logs contain NaN or infinite values")
+    return D
+
+
+def quaternion_combination(dictionary_log: ArrayLike, W: ArrayLike | sp.spmatrix) -> NDArray[np.float64]:
+    """Quaternion combination ``D (x) X`` of Eq. 2-3.
+
+    Parameters
+    ----------
+    dictionary_log : array_like, shape (K, n, 3)
+        Logarithms of the atoms (``atom = exp(log)``, half-angle convention of
+        :func:`quatmotion.quat.log`).
+    W : array_like or sparse matrix, shape (N, K)
+        Weights. Each row's non-zero atoms are multiplied in descending ``|weight|`` order,
+        largest on the left; ties keep ascending atom index.
+
+    Returns
+    -------
+    ndarray, shape (N, n, 4)
+        Unit quaternions, w first.
+    """
+    Dlog = _check_dictionary_log(dictionary_log)
+    codes = matrix_to_codes(W, Dlog.shape[0])
+    return _combine_codes(Dlog, codes)
+
+
+def sparse_code(
+    Y: NDArray[np.float64],
+    dictionary_log: NDArray[np.float64],
+    sparsity: int,
+    *,
+    residual: str = "left",
+    coef_solver: str = "gauss-newton",
+    n_sweeps: int = 3,
+    refit: str = "every",
+) -> tuple[Codes, NDArray[np.float64]]:
+    """Quaternion sparse coding (Algorithm 2) of all samples at once.
+
+    All residuals advance together: one step computes every sample's log residual (a Numba
+    kernel), projects them on the log atoms with one matrix product, and appends the best atom
+    and refits the weights of every sample in parallel.
+
+    Parameters
+    ----------
+    Y : ndarray, shape (N, n, 4)
+        Unit quaternions with ``w >= 0`` (as returned by the estimators' validation).
+    dictionary_log : ndarray, shape (K, n, 3)
+        Atom logs.
+    sparsity : int
+        ``L``, the largest number of atoms per sample.
+    residual, coef_solver, n_sweeps
+        See the module docstring.
+
+    Returns
+    -------
+    codes : Codes
+        Slots sorted by descending ``|weight|``.
+    objective : ndarray, shape (N,)
+        ``sum_j 1 - |<Y_j, Yhat_j>|`` per sample.
+    """
+    if residual not in ("left", "right"):
+        raise ValueError(f"residual must be 'left' or 'right', got {residual!r}")
+    if refit not in ("every", "final"):
+        raise ValueError(f"refit must be 'every' or 'final', got {refit!r}")
+    if coef_solver not in _SOLVERS:
+        raise ValueError(f"coef_solver must be one of {sorted(_SOLVERS)}, got {coef_solver!r}")
+    Dlog = _check_dictionary_log(dictionary_log, Y.shape[1])
+    N, n, _ = Y.shape
+    K = Dlog.shape[0]
+    L = min(sparsity, K)
+    Dnorm, Daxis = _atom_geometry(Dlog)
+    Dflat = Dlog.reshape(K, 3 * n)
+    codes = _empty_codes(N, L)
+    objective = np.sum(1.0 - Y[..., 0], axis=-1)
+    Rlog = np.ascontiguousarray(quat.log(Y))
+    left = residual == "left"
+    solver = _SOLVERS[coef_solver]
+    for step in range(L):
+        Rflat = Rlog.reshape(N, 3 * n)
+        active = (codes.count == step) & (np.einsum("ij,ij->i", Rflat, Rflat) > _CODE_TOL**2)
+        if not np.any(active):
+            break
+        new_atom = np.zeros(N, dtype=np.int64)
+        rows = np.flatnonzero(active)
+        for start in range(0, rows.size, _PROJECTION_CHUNK):
+            chunk = rows[start : start + _PROJECTION_CHUNK]
+            proj = np.abs(Rflat[chunk] @ Dflat.T)
+            if step:
+                # An atom appears once per code: its weight is refit, never duplicated.
+                np.put_along_axis(proj, codes.idx[chunk, :step], -1.0, axis=1)
+            new_atom[chunk] = np.argmax(proj, axis=1)
+        do_refit = refit == "every" or step == L - 1
+        kern.add_atom_and_refit(
+            Y, Dlog, Dnorm, Daxis, codes.idx, codes.coef, codes.count, new_atom, active, left,
+            n_sweeps, solver, do_refit, Rlog, objective,
+        )
+    return codes, objective
+
+
+@dataclass
+class DictionaryUpdateResult:
+    """What one pass of Algorithm 3 did.
+
+    Attributes
+    ----------
+    dictionary_log : ndarray, shape (K, n, 3)
+    codes : Codes
+        The codes with updated weights (slots re-sorted by magnitude).
+    objective : ndarray, shape (N,)
+        Per-sample objective after the pass.
+    n_accepted, n_rejected, n_reseeded : int
+        Atom updates kept, refused by the safeguard, and unused atoms re-seeded.
+    """
+
+    dictionary_log: NDArray[np.float64]
+    codes: Codes
+    objective: NDArray[np.float64]
+    n_accepted: int
+    n_rejected: int
+    n_reseeded: int
+
+
+def update_dictionary(
+    Y: NDArray[np.float64],
+    dictionary_log: NDArray[np.float64],
+    codes: Codes,
+    *,
+    safeguard: bool = True,
+    objective: NDArray[np.float64] | None = None,
+) -> DictionaryUpdateResult:
+    """Quaternion dictionary learning (Algorithm 3): every atom and its weights, in turn.
+
+    For atom ``k`` and each sample ``i`` using it, ``E_i = P_i^-1 Y_i S_i^-1`` with ``P_i`` the
+    combination of the atoms left of ``k`` (larger weights) and ``S_i`` of those right of it;
+    the rank-1 SVD ``ln E = w u^T`` gives the new atom ``exp(u)`` and weights ``w``. The powers
+    of every code slot are cached, so ``E`` costs ``O(L n)`` quaternion products per sample.
+
+    Parameters
+    ----------
+    Y : ndarray, shape (N, n, 4)
+        Unit quaternions with ``w >= 0``.
+    dictionary_log : ndarray, shape (K, n, 3)
+        Atom logs; not modified (a copy is updated).
+    codes : Codes
+        Current codes; not modified.
+    safeguard : bool
+        Keep an atom update only if it does not increase the objective (module docstring).
+    objective : ndarray, shape (N,), optional
+        Current per-sample objective, if known.
+
+    Returns
+    -------
+    DictionaryUpdateResult
+    """
+    Dlog = np.array(dictionary_log, dtype=np.float64, order="C", copy=True)
+    codes = Codes(codes.idx.copy(), codes.coef.copy(), codes.count.copy())
+    N, n, _ = Y.shape
+    K = Dlog.shape[0]
+    L = codes.idx.shape[1]
+    if objective is None:
+        objective = _objective_rows(Y, _combine_codes(Dlog, codes))
+    objective = objective.copy()
+    groups = group_by_atom(codes, K)
+    n_reseeded = _reseed_unused(Y, Dlog, codes, objective, groups)
+    A = np.zeros((N, L, n, 4))
+    kern.slot_powers(Dlog, codes.idx, codes.coef, codes.count, A)
+    n_accepted = n_rejected = 0
+    for k in range(K):
+        samples = groups[k]
+        if samples.size == 0:
+            continue
+        positions = np.argmax(codes.idx[samples] == k, axis=1).astype(np.int64)
+        lnE = np.empty((samples.size, n, 3))
+        kern.atom_residual_logs(Y, A, codes.count, samples, positions, lnE)
+        u, w = rank1(lnE.reshape(samples.size, 3 * n), Dlog[k].ravel())
+        if not np.all(np.isfinite(u)) or not np.any(u):
+            n_rejected += 1
+            continue
+        atom_log = np.ascontiguousarray(u.reshape(n, 3))
+        if safeguard:
+            candidate = np.empty(samples.size)
+            kern.candidate_objective(
+                Y, Dlog, A, codes.idx, codes.coef, codes.count, samples, positions, atom_log, w,
+                candidate,
+            )
+            current = float(np.sum(objective[samples]))
+            if float(np.sum(candidate)) > current + 1e-12 * max(current, 1.0):
+                n_rejected += 1
+                continue
+        Dlog[k] = atom_log
+        kern.commit_atom(Dlog, A, codes.idx, codes.coef, codes.count, samples, positions, k, w)
+        if safeguard:
+            objective[samples] = candidate
+        n_accepted += 1
+    if not safeguard:
+        objective = _objective_rows(Y, _combine_codes(Dlog, codes))
+    return DictionaryUpdateResult(Dlog, codes, objective, n_accepted, n_rejected, n_reseeded)
+
+
+def _reseed_unused(
+    Y: NDArray[np.float64],
+    Dlog: NDArray[np.float64],
+    codes: Codes,
+    objective: NDArray[np.float64],
+    groups: list[NDArray[np.int64]],
+) -> int:
+    unused = [k for k in range(Dlog.shape[0]) if groups[k].size == 0]
+    if not unused:
+        return 0
+    worst = np.argsort(-objective, kind="stable")[: len(unused)]
+    sub = Codes(codes.idx[worst], codes.coef[worst], codes.count[worst])
+    Rlog = np.empty((worst.size, Y.shape[1], 3))
+    kern.residual_logs(np.ascontiguousarray(Y[worst]), Dlog, sub.idx, sub.coef, sub.count, True, Rlog)
+    done = 0
+    for k, r in zip(unused, Rlog, strict=False):
+        norm = np.linalg.norm(r)
+        if norm > _CODE_TOL:
+            Dlog[k] = r / norm
+            done += 1
+    return done
+
+
+def _mean_angle_deg(Y: NDArray[np.float64], Yhat: NDArray[np.float64]) -> float:
+    d = np.minimum(np.abs(np.sum(Y * Yhat, axis=-1)), 1.0)
+    return float(np.degrees(2.0 * np.mean(np.arccos(d))))
+
+
+class QSSD(TransformerMixin, BaseEstimator):
+    """Quaternion space sparse decomposition (Algorithms 2-4 of the paper).
+
+    Parameters
+    ----------
+    n_atoms : int
+        ``K``, number of dictionary atoms.
+    sparsity : int
+        ``L``, largest number of atoms per sample.
+    max_iter : int
+        Largest number of coding + dictionary iterations (Algorithm 4).
+    tol : float
+        Stop when the objective after coding improves by less than ``tol`` times its value.
+        ``0`` runs all ``max_iter`` iterations.
+    residual : {"left", "right"}
+        Residual for atom selection; see the module docstring.
+    coef_solver : {"weighted", "paper"}
+        Eq. 6 as least squares, weighted or plain.
+    n_sweeps : int
+        Block coordinate descent sweeps after each added atom.
+    safeguard : bool
+        Monotone dictionary stage (module docstring).
+    random_state : int, RandomState or None
+        Seeds the choice of initial atoms (Algorithm 4 line 1: random samples).
+    verbose : bool
+        Print one line per iteration.
+
+    Attributes
+    ----------
+    dictionary_ : ndarray, shape (K, n, 4)
+        Atoms, unit quaternions with ``w > 0``.
+    dictionary_log_ : ndarray, shape (K, n, 3)
+        Their logs, each of unit norm as a ``3n``-vector.
+    n_iter_ : int
+        Iterations run.
+    errors_ : ndarray, shape (n_iter_,)
+        Training reconstruction error after each coding stage: mean rotation angle between
+        sample and reconstruction, degrees per quaternion (Eq. 11 with the factor 2 of the
+        rotation angle; halve it for the paper's ``arccos``).
+    objective_ : ndarray, shape (n_iter_,)
+        The objective ``sum 1 - |<Y, Yhat>|`` after each coding stage.
+    iteration_seconds_ : ndarray, shape (n_iter_,)
+        Wall time of each iteration (coding + dictionary update).
+    n_features_in_ : int
+        ``n``, quaternions per sample.
+    """
+
+    def __init__(
+        self,
+        n_atoms: int = 20,
+        sparsity: int = 5,
+        max_iter: int = 50,
+        tol: float = 1e-6,
+        residual: str = "left",
+        coef_solver: str = "gauss-newton",
+        n_sweeps: int = 3,
+        refit: str = "every",
+        safeguard: bool = False,
+        init: str = "samples",
+        init_iter: int = 10,
+        random_state: int | np.random.RandomState | None = None,
+        verbose: bool = False,
+    ) -> None:
+        self.n_atoms = n_atoms
+        self.sparsity = sparsity
+        self.max_iter = max_iter
+        self.tol = tol
+        self.residual = residual
+        self.coef_solver = coef_solver
+        self.n_sweeps = n_sweeps
+        self.refit = refit
+        self.safeguard = safeguard
+        self.init = init
+        self.init_iter = init_iter
+        self.random_state = random_state
+        self.verbose = verbose
+
+    def _check_params(self) -> None:
+        check_positive_int(self.n_atoms, "n_atoms")
+        check_positive_int(self.sparsity, "sparsity")
+        check_positive_int(self.max_iter, "max_iter")
+        check_positive_int(self.n_sweeps, "n_sweeps")
+        if self.sparsity > self.n_atoms:
+            raise ValueError(f"sparsity ({self.sparsity}) cannot exceed n_atoms ({self.n_atoms})")
+        if not (np.isfinite(self.tol) and self.tol >= 0):
+            raise ValueError(f"tol must be a finite number >= 0, got {self.tol!r}")
+        if self.residual not in ("left", "right"):
+            raise ValueError(f"residual must be 'left' or 'right', got {self.residual!r}")
+        if self.refit not in ("every", "final"):
+            raise ValueError(f"refit must be 'every' or 'final', got {self.refit!r}")
+        if self.init not in ("samples", "log-ksvd"):
+            raise ValueError(f"init must be 'samples' or 'log-ksvd', got {self.init!r}")
+        check_positive_int(self.init_iter, "init_iter")
+        if self.coef_solver not in _SOLVERS:
+            raise ValueError(f"coef_solver must be one of {sorted(_SOLVERS)}, got {self.coef_solver!r}")
+
+    def _initial_dictionary(self, Y: NDArray[np.float64], rng: np.random.RandomState) -> NDArray[np.float64]:
+        """Algorithm 4 line 1: logs of distinct random samples, normalised to unit norm."""
+        N, n, _ = Y.shape
+        K = self.n_atoms
+        logs = quat.log(Y).reshape(N, 3 * n)
+        norms = np.linalg.norm(logs, axis=1)
+        usable = np.flatnonzero(norms > _CODE_TOL)
+        chosen = rng.permutation(usable)[:K]
+        D = np.empty((K, 3 * n))
+        D[: chosen.size] = logs[chosen] / norms[chosen, None]
+        if chosen.size < K:
+            # Fewer distinct non-identity samples than atoms: fill with random directions.
+            extra = rng.standard_normal((K - chosen.size, 3 * n))
+            D[chosen.size :] = extra / np.linalg.norm(extra, axis=1, keepdims=True)
+        if self.init == "log-ksvd":
+            # First-order model: ln(A^a B^b) = a ln A + b ln B + O(ab [ln A, ln B]), so linear
+            # K-SVD on the logs finds atoms close to the quaternion ones at a fraction of the cost.
+            D = learn_linear_dictionary(np.ascontiguousarray(logs), D, self.sparsity, self.init_iter)
+        return np.ascontiguousarray(D.reshape(K, n, 3))
+
+    def fit(self, Y: ArrayLike, y: object = None) -> QSSD:
+        """Learn the dictionary from ``Y`` ``(N, n, 4)`` unit quaternions.
+
+        Returns
+        -------
+        self
+        """
+        self._check_params()
+        Yc = check_quaternion_samples(Y)
+        rng = check_random_state(self.random_state)
+        Dlog = self._initial_dictionary(Yc, rng)
+        errors: list[float] = []
+        objectives: list[float] = []
+        seconds: list[float] = []
+        previous = np.inf
+        work = float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)
+        for it in range(self.max_iter):
+            t0 = time.perf_counter()
+            with compute_threads(work):
+                codes, objective = sparse_code(
+                    Yc, Dlog, self.sparsity, residual=self.residual, coef_solver=self.coef_solver,
+                    n_sweeps=self.n_sweeps, refit=self.refit,
+                )
+                total = float(np.sum(objective))
+                errors.append(_mean_angle_deg(Yc, _combine_codes(Dlog, codes)))
+            objectives.append(total)
+            with compute_threads(work, blas_single=True):
+                result = update_dictionary(
+                    Yc, Dlog, codes, safeguard=self.safeguard, objective=objective
+                )
+            Dlog = result.dictionary_log
+            seconds.append(time.perf_counter() - t0)
+            if self.verbose:
+                print(
+                    f"QSSD iter {it + 1}: error {errors[-1]:.6g} deg, objective {total:.6g}, "
+                    f"accepted {result.n_accepted}, rejected {result.n_rejected}, "
+                    f"reseeded {result.n_reseeded}, {seconds[-1]:.3f} s"
+                )
+            if self.tol > 0 and it > 0 and abs(previous - total) <= self.tol * previous:
+                break
+            previous = total
+        self.dictionary_log_ = Dlog
+        self.dictionary_ = quat.exp(Dlog)
+        self.n_iter_ = len(errors)
+        self.errors_ = np.asarray(errors)
+        self.objective_ = np.asarray(objectives)
+        self.iteration_seconds_ = np.asarray(seconds)
+        self.n_features_in_ = Yc.shape[1]
+        return self
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "dictionary_log_"):
+            raise ValueError("this QSSD instance is not fitted yet; call fit first")
+
+    def transform(self, Y: ArrayLike) -> sp.csr_matrix:
+        """Sparse weights of ``Y`` ``(N, n, 4)`` on the learned dictionary (Algorithm 2).
+
+        Returns
+        -------
+        scipy.sparse.csr_matrix, shape (N, K)
+            At most ``sparsity`` non-zeros per row; their magnitudes give the combination order.
+        """
+        self._check_fitted()
+        Yc = check_quaternion_samples(Y)
+        if Yc.shape[1] != self.n_features_in_:
+            raise ValueError(f"Y has {Yc.shape[1]} quaternions per sample, the model {self.n_features_in_}")
+        with compute_threads(float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)):
+            codes, _ = sparse_code(
+                Yc, self.dictionary_log_, self.sparsity, residual=self.residual,
+                coef_solver=self.coef_solver, n_sweeps=self.n_sweeps, refit=self.refit,
+            )
+        return codes_to_matrix(codes, self.n_atoms)
+
+    def inverse_transform(self, W: ArrayLike | sp.spmatrix) -> NDArray[np.float64]:
+        """Quaternion combination (Eq. 2-3) of weights ``W`` ``(N, K)``: ``-> (N, n, 4)``."""
+        self._check_fitted()
+        return quaternion_combination(self.dictionary_log_, W)
+

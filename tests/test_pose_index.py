@@ -1,0 +1,186 @@
+"""Tests of the ANN pose index, the saved pose library and the ``pose`` CLI."""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+
+import numpy as np
+import pytest
+from scipy.spatial.distance import cdist
+
+from quatmotion.pose.index import PoseIndex, PoseLibrary, exact_knn, recall_at_k
+
+DATA = pathlib.Path(
+    os.environ.get(
+        "QUATMOTION_DATA", pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "data"
+    )
+)
+
+
+def _pose_like(n: int, dim: int = 50, seed: int = 0) -> np.ndarray:
+    """Points near a smooth 8-d manifold in ``dim`` dimensions (like projected poses)."""
+    rng = np.random.default_rng(seed)
+    z = rng.normal(size=(n, 8))
+    a = rng.normal(size=(8, 32)) / np.sqrt(8)
+    b = rng.normal(size=(32, dim)) / np.sqrt(32)
+    return np.tanh(z @ a) @ b + 0.01 * rng.normal(size=(n, dim))
+
+
+def test_indexed_pose_finds_itself_first() -> None:
+    X = _pose_like(3000)
+    index = PoseIndex(M=16, ef_construction=100, ef_search=32, random_state=0).fit(X)
+    ids, dist = index.query(X, k=3)
+    np.testing.assert_array_equal(ids[:, 0], np.arange(len(X)))
+    np.testing.assert_allclose(dist[:, 0], 0.0, atol=1e-3)
+    assert np.all(np.diff(dist, axis=1) >= 0)
+    # the distances are Euclidean, not hnswlib's squared ones
+    np.testing.assert_allclose(dist[:, 1], np.linalg.norm(X[ids[:, 1]] - X, axis=1), rtol=1e-4)
+
+
+def test_exact_knn_matches_brute_force_and_hnsw_recall_is_high() -> None:
+    X = _pose_like(2000, seed=1)
+    Q = _pose_like(100, seed=2)
+    idx, dist = exact_knn(X, Q, k=10, chunk=37)
+    full = cdist(Q, X)
+    np.testing.assert_array_equal(idx, np.argsort(full, axis=1, kind="stable")[:, :10])
+    np.testing.assert_allclose(dist, np.sort(full, axis=1)[:, :10], rtol=1e-4)
+    approx, _ = PoseIndex(ef_search=64).fit(X).query(Q, k=10)
+    assert recall_at_k(approx, idx) >= 0.95
+    assert recall_at_k(idx, idx) == 1.0
+    shifted = np.roll(idx, 5, axis=0)
+    assert recall_at_k(shifted, idx) < 0.5
+
+
+def test_query_validation() -> None:
+    index = PoseIndex().fit(_pose_like(50, dim=4))
+    with pytest.raises(ValueError, match="dimensions"):
+        index.query(np.zeros((1, 5)))
+    with pytest.raises(ValueError, match="k must"):
+        index.query(np.zeros((1, 4)), k=51)
+    with pytest.raises(ValueError, match="not built"):
+        PoseIndex().query(np.zeros((1, 4)))
+
+
+def test_library_round_trip_and_projection(tmp_path: pathlib.Path) -> None:
+    rng = np.random.default_rng(3)
+    D, r, n = 30, 6, 400
+    raw = rng.normal(size=(n, D))
+    model = {
+        "scale": rng.uniform(0.5, 2, D),
+        "offset": rng.normal(size=D),
+        "W": rng.normal(size=(D, r)),
+    }
+    lib = PoseLibrary(
+        index=PoseIndex(random_state=0),
+        clip_names=["a/one.amc", "b/two.bvh"],
+        clip_of=np.repeat([0, 1], n // 2),
+        frame_of=np.tile(np.arange(0, n // 2) * 4, 2),
+        model=model,
+        meta={"fps": 30.0},
+    )
+    vectors = lib.project(raw)
+    x = raw * model["scale"] + model["offset"]
+    np.testing.assert_allclose(vectors, (x / np.linalg.norm(x, axis=1, keepdims=True)) @ model["W"])
+    lib.index.fit(vectors)
+    path = tmp_path / "lib.idx"
+    lib.save(path)
+    assert [p.name for p in tmp_path.iterdir()] == ["lib.idx"]  # no temporary file left
+    back = PoseLibrary.load(path)
+    assert back.clip_names == lib.clip_names and back.meta["fps"] == 30.0
+    for key in model:
+        np.testing.assert_array_equal(back.model[key], model[key])
+    ids0, d0 = lib.search(vectors[:20], 5)
+    ids1, d1 = back.search(vectors[:20], 5)
+    np.testing.assert_array_equal(ids0, ids1)
+    np.testing.assert_allclose(d0, d1)
+    assert back.find("two.bvh", 9) == n // 2 + 2  # nearest stored frame to 9 is 8
+    assert back.find(0, 0) == 0
+    with pytest.raises(ValueError):
+        back.find("three", 0)
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, x=np.zeros(3))
+    with pytest.raises(ValueError, match="pose library"):
+        PoseLibrary.load(bad)
+
+
+@pytest.mark.skipif(not (DATA / "cmu").is_dir(), reason=f"mocap data folder {DATA} is absent")
+def test_cli_index_then_search_returns_the_query_pose(
+    tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from typer.testing import CliRunner
+
+    from quatmotion.pose import cli
+
+    # RDSR's fit (1683 x 1683 eigenproblems) is tested in test_pose_rdsr.py and takes minutes on
+    # a shared machine; here the plumbing is under test, so a linear projection of the same
+    # interface (components_ of shape (rank, D)) stands in for it.
+    class _Projection:
+        def __init__(self, n_components: int, random_state: int = 0) -> None:
+            self.n_components = n_components
+
+        def fit(self, X: np.ndarray, pairs: np.ndarray) -> _Projection:
+            _, _, vt = np.linalg.svd(X - X.mean(0), full_matrices=False)
+            self.components_ = vt[: self.n_components]
+            return self
+
+    monkeypatch.setattr(cli, "RDSR", _Projection)
+    app = cli.app
+    runner = CliRunner()
+    out = tmp_path / "poses.idx"
+    files = [str(DATA / "cmu" / "02" / f) for f in ("02_01.amc", "02_02.amc", "02_03.amc")]
+    res = runner.invoke(
+        app,
+        [
+            "index",
+            *files,
+            "-o",
+            str(out),
+            "--fps",
+            "15",
+            "--rank",
+            "10",
+            "--unlabeled",
+            "150",
+            "--pairs",
+            "40",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(
+        app, ["search", str(out), "--clip", "02_01", "--frame", "120", "-k", "5", "--json"]
+    )
+    assert res.exit_code == 0, res.output
+    found = json.loads(res.stdout[res.stdout.index("{") :])
+    first = found["results"][0]
+    assert (
+        first["clip"].endswith("02_01.amc") and first["frame"] == 120 and first["distance"] < 1e-4
+    )
+    assert len(found["results"]) == 5
+    res = runner.invoke(
+        app,
+        [
+            "search",
+            str(out),
+            "--clip",
+            "02_01",
+            "--frame",
+            "120",
+            "-k",
+            "5",
+            "--json",
+            "--other-clips",
+        ],
+    )
+    others = json.loads(res.stdout[res.stdout.index("{") :])["results"]
+    assert all(not r["clip"].endswith("02_01.amc") for r in others)
+    # a query read from a file goes through the same features and projection as the index
+    res = runner.invoke(
+        app, ["search", str(out), "--file", files[1], "--frame", "40", "-k", "1", "--json"]
+    )
+    assert res.exit_code == 0, res.output
+    hit = json.loads(res.stdout[res.stdout.index("{") :])["results"][0]
+    assert hit["clip"].endswith("02_02.amc") and hit["frame"] == 40 and hit["distance"] < 1e-4
+    res = runner.invoke(app, ["search", str(out), "--clip", "nope", "--frame", "1"])
+    assert res.exit_code == 2
