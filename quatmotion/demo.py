@@ -9,7 +9,7 @@ Conventions
 * Angular displacement (QSSD paper, Sec. 4.2): for each clip and joint, ``d_t = q_0^-1 q_t``,
   the local rotation at frame ``t`` relative to the reference (first) frame. A sample is one
   frame's displacements of every joint with rotation channels: ``(n, 4)`` unit quaternions.
-* Clips are subsampled to at most 30 frames/s before sampling frames (neighbouring frames at
+* Clips are subsampled to at most 20 frames/s before sampling frames (neighbouring frames at
   120 frames/s are near-duplicates); 80 % of the frames train, 20 % test (random split).
 * Errors are the mean rotation angle between sample and reconstruction, degrees per joint per
   frame (METRICS.md "Angular error", with the factor 2).
@@ -36,7 +36,7 @@ from quatmotion.motion import Motion, forward_kinematics
 
 __all__ = ["angular_displacements", "plot_stick_figure", "run_demo"]
 
-_MAX_SAMPLE_FPS = 30.0
+_MAX_SAMPLE_FPS = 20.0
 _MAX_USER_CLIPS = 60
 _TEST_FRACTION = 0.2
 
@@ -179,7 +179,7 @@ def _compare(train: NDArray[np.float64], test: NDArray[np.float64], seed: int, q
                       "skipping the QSSD / K-SVD comparison.[/yellow]")
         return None
     params = {"n_atoms": 16 if quick else 32, "sparsity": 3,
-              "max_iter": 3 if quick else 6, "random_state": seed}
+              "max_iter": 3 if quick else 5, "random_state": seed}
     rows = []
     for name, cls in (("QSSD", QSSD), ("K-SVD", KSVD)):
         start = time.perf_counter()

@@ -150,7 +150,12 @@ def _split(clips: list[Clip]) -> tuple[list[int], list[int]]:
 def _methods() -> dict[str, Callable[..., Any]]:
     from quatmotion.pose.methods import METHODS
 
-    return dict(METHODS)
+    # aliases ("RDSR" is "GPD+RDSR") share a factory: run each distinct method once
+    unique: dict[str, Callable[..., Any]] = {}
+    for name, factory in METHODS.items():
+        if all(factory is not f for f in unique.values()):
+            unique[name] = factory
+    return unique
 
 
 def _timed_fit(

@@ -245,10 +245,6 @@ def _scan_tokens(buf, pow10):  # pragma: no cover - compiled
                 break
             i += 1
         end = i
-        # FNV-1a of the token, to compare names without making Python strings.
-        h = np.uint64(14695981039346656037)
-        for k in range(start, end):
-            h = (h ^ np.uint64(buf[k])) * np.uint64(1099511628211)
         # Number grammar: [+-]? digits [. digits] [(e|E) [+-]? digits], at least one digit.
         k = start
         negative = False
@@ -312,6 +308,12 @@ def _scan_tokens(buf, pow10):  # pragma: no cover - compiled
                 value = m * 10.0**exponent
             if negative:
                 value = -value
+        # FNV-1a of names (numbers get 0), to compare them without making Python strings.
+        h = np.uint64(0)
+        if not ok:
+            h = np.uint64(14695981039346656037)
+            for k in range(start, end):
+                h = (h ^ np.uint64(buf[k])) * np.uint64(1099511628211)
         values[count] = value
         numeric[count] = ok
         hashes[count] = h
@@ -348,7 +350,8 @@ def scan_tokens(
         Whether each token is a plain decimal number (``[+-]digits[.digits][e[+-]digits]``;
         ``nan``, ``inf`` and anything else are not).
     hashes : ndarray of uint64, shape (N,)
-        :func:`token_hash` of each token, to compare names in bulk.
+        :func:`token_hash` of each token that is not a number (0 for numbers), to compare
+        names in bulk.
     lines : ndarray of int, shape (N,)
         0-based line of each token within ``text``.
     """

@@ -26,11 +26,11 @@ Conventions
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline, PchipInterpolator
+from scipy.interpolate import PchipInterpolator
 from scipy.ndimage import gaussian_filter1d
 
 from quatmotion import quat
@@ -285,8 +285,7 @@ def standing_pose(skeleton: Skeleton | None = None) -> Motion:
 
 def _standing_height(sk: Skeleton) -> float:
     """Vertical extent (skeleton units) of :func:`standing_pose`."""
-    rotations = _local_rotations(sk, {"l_knee": np.zeros(1), "r_knee": np.zeros(1)}, 1)
-    y = forward_kinematics(Motion(sk, 1.0, np.zeros((1, 3)), rotations)).all_positions()[0, :, 1]
+    y = forward_kinematics(standing_pose(sk)).all_positions()[0, :, 1]
     return float(y.max() - y.min())
 
 
@@ -352,7 +351,6 @@ class _Plan:
     flight_drift: FloatArray | None = None  # (T,) extra forward cm per frame while airborne
     contact_from_height: bool = False  # planted feet = the lowest ones (stance only gates flight)
     no_jitter: tuple[str, ...] = ()  # angles kept exact (foot placement depends on them)
-    extra: dict[str, float] = field(default_factory=dict)
 
 
 def _get(angles: dict[str, FloatArray], key: str, T: int, default: float = 0.0) -> FloatArray:
@@ -430,14 +428,6 @@ def _local_rotations(sk: Skeleton, angles: dict[str, FloatArray], T: int) -> Flo
 
 # --------------------------------------------------------------------------------------------
 # Curves and noise
-
-
-def _periodic(keys: Sequence[tuple[float, float]]) -> Callable[[FloatArray], FloatArray]:
-    """A smooth 1-periodic curve through ``(phase, value)`` keys (phases in [0, 1))."""
-    x = np.array([k[0] for k in keys] + [1.0])
-    y = np.array([k[1] for k in keys] + [keys[0][1]])
-    spline = CubicSpline(x, y, bc_type="periodic")
-    return lambda phase: spline(np.mod(phase, 1.0))
 
 
 def _timeline(t: FloatArray, keys: Sequence[tuple[float, float]]) -> FloatArray:

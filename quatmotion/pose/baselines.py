@@ -38,6 +38,7 @@ labels)`` and ``transform``-style distances:
 
 from __future__ import annotations
 
+import itertools
 from typing import Literal
 
 import numpy as np
@@ -52,7 +53,7 @@ from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
 from quatmotion.pose.data import PoseData
-from quatmotion.pose.gpd import JOINTS, _JOINT_PAIRS
+from quatmotion.pose.gpd import JOINTS
 
 __all__ = [
     "LEE_WEIGHTS",
@@ -66,6 +67,8 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+_JOINT_PAIRS = np.array(list(itertools.combinations(range(len(JOINTS)), 2)), dtype=np.intp)
 
 #: Seconds per "frame" of the velocity terms (see the module docstring).
 VELOCITY_TIME_UNIT = 1.0 / 30.0

@@ -274,10 +274,16 @@ def _refit_with_swaps(Y_i, Dlog, idx_row, coef_row, m, n_iter, A, suf, Wmat):  #
         return
     trial_idx = np.empty_like(idx_row)
     trial_coef = np.empty_like(coef_row)
+    # The two closest pairs at most: each trial is a full refit.
+    gaps = np.empty(m - 1)
     for s in range(m - 1):
         a = abs(coef_row[s])
-        b = abs(coef_row[s + 1])
-        if a - b > 0.05 * a:
+        gaps[s] = (a - abs(coef_row[s + 1])) / max(a, 1e-300)
+    order = np.argsort(gaps)
+    candidates = order[:2].copy()
+    for c in range(candidates.shape[0]):
+        s = candidates[c]
+        if gaps[s] > 0.05:
             continue
         for t in range(m):
             trial_idx[t] = idx_row[t]
@@ -465,7 +471,9 @@ def add_atom_and_refit(Y, Dlog, Dnorm, Daxis, idx, coef, count, new_atom, active
         coef[i, m] = x
         m += 1
         count[i] = m
-        moved = _sort_slots(idx[i], coef[i], m)
+        # Between refits the slots stay in selection order (the greedy order the paper assumes
+        # descending), so the left residual advances by one product; the refit sorts them.
+        moved = _sort_slots(idx[i], coef[i], m) if (refit or not left) else False
         recompute = True
         tmp = np.empty((n, 4))
         if refit:

@@ -137,7 +137,7 @@ def sparse_code(
     residual: str = "left",
     coef_solver: str = "gauss-newton",
     n_sweeps: int = 3,
-    refit: str = "every",
+    refit: str = "final",
 ) -> tuple[Codes, NDArray[np.float64]]:
     """Quaternion sparse coding (Algorithm 2) of all samples at once.
 
@@ -386,7 +386,7 @@ class QSSD(TransformerMixin, BaseEstimator):
         residual: str = "left",
         coef_solver: str = "gauss-newton",
         n_sweeps: int = 3,
-        refit: str = "every",
+        refit: str = "final",
         safeguard: bool = False,
         init: str = "samples",
         init_iter: int = 10,
