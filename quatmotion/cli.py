@@ -17,7 +17,6 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -127,13 +126,12 @@ def _write(motion, out: Path) -> list[Path]:  # noqa: ANN001 (Motion, imported l
 
 
 def _motion_summary(motion, path: str) -> Table:  # noqa: ANN001
-    from quatmotion.motion import forward_kinematics
+    from quatmotion.motion import standing_height
 
     sk = motion.skeleton
     table = Table(title=path, show_header=False, title_justify="left")
     table.add_column("field", style="bold")
     table.add_column("value")
-    first = forward_kinematics(motion.slice(0, 1)).all_positions()[0] if motion.n_frames else None
     rows = [
         ("skeleton", sk.name or "-"),
         ("joints", str(sk.n_joints)),
@@ -143,8 +141,9 @@ def _motion_summary(motion, path: str) -> Table:  # noqa: ANN001
         ("duration (s)", f"{motion.duration:.3f}"),
         ("rest height (cm)", f"{sk.height():.1f}"),
     ]
-    if first is not None:
-        rows.append(("frame-0 height (cm)", f"{np.ptp(first[:, 1]):.1f}"))
+    if motion.n_frames:
+        step = max(1, motion.n_frames // 200)
+        rows.append(("standing height (cm)", f"{standing_height(motion, step):.1f}"))
         rows.append(("root at frame 0 (cm)",
                      " ".join(f"{v:.1f}" for v in motion.root_translation[0])))
     for field, value in rows:

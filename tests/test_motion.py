@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from quatmotion import quat
-from quatmotion.motion import Motion, Skeleton, forward_kinematics
+from quatmotion.motion import Motion, Skeleton, forward_kinematics, standing_height
 
 
 def chain(n: int = 3, length: float = 10.0) -> Skeleton:
@@ -92,3 +92,13 @@ def test_skeleton_rejects_bad_hierarchies():
         Skeleton(("a", "a"), np.array([-1, 0]), np.zeros((2, 3)), ((), ()))
     with pytest.raises(ValueError, match="channels"):
         Skeleton(("a", "b"), np.array([-1, 0]), np.zeros((2, 3)), ((), ("qq",)))
+
+
+def test_standing_height_measures_the_posed_figure_not_the_rest_pose():
+    # A chain lying along X at rest (height 0) is stood up by a quarter turn of its root.
+    sk = chain(4, 10.0)
+    rot = np.tile(quat.identity(), (5, 4, 1))
+    rot[:, 0] = quat.from_euler([0, 0, np.pi / 2], "XYZ")
+    motion = Motion(sk, 30.0, np.zeros((5, 3)), rot)
+    assert sk.height() == 0.0
+    assert standing_height(motion) == pytest.approx(40.0)

@@ -42,7 +42,9 @@ def test_two_atom_sample_is_coded_exactly_in_descending_order() -> None:
 
 def test_true_dictionary_codes_simulated_data_exactly() -> None:
     data = make_sparse_quaternion_data(60, 8, 10, 3, weight_scale=0.5, random_state=3)
-    codes, objective = sparse_code(data.Y, data.dictionary_log, 3, coef_solver="gauss-newton", n_sweeps=10)
+    codes, objective = sparse_code(
+        data.Y, data.dictionary_log, 3, coef_solver="gauss-newton", n_sweeps=10
+    )
     for i in range(60):
         assert set(codes.idx[i, : codes.count[i]]) == set(data.weights[i].indices)
     assert np.max(objective) < 1e-12
@@ -104,8 +106,15 @@ def test_unused_atoms_are_reseeded_from_worst_fit_samples() -> None:
     from quatmotion.sparse import _kernels
 
     rlog = np.empty((1, 4, 3))
-    _kernels.residual_logs(Y[worst : worst + 1], Dlog, codes.idx[worst : worst + 1],
-                           codes.coef[worst : worst + 1], codes.count[worst : worst + 1], True, rlog)
+    _kernels.residual_logs(
+        Y[worst : worst + 1],
+        Dlog,
+        codes.idx[worst : worst + 1],
+        codes.coef[worst : worst + 1],
+        codes.count[worst : worst + 1],
+        True,
+        rlog,
+    )
     np.testing.assert_allclose(result.dictionary_log[1], rlog[0] / np.linalg.norm(rlog), atol=1e-12)
 
 
@@ -116,14 +125,18 @@ def test_fit_learns_unit_atoms_and_lowers_error() -> None:
     assert model.errors_[-1] < model.errors_[0]
     np.testing.assert_allclose(np.linalg.norm(model.dictionary_, axis=-1), 1.0, atol=1e-12)
     assert np.all(model.dictionary_[..., 0] > 0)
-    np.testing.assert_allclose(np.linalg.norm(model.dictionary_log_.reshape(8, -1), axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(
+        np.linalg.norm(model.dictionary_log_.reshape(8, -1), axis=1), 1.0, atol=1e-12
+    )
 
 
 def test_sign_of_input_quaternions_does_not_matter() -> None:
     data = make_sparse_quaternion_data(50, 5, 6, 2, random_state=8)
     flip = np.where(np.random.default_rng(0).random((50, 5, 1)) < 0.5, -1.0, 1.0)
     model = QSSD(n_atoms=6, sparsity=2, max_iter=2, random_state=0).fit(data.Y)
-    np.testing.assert_allclose(model.transform(data.Y * flip).toarray(), model.transform(data.Y).toarray())
+    np.testing.assert_allclose(
+        model.transform(data.Y * flip).toarray(), model.transform(data.Y).toarray()
+    )
 
 
 def test_seeds_reproduce() -> None:

@@ -47,16 +47,44 @@ PAPER_TABLE2 = {
     (5000, 100, 10, 10): (9.5, 14.9),
 }
 PAPER_TABLE1 = {
-    "walking": {"qssd_train": 0.0030, "qssd_test": 0.0053, "ksvd_train": 0.0135, "ksvd_test": 0.0271},
+    "walking": {
+        "qssd_train": 0.0030,
+        "qssd_test": 0.0053,
+        "ksvd_train": 0.0135,
+        "ksvd_test": 0.0271,
+    },
     "mixed": {"qssd_train": 0.0052, "qssd_test": 0.0105, "ksvd_train": 0.0148, "ksvd_test": 0.0293},
 }
 
 VARIANTS = {
-    # name: QSSD keyword arguments
+    # name: QSSD keyword arguments. "as_printed" is Algorithms 2-4 as the paper prints them
+    # (random-sample initial atoms, right residual, coordinate descent with plain Eq. 6 after
+    # every added atom); the others add one of our changes each.
     "improved": {},
-    "as_printed": {"residual": "right", "coef_solver": "paper", "safeguard": False},
-    "as_printed+left_residual": {"residual": "left", "coef_solver": "paper", "safeguard": False},
-    "as_printed+gauss_newton": {"residual": "right", "coef_solver": "gauss-newton", "safeguard": False},
+    "as_printed": {
+        "init": "samples",
+        "residual": "right",
+        "coef_solver": "paper",
+        "refit": "every",
+    },
+    "as_printed+left_residual": {
+        "init": "samples",
+        "residual": "left",
+        "coef_solver": "paper",
+        "refit": "every",
+    },
+    "as_printed+gauss_newton": {
+        "init": "samples",
+        "residual": "right",
+        "coef_solver": "gauss-newton",
+        "refit": "every",
+    },
+    "as_printed+log_ksvd_init": {
+        "init": "log-ksvd",
+        "residual": "right",
+        "coef_solver": "paper",
+        "refit": "every",
+    },
 }
 
 
@@ -73,7 +101,12 @@ def _write_json(path: pathlib.Path, payload: dict[str, Any]) -> None:
 
 
 def _simulate_once(
-    N: int, n_iter: int, seed: int, snr_db: float | None, weight_scale: float, params: dict[str, Any]
+    N: int,
+    n_iter: int,
+    seed: int,
+    snr_db: float | None,
+    weight_scale: float,
+    params: dict[str, Any],
 ) -> dict[str, Any]:
     data = make_sparse_quaternion_data(
         N, 20, 20, 5, weight_scale=weight_scale, snr_db=snr_db, random_state=seed
@@ -105,7 +138,14 @@ def simulation(quick: bool, seed: int) -> dict[str, Any]:
     N = 500
     n_iter = 30 if quick else 100
     seeds = [seed + s for s in range(2 if quick else 5)]
-    result: dict[str, Any] = {"N": N, "n": 20, "K": 20, "L": 5, "iterations": n_iter, "seeds": seeds}
+    result: dict[str, Any] = {
+        "N": N,
+        "n": 20,
+        "K": 20,
+        "L": 5,
+        "iterations": n_iter,
+        "seeds": seeds,
+    }
     noise: dict[str, Any] = {}
     for label, snr in (("noiseless", None), ("100dB", 100.0), ("40dB", 40.0)):
         noise[label] = _mean_runs([_simulate_once(N, n_iter, s, snr, 1.0, {}) for s in seeds])
@@ -114,7 +154,9 @@ def simulation(quick: bool, seed: int) -> dict[str, Any]:
     for name, params in VARIANTS.items():
         if name == "improved" or (quick and name != "as_printed"):
             continue
-        ablation[name] = _mean_runs([_simulate_once(N, n_iter, s, None, 1.0, params) for s in seeds])
+        ablation[name] = _mean_runs(
+            [_simulate_once(N, n_iter, s, None, 1.0, params) for s in seeds]
+        )
     result["ablation_noiseless"] = ablation
     scales = [0.5, 1.0, 2.0] if quick else [0.25, 0.5, 1.0, 1.5, 2.0, 3.0]
     sweep_iter = 30 if quick else 60
@@ -123,7 +165,9 @@ def simulation(quick: bool, seed: int) -> dict[str, Any]:
     for name in ("improved", "as_printed"):
         rows = []
         for scale in scales:
-            runs = [_simulate_once(N, sweep_iter, s, None, scale, VARIANTS[name]) for s in sweep_seeds]
+            runs = [
+                _simulate_once(N, sweep_iter, s, None, scale, VARIANTS[name]) for s in sweep_seeds
+            ]
             rows.append(_mean_runs(runs))
         sweep[name] = {
             "restoration_quaternion": [r["restoration_quaternion"] for r in rows],
@@ -173,8 +217,12 @@ def table1(quick: bool, seed: int) -> dict[str, Any]:
     else:
         K, L, n_iter, frame_step = 500, 15, 20, 8
     result: dict[str, Any] = {
-        "K": K, "L": L, "iterations": n_iter, "frame_step": frame_step,
-        "split": "random 80/20 of frames", "paper": PAPER_TABLE1,
+        "K": K,
+        "L": L,
+        "iterations": n_iter,
+        "frame_step": frame_step,
+        "split": "random 80/20 of frames",
+        "paper": PAPER_TABLE1,
         "error_unit": "degrees per joint per frame; *_rotation = 2 arccos|<q,q'>| (METRICS.md), "
         "*_paper = arccos|<q,q'>| as printed in Eq. 11",
     }
@@ -222,15 +270,24 @@ def table2(quick: bool, seed: int) -> dict[str, Any]:
         k = KSVD(n_atoms=K, sparsity=L, max_iter=n_iter, tol=0.0, random_state=seed).fit(Y)
         q_s = float(np.median(q.iteration_seconds_))
         k_s = float(np.median(k.iteration_seconds_))
-        rows.append({
-            "N": N, "n": n, "K": K, "L": L,
-            "qssd_seconds": q_s, "ksvd_seconds": k_s,
-            "paper_qssd_seconds": paper_qssd, "paper_ksvd_seconds": paper_ksvd,
-            "qssd_speedup_vs_paper": paper_qssd / q_s, "ksvd_speedup_vs_paper": paper_ksvd / k_s,
-            "qssd_over_our_ksvd": q_s / k_s,
-        })
+        rows.append(
+            {
+                "N": N,
+                "n": n,
+                "K": K,
+                "L": L,
+                "qssd_seconds": q_s,
+                "ksvd_seconds": k_s,
+                "paper_qssd_seconds": paper_qssd,
+                "paper_ksvd_seconds": paper_ksvd,
+                "qssd_speedup_vs_paper": paper_qssd / q_s,
+                "ksvd_speedup_vs_paper": paper_ksvd / k_s,
+                "qssd_over_our_ksvd": q_s / k_s,
+            }
+        )
     return {
-        "iterations_timed": n_iter, "rows": rows,
+        "iterations_timed": n_iter,
+        "rows": rows,
         "min_qssd_speedup_vs_paper": min(r["qssd_speedup_vs_paper"] for r in rows),
         "max_qssd_over_our_ksvd": max(r["qssd_over_our_ksvd"] for r in rows),
     }
@@ -247,12 +304,19 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
     if sim:
         fig, ax = plt.subplots(figsize=(6, 4))
         for label, entry in sim["noise"].items():
-            ax.plot(np.arange(1, len(entry["error_curve_deg"]) + 1), entry["error_curve_deg"],
-                    label=f"{label} (restored {entry['restoration_quaternion']:.2f})")
+            ax.plot(
+                np.arange(1, len(entry["error_curve_deg"]) + 1),
+                entry["error_curve_deg"],
+                label=f"{label} (restored {entry['restoration_quaternion']:.2f})",
+            )
         asp = sim["ablation_noiseless"].get("as_printed")
         if asp:
-            ax.plot(np.arange(1, len(asp["error_curve_deg"]) + 1), asp["error_curve_deg"], "--",
-                    label=f"as printed, noiseless (restored {asp['restoration_quaternion']:.2f})")
+            ax.plot(
+                np.arange(1, len(asp["error_curve_deg"]) + 1),
+                asp["error_curve_deg"],
+                "--",
+                label=f"as printed, noiseless (restored {asp['restoration_quaternion']:.2f})",
+            )
         ax.set_yscale("log")
         ax.set_xlabel("iteration")
         ax.set_ylabel("mean angular error (deg)")
@@ -266,8 +330,15 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
         sweep = sim["weight_scale_sweep"]
         fig, ax = plt.subplots(figsize=(6, 4))
         for name in ("improved", "as_printed"):
-            ax.plot(sweep["scales"], sweep[name]["restoration_quaternion"], "o-", label=f"{name}, Eq. 10")
-            ax.plot(sweep["scales"], sweep[name]["restoration_log"], "s--", label=f"{name}, log space")
+            ax.plot(
+                sweep["scales"],
+                sweep[name]["restoration_quaternion"],
+                "o-",
+                label=f"{name}, Eq. 10",
+            )
+            ax.plot(
+                sweep["scales"], sweep[name]["restoration_log"], "s--", label=f"{name}, log space"
+            )
         ax.set_xlabel("weight scale (weights in scale x [0.2, 1])")
         ax.set_ylabel("restoration ratio")
         ax.set_ylim(-0.02, 1.02)
@@ -282,10 +353,12 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
         fig, ax = plt.subplots(figsize=(7, 4))
         labels = [f"N{r['N']}\nn{r['n']} K{r['K']}" for r in t2["rows"]]
         x = np.arange(len(labels))
-        for off, key, name in ((-0.3, "paper_qssd_seconds", "QSSD paper"),
-                               (-0.1, "paper_ksvd_seconds", "K-SVD paper"),
-                               (0.1, "qssd_seconds", "QSSD ours"),
-                               (0.3, "ksvd_seconds", "K-SVD ours")):
+        for off, key, name in (
+            (-0.3, "paper_qssd_seconds", "QSSD paper"),
+            (-0.1, "paper_ksvd_seconds", "K-SVD paper"),
+            (0.1, "qssd_seconds", "QSSD ours"),
+            (0.3, "ksvd_seconds", "K-SVD ours"),
+        ):
             ax.bar(x + off, [r[key] for r in t2["rows"]], width=0.2, label=name)
         ax.set_yscale("log")
         ax.set_xticks(x, labels, fontsize=7)

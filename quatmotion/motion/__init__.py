@@ -1,7 +1,7 @@
 """Skeletons, clips and forward kinematics (the bottom layer, with :mod:`quatmotion.quat`)."""
 
 from quatmotion.motion.clip import Motion
-from quatmotion.motion.kinematics import Pose, forward_kinematics
+from quatmotion.motion.kinematics import Pose, forward_kinematics, standing_height
 from quatmotion.motion.skeleton import Skeleton
 
-__all__ = ["Motion", "Pose", "Skeleton", "forward_kinematics"]
+__all__ = ["Motion", "Pose", "Skeleton", "forward_kinematics", "standing_height"]

@@ -123,3 +123,18 @@ def forward_kinematics(motion: Motion, include_sites: bool = True) -> Pose:
         np.ascontiguousarray(sk.site_offsets[: len(site_parents)]),
     )
     return Pose(positions=positions, rotations=rotations, site_positions=sites)
+
+
+def standing_height(motion: Motion, step: int = 1) -> float:
+    """The figure's height in centimetres as seen in motion: the median over frames of the
+    vertical (Y) extent of all joints and end sites.
+
+    Unlike :meth:`Skeleton.height`, which measures the zero-rotation rest pose, this does not
+    assume the rest pose stands upright (Bandai's BVH rest pose lies along the X axis). The
+    median ignores the few frames of a clip with raised arms or a crouch. ``step`` subsamples
+    frames for speed.
+    """
+    if motion.n_frames == 0:
+        raise ValueError(f"clip {motion.name!r} has no frames")
+    y = forward_kinematics(motion.slice(0, None, step)).all_positions()[..., 1]
+    return float(np.median(y.max(axis=1) - y.min(axis=1)))

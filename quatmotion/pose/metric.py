@@ -255,11 +255,25 @@ def trace_ratio_bounds(A: ArrayLike, B: ArrayLike, rank: int) -> tuple[float, fl
         ``Tr(A) / Tr(B)`` and (sum of the ``rank`` largest eigenvalues of A) / (sum of the
         ``rank`` smallest eigenvalues of B).
     """
-    A = np.asarray(A, dtype=np.float64)
-    B = np.asarray(B, dtype=np.float64)
-    top_a = _top_eigen(A, rank, vectors=False)[0]
-    low_b = -_top_eigen(-B, rank, vectors=False)[0]
-    return float(np.trace(A) / np.trace(B)), float(np.sum(top_a) / np.sum(low_b))
+    bounds, _ = _bounds_and_start(np.asarray(A, dtype=np.float64),
+                                  np.asarray(B, dtype=np.float64), rank)  # fmt: skip
+    return bounds
+
+
+def _bounds_and_start(A: FloatArray, B: FloatArray, rank: int) -> tuple[tuple[float, float], float]:
+    """Eq. 29-30 bounds, and the best ratio among the two eigenbases they compute.
+
+    The top eigenvectors of A and the bottom eigenvectors of B are feasible W, so their
+    ratios are lower bounds on eta* too, usually far tighter than ``Tr(A) / Tr(B)``.
+    """
+    top_a, W_a = _top_eigen(A, rank, vectors=True)
+    low_b, W_b = _top_eigen(-B, rank, vectors=True)
+    low_b = -low_b
+    assert W_a is not None and W_b is not None
+    lower = float(np.trace(A) / np.trace(B))
+    upper = float(np.sum(top_a) / np.sum(low_b))
+    start = max(lower, trace_ratio_objective(W_a, A, B), trace_ratio_objective(W_b, A, B))
+    return (lower, upper), start
 
 
 def trace_ratio(
@@ -286,8 +300,9 @@ def trace_ratio(
         ``"bisection"``: Fig. 3, halving ``[eta_lower, eta_upper]`` (Eq. 29-30) by the sign of
         ``f`` (eigenvalues only) until its width is below ``tol * eta_upper``. ``"newton"``:
         the iterative trace-ratio update ``eta <- ratio(W(eta))`` (Wang et al. 2007, [45]),
-        which is Newton's method on ``f`` (``-Tr(W^T B W)`` is its slope), rises
-        monotonically from ``eta_lower`` and converges superlinearly to the same root.
+        which is Newton's method on ``f`` (``-Tr(W^T B W)`` is its slope): it starts from the
+        best ratio of the eigenbases the bounds need (a lower bound on eta*), rises
+        monotonically and converges superlinearly to the same root.
     tol : float
         Relative tolerance on eta.
     max_iter : int
@@ -309,7 +324,7 @@ def trace_ratio(
         raise ValueError(f"A and B must be square and alike, got {A.shape} and {B.shape}")
     if not 1 <= rank <= d:
         raise ValueError(f"rank must be in [1, {d}], got {rank}")
-    lower, upper = trace_ratio_bounds(A, B, rank)
+    (lower, upper), start = _bounds_and_start(A, B, rank)
     history: list[float] = []
     if solver == "bisection":
         lo, hi = lower, upper
@@ -326,7 +341,7 @@ def trace_ratio(
         eta = 0.5 * (lo + hi)
         _, W = _top_eigen(A - eta * B, rank, vectors=True)
     elif solver == "newton":
-        eta = lower
+        eta = start
         n_iter = 0
         W = None
         while n_iter < max_iter:
@@ -374,6 +389,14 @@ class RDSR(TransformerMixin, BaseEstimator):
     reg : float
         Ridge added to B, as a fraction of ``Tr(B) / D``, so B is positive definite (features
         constant on the training set make it singular) and Eq. 30's bound is finite.
+    variance_kept : float
+        The trace ratio is solved in the span of the principal directions holding this
+        fraction of the unlabeled poses' variance (at least ``n_components`` of them). In the
+        directions the data do not vary, ``A`` and ``B`` are both ~0, and the optimum of Eq. 27
+        degenerates: it keeps the single best direction and pads W with those free null
+        directions (we measured one informative column out of 50 on full GPD). Restricting
+        to the data's span is the usual preprocessing of trace-ratio / LDA-type methods; it
+        also makes every eigendecomposition small.
     max_active : int
         Most atoms per sparse code.
     tol : float
@@ -384,7 +407,7 @@ class RDSR(TransformerMixin, BaseEstimator):
     Attributes
     ----------
     components_ : ndarray, shape (n_components, D)
-        ``W^T``: ``transform(X) = X @ components_.T``.
+        ``W^T`` (orthonormal rows): ``transform(X) = X @ components_.T``.
     eta_ : float
         Optimal trace ratio.
     eta_bounds_ : tuple of float
@@ -393,8 +416,10 @@ class RDSR(TransformerMixin, BaseEstimator):
         The lasso weights of the unlabeled poses.
     codes_converged_ : float
         Fraction of sparse codes that met the lasso's optimality conditions.
-    A_, B_ : ndarray, shape (D, D)
-        The trace-ratio matrices (``B_`` includes the ridge).
+    basis_ : ndarray, shape (D, k)
+        Orthonormal principal directions the problem is solved in.
+    A_, B_ : ndarray, shape (k, k)
+        The trace-ratio matrices in ``basis_`` coordinates (``B_`` includes the ridge).
     n_iter_ : int
     timings_ : dict of str to float
         Seconds per step, as in Table 2: ``S_W``, ``S_L``, ``S_C``, ``A``, ``B``,
@@ -409,6 +434,7 @@ class RDSR(TransformerMixin, BaseEstimator):
         lasso_alpha: float = 0.05,
         solver: Literal["newton", "bisection"] = "newton",
         reg: float = 1e-6,
+        variance_kept: float = 0.999,
         max_active: int = 256,
         tol: float = 1e-10,
         random_state: int | np.random.RandomState | None = None,
@@ -418,6 +444,7 @@ class RDSR(TransformerMixin, BaseEstimator):
         self.lasso_alpha = lasso_alpha
         self.solver = solver
         self.reg = reg
+        self.variance_kept = variance_kept
         self.max_active = max_active
         self.tol = tol
         self.random_state = random_state
@@ -447,10 +474,6 @@ class RDSR(TransformerMixin, BaseEstimator):
         timings: dict[str, float] = {}
 
         t = time.perf_counter()
-        S_W = diffs.T @ diffs  # Eq. 13
-        timings["S_W"] = time.perf_counter() - t
-
-        t = time.perf_counter()
         if n >= 2:
             codes, converged = sparse_codes(X, self.lasso_alpha, self.max_active)
         else:
@@ -462,33 +485,43 @@ class RDSR(TransformerMixin, BaseEstimator):
         timings["S_C"] = time.perf_counter() - t
 
         t = time.perf_counter()
-        A = centred.T @ centred
+        basis = self._principal_basis(centred, diffs)
+        centred_k = centred @ basis
+        A = centred_k.T @ centred_k
         timings["A"] = time.perf_counter() - t
 
         t = time.perf_counter()
-        residuals = X - codes @ X
+        diffs_k = diffs @ basis
+        S_W_k = diffs_k.T @ diffs_k  # Eq. 13
+        timings["S_W"] = time.perf_counter() - t
+
+        t = time.perf_counter()
+        residuals = (X - codes @ X) @ basis
         B_L = residuals.T @ residuals  # X S_L X^T (Eq. 17-18)
-        tr_sw = float(np.trace(S_W))
+        tr_sw = float(np.trace(S_W_k))
         tr_bl = float(np.trace(B_L))
         if n >= 2 and tr_sw > 0:
-            B = B_L + (self.alpha * tr_bl / tr_sw) * S_W
+            B = B_L + (self.alpha * tr_bl / tr_sw) * S_W_k
         else:
-            B = B_L + S_W
-        B += (self.reg * max(np.trace(B), 1e-300) / d) * np.eye(d)
+            B = B_L + S_W_k
+        k = basis.shape[1]
+        B += (self.reg * max(np.trace(B), 1e-300) / k) * np.eye(k)
         timings["B"] = time.perf_counter() - t
 
         t = time.perf_counter()
         if n < 2:
             # Eq. 46: with no unlabeled data only E_supervision is left; minimise it.
-            w, W = _top_eigen(-B, self.n_components, vectors=True)
-            assert W is not None
+            w, W_k = _top_eigen(-B, self.n_components, vectors=True)
+            assert W_k is not None
             eta = float(-np.sum(w))
             info: dict[str, object] = {"eta_lower": eta, "eta_upper": eta, "n_iter": 0}
         else:
-            W, eta, info = trace_ratio(A, B, self.n_components, self.solver, self.tol)
+            W_k, eta, info = trace_ratio(A, B, self.n_components, self.solver, self.tol)
+        W = basis @ W_k
         timings["optimisation"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - t_total
 
+        self.basis_ = basis
         self.components_ = np.ascontiguousarray(W.T)
         self.eta_ = eta
         self.eta_bounds_ = (float(info["eta_lower"]), float(info["eta_upper"]))  # type: ignore[arg-type]
@@ -500,6 +533,24 @@ class RDSR(TransformerMixin, BaseEstimator):
         self.timings_ = timings
         self.n_features_in_ = d
         return self
+
+    def _principal_basis(self, centred: FloatArray, diffs: FloatArray) -> FloatArray:
+        """Orthonormal (D, k) basis of the directions the training poses vary along."""
+        d = centred.shape[1]
+        source = centred if centred.shape[0] >= 2 else diffs
+        with threadpool_limits(limits=1, user_api="blas"):
+            _, sv, vt = scipy.linalg.svd(source, full_matrices=False, lapack_driver="gesdd")
+        energy = np.cumsum(sv**2)
+        if energy[-1] <= 0:
+            raise ValueError("the training poses do not vary: no metric to learn")
+        k = int(np.searchsorted(energy, self.variance_kept * energy[-1]) + 1)
+        k = min(max(k, self.n_components), vt.shape[0], d)
+        if k < self.n_components:
+            raise ValueError(
+                f"the training poses span {k} dimensions, fewer than n_components="
+                f"{self.n_components}"
+            )
+        return np.ascontiguousarray(vt[:k].T)
 
     @staticmethod
     def _validate(X_unlabeled: ArrayLike, positive_pairs: ArrayLike) -> tuple[FloatArray, FloatArray]:

@@ -16,7 +16,6 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
-
 from threadpoolctl import threadpool_limits
 
 from quatmotion import quat
@@ -62,15 +61,21 @@ def check_quaternion_samples(Y: ArrayLike, name: str = "Y") -> NDArray[np.float6
     """
     arr = np.asarray(Y, dtype=np.float64)
     if arr.ndim != 3 or arr.shape[-1] != 4:
-        raise ValueError(f"{name} must have shape (N, n, 4) (N samples of n quaternions), got {arr.shape}")
+        raise ValueError(
+            f"{name} must have shape (N, n, 4) (N samples of n quaternions), got {arr.shape}"
+        )
     if arr.shape[0] < 1 or arr.shape[1] < 1:
-        raise ValueError(f"{name} needs at least one sample of at least one quaternion, got {arr.shape}")
+        raise ValueError(
+            f"{name} needs at least one sample of at least one quaternion, got {arr.shape}"
+        )
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or infinite values")
     norms = np.linalg.norm(arr, axis=-1)
     worst = float(np.max(np.abs(norms - 1.0)))
     if worst > UNIT_TOLERANCE:
-        raise ValueError(f"{name} must hold unit quaternions; the largest | |q| - 1 | is {worst:.3g}")
+        raise ValueError(
+            f"{name} must hold unit quaternions; the largest | |q| - 1 | is {worst:.3g}"
+        )
     # Renormalise away the admitted rounding and pick the w >= 0 hemisphere: the shortest-arc
     # representative that every log below assumes.
     return np.ascontiguousarray(quat.canonicalize(arr / norms[..., None]))
@@ -97,7 +102,11 @@ def matrix_to_codes(W: ArrayLike | sp.spmatrix, n_atoms: int) -> Codes:
 
     Ties keep ascending atom index, so the combination order is a function of ``W``.
     """
-    M = sp.csr_matrix(W, dtype=np.float64) if sp.issparse(W) else sp.csr_matrix(np.asarray(W, dtype=np.float64))
+    M = (
+        sp.csr_matrix(W, dtype=np.float64)
+        if sp.issparse(W)
+        else sp.csr_matrix(np.asarray(W, dtype=np.float64))
+    )
     if M.ndim != 2 or M.shape[1] != n_atoms:
         raise ValueError(f"weights must have shape (N, {n_atoms}), got {M.shape}")
     M.eliminate_zeros()
@@ -131,7 +140,9 @@ def group_by_atom(codes: Codes, n_atoms: int) -> list[NDArray[np.int64]]:
     return [rows[order[bounds[k] : bounds[k + 1]]] for k in range(n_atoms)]
 
 
-def rank1(A: NDArray[np.float64], warm: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def rank1(
+    A: NDArray[np.float64], warm: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Best rank-1 approximation ``A ~ w u^T`` with ``|u| = 1``: ``(M, d) -> (u (d,), w (M,))``.
 
     ``w = sigma_1 v_1`` and ``u`` the first right singular vector (the atom in K-SVD, Algorithm 1

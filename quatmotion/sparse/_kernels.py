@@ -42,11 +42,8 @@ def _qmul(aw, ax, ay, az, bw, bx, by, bz):  # type: ignore[no-untyped-def]
 @njit(inline="always", cache=True)
 def _qexp(vx, vy, vz):  # type: ignore[no-untyped-def]
     a = math.sqrt(vx * vx + vy * vy + vz * vz)
-    if a < 1e-8:
-        # sin(a)/a = 1 - a^2/6 to double precision here.
-        s = 1.0 - a * a / 6.0
-    else:
-        s = math.sin(a) / a
+    # Below 1e-8, sin(a)/a = 1 - a^2/6 to double precision.
+    s = 1.0 - a * a / 6.0 if a < 1e-8 else math.sin(a) / a
     return math.cos(a), vx * s, vy * s, vz * s
 
 
@@ -56,10 +53,7 @@ def _qlog(w, x, y, z):  # type: ignore[no-untyped-def]
     if w < 0.0:
         w, x, y, z = -w, -x, -y, -z
     vn = math.sqrt(x * x + y * y + z * z)
-    if vn < 1e-12:
-        s = 1.0 / max(w, 1e-300)
-    else:
-        s = math.atan2(vn, w) / vn
+    s = 1.0 / max(w, 1e-300) if vn < 1e-12 else math.atan2(vn, w) / vn
     return x * s, y * s, z * s
 
 
@@ -145,8 +139,16 @@ def _bcd(Y_i, Dlog, Dnorm, Daxis, idx_row, coef_row, m, n_sweeps, weighted, A, s
             suf[m, j, 3] = 0.0
         for s in range(m - 1, -1, -1):
             for j in range(n):
-                r = _qmul(A[s, j, 0], A[s, j, 1], A[s, j, 2], A[s, j, 3],
-                          suf[s + 1, j, 0], suf[s + 1, j, 1], suf[s + 1, j, 2], suf[s + 1, j, 3])
+                r = _qmul(
+                    A[s, j, 0],
+                    A[s, j, 1],
+                    A[s, j, 2],
+                    A[s, j, 3],
+                    suf[s + 1, j, 0],
+                    suf[s + 1, j, 1],
+                    suf[s + 1, j, 2],
+                    suf[s + 1, j, 3],
+                )
                 suf[s, j, 0] = r[0]
                 suf[s, j, 1] = r[1]
                 suf[s, j, 2] = r[2]
@@ -159,8 +161,16 @@ def _bcd(Y_i, Dlog, Dnorm, Daxis, idx_row, coef_row, m, n_sweeps, weighted, A, s
         for s in range(m):
             for j in range(n):
                 # E = Lq * conj(suf[s + 1])
-                r = _qmul(Lq[j, 0], Lq[j, 1], Lq[j, 2], Lq[j, 3],
-                          suf[s + 1, j, 0], -suf[s + 1, j, 1], -suf[s + 1, j, 2], -suf[s + 1, j, 3])
+                r = _qmul(
+                    Lq[j, 0],
+                    Lq[j, 1],
+                    Lq[j, 2],
+                    Lq[j, 3],
+                    suf[s + 1, j, 0],
+                    -suf[s + 1, j, 1],
+                    -suf[s + 1, j, 2],
+                    -suf[s + 1, j, 3],
+                )
                 E[j, 0] = r[0]
                 E[j, 1] = r[1]
                 E[j, 2] = r[2]
@@ -170,8 +180,16 @@ def _bcd(Y_i, Dlog, Dnorm, Daxis, idx_row, coef_row, m, n_sweeps, weighted, A, s
             _power_into(Dlog, idx_row[s], x, A[s])
             for j in range(n):
                 # Lq <- A_s^-1 Lq
-                r = _qmul(A[s, j, 0], -A[s, j, 1], -A[s, j, 2], -A[s, j, 3],
-                          Lq[j, 0], Lq[j, 1], Lq[j, 2], Lq[j, 3])
+                r = _qmul(
+                    A[s, j, 0],
+                    -A[s, j, 1],
+                    -A[s, j, 2],
+                    -A[s, j, 3],
+                    Lq[j, 0],
+                    Lq[j, 1],
+                    Lq[j, 2],
+                    Lq[j, 3],
+                )
                 Lq[j, 0] = r[0]
                 Lq[j, 1] = r[1]
                 Lq[j, 2] = r[2]
@@ -208,7 +226,12 @@ def _gauss_newton(Y_i, Dlog, idx_row, coef_row, m, n_iter, A, suf, Wmat, keep_so
         for s in range(m):
             k = idx_row[s]
             for j in range(n):
-                sw, sx, sy, sz = suf[s + 1, j, 0], suf[s + 1, j, 1], suf[s + 1, j, 2], suf[s + 1, j, 3]
+                sw, sx, sy, sz = (
+                    suf[s + 1, j, 0],
+                    suf[s + 1, j, 1],
+                    suf[s + 1, j, 2],
+                    suf[s + 1, j, 3],
+                )
                 t = _qmul(sw, -sx, -sy, -sz, 0.0, Dlog[k, j, 0], Dlog[k, j, 1], Dlog[k, j, 2])
                 q = _qmul(t[0], t[1], t[2], t[3], sw, sx, sy, sz)
                 Wmat[s, 3 * j] = q[1]
@@ -305,7 +328,7 @@ def _refit_with_swaps(Y_i, Dlog, idx_row, coef_row, m, n_iter, A, suf, Wmat):  #
 
 @njit(cache=True)
 def _cholesky_solve(G, g, out, m):  # type: ignore[no-untyped-def]
-    """Solve ``G out = g`` for SPD ``G`` ``(m, m)`` in place (G is overwritten); False if singular."""
+    """Solve ``G out = g`` for SPD ``G`` ``(m, m)``; G is overwritten. False if singular."""
     for a in range(m):
         acc = G[a, a]
         for t in range(a):
@@ -355,16 +378,32 @@ def _suffix_and_residual(Y_i, m, A, suf, r):  # type: ignore[no-untyped-def]
         suf[m, j, 3] = 0.0
     for s in range(m - 1, -1, -1):
         for j in range(n):
-            q = _qmul(A[s, j, 0], A[s, j, 1], A[s, j, 2], A[s, j, 3],
-                      suf[s + 1, j, 0], suf[s + 1, j, 1], suf[s + 1, j, 2], suf[s + 1, j, 3])
+            q = _qmul(
+                A[s, j, 0],
+                A[s, j, 1],
+                A[s, j, 2],
+                A[s, j, 3],
+                suf[s + 1, j, 0],
+                suf[s + 1, j, 1],
+                suf[s + 1, j, 2],
+                suf[s + 1, j, 3],
+            )
             suf[s, j, 0] = q[0]
             suf[s, j, 1] = q[1]
             suf[s, j, 2] = q[2]
             suf[s, j, 3] = q[3]
     total = 0.0
     for j in range(n):
-        q = _qmul(suf[0, j, 0], -suf[0, j, 1], -suf[0, j, 2], -suf[0, j, 3],
-                  Y_i[j, 0], Y_i[j, 1], Y_i[j, 2], Y_i[j, 3])
+        q = _qmul(
+            suf[0, j, 0],
+            -suf[0, j, 1],
+            -suf[0, j, 2],
+            -suf[0, j, 3],
+            Y_i[j, 0],
+            Y_i[j, 1],
+            Y_i[j, 2],
+            Y_i[j, 3],
+        )
         lx, ly, lz = _qlog(q[0], q[1], q[2], q[3])
         r[3 * j] = lx
         r[3 * j + 1] = ly
@@ -384,8 +423,16 @@ def _combine_row(Dlog, idx_row, coef_row, m, out, tmp):  # type: ignore[no-untyp
     for s in range(m):
         _power_into(Dlog, idx_row[s], coef_row[s], tmp)
         for j in range(n):
-            r = _qmul(out[j, 0], out[j, 1], out[j, 2], out[j, 3],
-                      tmp[j, 0], tmp[j, 1], tmp[j, 2], tmp[j, 3])
+            r = _qmul(
+                out[j, 0],
+                out[j, 1],
+                out[j, 2],
+                out[j, 3],
+                tmp[j, 0],
+                tmp[j, 1],
+                tmp[j, 2],
+                tmp[j, 3],
+            )
             out[j, 0] = r[0]
             out[j, 1] = r[1]
             out[j, 2] = r[2]
@@ -426,11 +473,27 @@ def residual_logs(Y, Dlog, idx, coef, count, left, out):  # type: ignore[no-unty
         _combine_row(Dlog, idx[i], coef[i], count[i], C, tmp)
         for j in range(n):
             if left:
-                r = _qmul(C[j, 0], -C[j, 1], -C[j, 2], -C[j, 3],
-                          Y[i, j, 0], Y[i, j, 1], Y[i, j, 2], Y[i, j, 3])
+                r = _qmul(
+                    C[j, 0],
+                    -C[j, 1],
+                    -C[j, 2],
+                    -C[j, 3],
+                    Y[i, j, 0],
+                    Y[i, j, 1],
+                    Y[i, j, 2],
+                    Y[i, j, 3],
+                )
             else:
-                r = _qmul(Y[i, j, 0], Y[i, j, 1], Y[i, j, 2], Y[i, j, 3],
-                          C[j, 0], -C[j, 1], -C[j, 2], -C[j, 3])
+                r = _qmul(
+                    Y[i, j, 0],
+                    Y[i, j, 1],
+                    Y[i, j, 2],
+                    Y[i, j, 3],
+                    C[j, 0],
+                    -C[j, 1],
+                    -C[j, 2],
+                    -C[j, 3],
+                )
             lx, ly, lz = _qlog(r[0], r[1], r[2], r[3])
             out[i, j, 0] = lx
             out[i, j, 1] = ly
@@ -438,8 +501,23 @@ def residual_logs(Y, Dlog, idx, coef, count, left, out):  # type: ignore[no-unty
 
 
 @njit(parallel=True, cache=True)
-def add_atom_and_refit(Y, Dlog, Dnorm, Daxis, idx, coef, count, new_atom, active, left,
-                       n_sweeps, solver, refit, Rlog, obj):  # type: ignore[no-untyped-def]
+def add_atom_and_refit(
+    Y,
+    Dlog,
+    Dnorm,
+    Daxis,
+    idx,
+    coef,
+    count,
+    new_atom,
+    active,
+    left,
+    n_sweeps,
+    solver,
+    refit,
+    Rlog,
+    obj,
+):  # type: ignore[no-untyped-def]
     """One step of Algorithm 2 for every active sample.
 
     ``Rlog`` ``(N, n, 3)`` holds each sample's residual log on entry (``C^-1 Y`` if ``left``,
@@ -483,13 +561,34 @@ def add_atom_and_refit(Y, Dlog, Dnorm, Daxis, idx, coef, count, new_atom, active
                 Wmat = np.empty((L, 3 * n))
                 _refit_with_swaps(Y[i], Dlog, idx[i], coef[i], m, n_sweeps, A, suf, Wmat)
             else:
-                _bcd(Y[i], Dlog, Dnorm, Daxis, idx[i], coef[i], m, n_sweeps, solver == 1, A,
-                     suf, R, tmp)
+                _bcd(
+                    Y[i],
+                    Dlog,
+                    Dnorm,
+                    Daxis,
+                    idx[i],
+                    coef[i],
+                    m,
+                    n_sweeps,
+                    solver == 1,
+                    A,
+                    suf,
+                    R,
+                    tmp,
+                )
         elif left and not moved:
             _power_into(Dlog, k, x, tmp)
             for j in range(n):
-                r = _qmul(tmp[j, 0], -tmp[j, 1], -tmp[j, 2], -tmp[j, 3],
-                          R[j, 0], R[j, 1], R[j, 2], R[j, 3])
+                r = _qmul(
+                    tmp[j, 0],
+                    -tmp[j, 1],
+                    -tmp[j, 2],
+                    -tmp[j, 3],
+                    R[j, 0],
+                    R[j, 1],
+                    R[j, 2],
+                    R[j, 3],
+                )
                 R[j, 0] = r[0]
                 R[j, 1] = r[1]
                 R[j, 2] = r[2]
@@ -500,11 +599,27 @@ def add_atom_and_refit(Y, Dlog, Dnorm, Daxis, idx, coef, count, new_atom, active
             _combine_row(Dlog, idx[i], coef[i], m, C, tmp)
             for j in range(n):
                 if left:
-                    r = _qmul(C[j, 0], -C[j, 1], -C[j, 2], -C[j, 3],
-                              Y[i, j, 0], Y[i, j, 1], Y[i, j, 2], Y[i, j, 3])
+                    r = _qmul(
+                        C[j, 0],
+                        -C[j, 1],
+                        -C[j, 2],
+                        -C[j, 3],
+                        Y[i, j, 0],
+                        Y[i, j, 1],
+                        Y[i, j, 2],
+                        Y[i, j, 3],
+                    )
                 else:
-                    r = _qmul(Y[i, j, 0], Y[i, j, 1], Y[i, j, 2], Y[i, j, 3],
-                              C[j, 0], -C[j, 1], -C[j, 2], -C[j, 3])
+                    r = _qmul(
+                        Y[i, j, 0],
+                        Y[i, j, 1],
+                        Y[i, j, 2],
+                        Y[i, j, 3],
+                        C[j, 0],
+                        -C[j, 1],
+                        -C[j, 2],
+                        -C[j, 3],
+                    )
                 R[j, 0] = r[0]
                 R[j, 1] = r[1]
                 R[j, 2] = r[2]
@@ -544,11 +659,13 @@ def atom_residual_logs(Y, A, count, samples, positions, out):  # type: ignore[no
         for j in range(n):
             lw, lx, ly, lz = Y[i, j, 0], Y[i, j, 1], Y[i, j, 2], Y[i, j, 3]
             for s in range(p - 1, -1, -1):
-                lw, lx, ly, lz = _qmul(A[i, s, j, 0], -A[i, s, j, 1], -A[i, s, j, 2],
-                                       -A[i, s, j, 3], lw, lx, ly, lz)
+                lw, lx, ly, lz = _qmul(
+                    A[i, s, j, 0], -A[i, s, j, 1], -A[i, s, j, 2], -A[i, s, j, 3], lw, lx, ly, lz
+                )
             for s in range(m - 1, p, -1):
-                lw, lx, ly, lz = _qmul(lw, lx, ly, lz, A[i, s, j, 0], -A[i, s, j, 1],
-                                       -A[i, s, j, 2], -A[i, s, j, 3])
+                lw, lx, ly, lz = _qmul(
+                    lw, lx, ly, lz, A[i, s, j, 0], -A[i, s, j, 1], -A[i, s, j, 2], -A[i, s, j, 3]
+                )
             ex, ey, ez = _qlog(lw, lx, ly, lz)
             out[r, j, 0] = ex
             out[r, j, 1] = ey
@@ -556,8 +673,9 @@ def atom_residual_logs(Y, A, count, samples, positions, out):  # type: ignore[no
 
 
 @njit(parallel=True, cache=True)
-def candidate_objective(Y, Dlog, A, idx, coef, count, samples, positions, atom_log,
-                        new_weights, out):  # type: ignore[no-untyped-def]
+def candidate_objective(
+    Y, Dlog, A, idx, coef, count, samples, positions, atom_log, new_weights, out
+):  # type: ignore[no-untyped-def]
     """Objective of each sample in ``samples`` if its slot ``positions[r]`` became
     ``exp(new_weights[r] * atom_log)``, with the slots re-sorted by magnitude (Eq. 2 order)."""
     M = samples.shape[0]
@@ -585,8 +703,9 @@ def candidate_objective(Y, Dlog, A, idx, coef, count, samples, positions, atom_l
             for j in range(n):
                 if s == p:
                     x = new_weights[r]
-                    bw, bx, by, bz = _qexp(x * atom_log[j, 0], x * atom_log[j, 1],
-                                           x * atom_log[j, 2])
+                    bw, bx, by, bz = _qexp(
+                        x * atom_log[j, 0], x * atom_log[j, 1], x * atom_log[j, 2]
+                    )
                 else:
                     bw, bx, by, bz = A[i, s, j, 0], A[i, s, j, 1], A[i, s, j, 2], A[i, s, j, 3]
                 q = _qmul(P[j, 0], P[j, 1], P[j, 2], P[j, 3], bw, bx, by, bz)

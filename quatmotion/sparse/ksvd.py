@@ -24,9 +24,9 @@ from quatmotion.sparse import _kernels as kern
 from quatmotion.sparse._common import (
     Codes,
     check_positive_int,
-    compute_threads,
     check_quaternion_samples,
     codes_to_matrix,
+    compute_threads,
     group_by_atom,
     matrix_to_codes,
     rank1,
@@ -37,7 +37,9 @@ __all__ = ["KSVD", "learn_linear_dictionary", "omp"]
 _CHUNK = 8192
 
 
-def omp(Yf: NDArray[np.float64], D: NDArray[np.float64], sparsity: int, tol: float = 1e-12) -> Codes:
+def omp(
+    Yf: NDArray[np.float64], D: NDArray[np.float64], sparsity: int, tol: float = 1e-12
+) -> Codes:
     """Batch orthogonal matching pursuit of ``Yf`` ``(N, d)`` on unit atoms ``D`` ``(K, d)``.
 
     Returns
@@ -175,13 +177,22 @@ class KSVD(TransformerMixin, BaseEstimator):
                 R = Yf - _reconstruct(D, codes)
             total = float(np.sum(R * R))
             Yhat = _to_quaternions(Yf - R, n)
-            errors.append(float(np.degrees(np.mean(2 * np.arccos(np.minimum(np.abs(np.sum(Yc * Yhat, -1)), 1.0))))))
+            errors.append(
+                float(
+                    np.degrees(
+                        np.mean(2 * np.arccos(np.minimum(np.abs(np.sum(Yc * Yhat, -1)), 1.0)))
+                    )
+                )
+            )
             objectives.append(total)
             with compute_threads(work, blas_single=True):
                 self._update_dictionary(Yf, D, codes, R)
             seconds.append(time.perf_counter() - t0)
             if self.verbose:
-                print(f"K-SVD iter {it + 1}: error {errors[-1]:.6g} deg, |R|^2 {total:.6g}, {seconds[-1]:.3f} s")
+                print(
+                    f"K-SVD iter {it + 1}: error {errors[-1]:.6g} deg, |R|^2 {total:.6g}, "
+                    f"{seconds[-1]:.3f} s"
+                )
             if self.tol > 0 and it > 0 and abs(previous - total) <= self.tol * previous:
                 break
             previous = total
@@ -195,7 +206,9 @@ class KSVD(TransformerMixin, BaseEstimator):
         return self
 
     @staticmethod
-    def _update_dictionary(Yf: NDArray[np.float64], D: NDArray[np.float64], codes: Codes, R: NDArray[np.float64]) -> None:
+    def _update_dictionary(
+        Yf: NDArray[np.float64], D: NDArray[np.float64], codes: Codes, R: NDArray[np.float64]
+    ) -> None:
         """Algorithm 1 lines 9-14 in place on ``D``, ``codes.coef`` and the residual ``R``."""
         K = D.shape[0]
         groups = group_by_atom(codes, K)
@@ -227,7 +240,9 @@ class KSVD(TransformerMixin, BaseEstimator):
         self._check_fitted()
         Yc = check_quaternion_samples(Y)
         if Yc.shape[1] != self.n_features_in_:
-            raise ValueError(f"Y has {Yc.shape[1]} quaternions per sample, the model {self.n_features_in_}")
+            raise ValueError(
+                f"Y has {Yc.shape[1]} quaternions per sample, the model {self.n_features_in_}"
+            )
         with compute_threads(float(len(Yc) * self.sparsity * max(self.n_atoms, Yc.shape[1]))):
             codes = omp(
                 np.ascontiguousarray(Yc.reshape(len(Yc), -1)), self.dictionary_flat_, self.sparsity

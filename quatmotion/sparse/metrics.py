@@ -39,7 +39,9 @@ def angular_error_deg(Y: ArrayLike, Y_hat: ArrayLike, convention: str = "rotatio
     Y = np.asarray(Y, dtype=np.float64)
     Y_hat = np.asarray(Y_hat, dtype=np.float64)
     if Y.shape != Y_hat.shape or Y.shape[-1:] != (4,):
-        raise ValueError(f"need two arrays of the same shape (..., 4), got {Y.shape} and {Y_hat.shape}")
+        raise ValueError(
+            f"need two arrays of the same shape (..., 4), got {Y.shape} and {Y_hat.shape}"
+        )
     if convention not in ("rotation", "paper"):
         raise ValueError(f"convention must be 'rotation' or 'paper', got {convention!r}")
     angles = quat.angle(Y, Y_hat)
@@ -55,7 +57,9 @@ def _as_atoms(D: ArrayLike, name: str) -> NDArray[np.float64]:
     return D
 
 
-def dictionary_distance(D: ArrayLike, D_true: ArrayLike, space: str = "quaternion") -> NDArray[np.float64]:
+def dictionary_distance(
+    D: ArrayLike, D_true: ArrayLike, space: str = "quaternion"
+) -> NDArray[np.float64]:
     """For every true atom, the distance to the nearest learned atom (Eq. 10).
 
     Parameters

@@ -56,19 +56,25 @@ from sklearn.utils import check_random_state
 
 from quatmotion import quat
 from quatmotion.sparse import _kernels as kern
-from quatmotion.sparse.ksvd import learn_linear_dictionary
 from quatmotion.sparse._common import (
     Codes,
     check_positive_int,
-    compute_threads,
     check_quaternion_samples,
     codes_to_matrix,
+    compute_threads,
     group_by_atom,
     matrix_to_codes,
     rank1,
 )
+from quatmotion.sparse.ksvd import learn_linear_dictionary
 
-__all__ = ["QSSD", "DictionaryUpdateResult", "quaternion_combination", "sparse_code", "update_dictionary"]
+__all__ = [
+    "QSSD",
+    "DictionaryUpdateResult",
+    "quaternion_combination",
+    "sparse_code",
+    "update_dictionary",
+]
 
 _PROJECTION_CHUNK = 8192
 _CODE_TOL = 1e-10
@@ -78,7 +84,9 @@ _SOLVERS = {"paper": 0, "weighted": 1, "gauss-newton": 2}
 def _atom_geometry(Dlog: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per-joint half angles ``(K, n)`` and unit axes ``(K, n, 3)`` (zero for a zero log)."""
     Dnorm = np.linalg.norm(Dlog, axis=-1)
-    Daxis = np.where(Dnorm[..., None] > 0.0, Dlog / np.where(Dnorm > 0.0, Dnorm, 1.0)[..., None], 0.0)
+    Daxis = np.where(
+        Dnorm[..., None] > 0.0, Dlog / np.where(Dnorm > 0.0, Dnorm, 1.0)[..., None], 0.0
+    )
     return np.ascontiguousarray(Dnorm), np.ascontiguousarray(Daxis)
 
 
@@ -107,7 +115,9 @@ def _check_dictionary_log(Dlog: ArrayLike, n: int | None = None) -> NDArray[np.f
     return D
 
 
-def quaternion_combination(dictionary_log: ArrayLike, W: ArrayLike | sp.spmatrix) -> NDArray[np.float64]:
+def quaternion_combination(
+    dictionary_log: ArrayLike, W: ArrayLike | sp.spmatrix
+) -> NDArray[np.float64]:
     """Quaternion combination ``D (x) X`` of Eq. 2-3.
 
     Parameters
@@ -196,8 +206,21 @@ def sparse_code(
             new_atom[chunk] = np.argmax(proj, axis=1)
         do_refit = refit == "every" or step == L - 1
         kern.add_atom_and_refit(
-            Y, Dlog, Dnorm, Daxis, codes.idx, codes.coef, codes.count, new_atom, active, left,
-            n_sweeps, solver, do_refit, Rlog, objective,
+            Y,
+            Dlog,
+            Dnorm,
+            Daxis,
+            codes.idx,
+            codes.coef,
+            codes.count,
+            new_atom,
+            active,
+            left,
+            n_sweeps,
+            solver,
+            do_refit,
+            Rlog,
+            objective,
         )
     return codes, objective
 
@@ -232,6 +255,7 @@ def update_dictionary(
     *,
     safeguard: bool = True,
     objective: NDArray[np.float64] | None = None,
+    robust: bool = True,
 ) -> DictionaryUpdateResult:
     """Quaternion dictionary learning (Algorithm 3): every atom and its weights, in turn.
 
@@ -252,6 +276,9 @@ def update_dictionary(
         Keep an atom update only if it does not increase the objective (module docstring).
     objective : ndarray, shape (N,), optional
         Current per-sample objective, if known.
+    robust : bool
+        Refit each atom once without the samples whose rank-1 misfit exceeds three times the
+        median (module docstring).
 
     Returns
     -------
@@ -277,7 +304,16 @@ def update_dictionary(
         positions = np.argmax(codes.idx[samples] == k, axis=1).astype(np.int64)
         lnE = np.empty((samples.size, n, 3))
         kern.atom_residual_logs(Y, A, codes.count, samples, positions, lnE)
-        u, w = rank1(lnE.reshape(samples.size, 3 * n), Dlog[k].ravel())
+        lnE_flat = lnE.reshape(samples.size, 3 * n)
+        u, w = rank1(lnE_flat, Dlog[k].ravel())
+        if robust and samples.size >= 8:
+            # Samples coded with a wrong atom set leave large, unrelated residuals in ln E that
+            # pull the least-squares atom away from the true one: refit once without them.
+            misfit = np.linalg.norm(lnE_flat - np.outer(w, u), axis=1)
+            keep = misfit <= 3.0 * np.median(misfit) + 1e-12
+            if 4 <= np.count_nonzero(keep) < samples.size:
+                u, _ = rank1(lnE_flat[keep], u)
+                w = lnE_flat @ u
         if not np.all(np.isfinite(u)) or not np.any(u):
             n_rejected += 1
             continue
@@ -285,7 +321,16 @@ def update_dictionary(
         if safeguard:
             candidate = np.empty(samples.size)
             kern.candidate_objective(
-                Y, Dlog, A, codes.idx, codes.coef, codes.count, samples, positions, atom_log, w,
+                Y,
+                Dlog,
+                A,
+                codes.idx,
+                codes.coef,
+                codes.count,
+                samples,
+                positions,
+                atom_log,
+                w,
                 candidate,
             )
             current = float(np.sum(objective[samples]))
@@ -315,7 +360,9 @@ def _reseed_unused(
     worst = np.argsort(-objective, kind="stable")[: len(unused)]
     sub = Codes(codes.idx[worst], codes.coef[worst], codes.count[worst])
     Rlog = np.empty((worst.size, Y.shape[1], 3))
-    kern.residual_logs(np.ascontiguousarray(Y[worst]), Dlog, sub.idx, sub.coef, sub.count, True, Rlog)
+    kern.residual_logs(
+        np.ascontiguousarray(Y[worst]), Dlog, sub.idx, sub.coef, sub.count, True, Rlog
+    )
     done = 0
     for k, r in zip(unused, Rlog, strict=False):
         norm = np.linalg.norm(r)
@@ -388,8 +435,9 @@ class QSSD(TransformerMixin, BaseEstimator):
         n_sweeps: int = 3,
         refit: str = "final",
         safeguard: bool = False,
-        init: str = "samples",
-        init_iter: int = 10,
+        robust: bool = True,
+        init: str = "log-ksvd",
+        init_iter: int = 100,
         random_state: int | np.random.RandomState | None = None,
         verbose: bool = False,
     ) -> None:
@@ -402,6 +450,7 @@ class QSSD(TransformerMixin, BaseEstimator):
         self.n_sweeps = n_sweeps
         self.refit = refit
         self.safeguard = safeguard
+        self.robust = robust
         self.init = init
         self.init_iter = init_iter
         self.random_state = random_state
@@ -424,9 +473,13 @@ class QSSD(TransformerMixin, BaseEstimator):
             raise ValueError(f"init must be 'samples' or 'log-ksvd', got {self.init!r}")
         check_positive_int(self.init_iter, "init_iter")
         if self.coef_solver not in _SOLVERS:
-            raise ValueError(f"coef_solver must be one of {sorted(_SOLVERS)}, got {self.coef_solver!r}")
+            raise ValueError(
+                f"coef_solver must be one of {sorted(_SOLVERS)}, got {self.coef_solver!r}"
+            )
 
-    def _initial_dictionary(self, Y: NDArray[np.float64], rng: np.random.RandomState) -> NDArray[np.float64]:
+    def _initial_dictionary(
+        self, Y: NDArray[np.float64], rng: np.random.RandomState
+    ) -> NDArray[np.float64]:
         """Algorithm 4 line 1: logs of distinct random samples, normalised to unit norm."""
         N, n, _ = Y.shape
         K = self.n_atoms
@@ -443,7 +496,9 @@ class QSSD(TransformerMixin, BaseEstimator):
         if self.init == "log-ksvd":
             # First-order model: ln(A^a B^b) = a ln A + b ln B + O(ab [ln A, ln B]), so linear
             # K-SVD on the logs finds atoms close to the quaternion ones at a fraction of the cost.
-            D = learn_linear_dictionary(np.ascontiguousarray(logs), D, self.sparsity, self.init_iter)
+            D = learn_linear_dictionary(
+                np.ascontiguousarray(logs), D, self.sparsity, self.init_iter
+            )
         return np.ascontiguousarray(D.reshape(K, n, 3))
 
     def fit(self, Y: ArrayLike, y: object = None) -> QSSD:
@@ -466,15 +521,25 @@ class QSSD(TransformerMixin, BaseEstimator):
             t0 = time.perf_counter()
             with compute_threads(work):
                 codes, objective = sparse_code(
-                    Yc, Dlog, self.sparsity, residual=self.residual, coef_solver=self.coef_solver,
-                    n_sweeps=self.n_sweeps, refit=self.refit,
+                    Yc,
+                    Dlog,
+                    self.sparsity,
+                    residual=self.residual,
+                    coef_solver=self.coef_solver,
+                    n_sweeps=self.n_sweeps,
+                    refit=self.refit,
                 )
                 total = float(np.sum(objective))
                 errors.append(_mean_angle_deg(Yc, _combine_codes(Dlog, codes)))
             objectives.append(total)
             with compute_threads(work, blas_single=True):
                 result = update_dictionary(
-                    Yc, Dlog, codes, safeguard=self.safeguard, objective=objective
+                    Yc,
+                    Dlog,
+                    codes,
+                    safeguard=self.safeguard,
+                    objective=objective,
+                    robust=self.robust,
                 )
             Dlog = result.dictionary_log
             seconds.append(time.perf_counter() - t0)
@@ -511,11 +576,18 @@ class QSSD(TransformerMixin, BaseEstimator):
         self._check_fitted()
         Yc = check_quaternion_samples(Y)
         if Yc.shape[1] != self.n_features_in_:
-            raise ValueError(f"Y has {Yc.shape[1]} quaternions per sample, the model {self.n_features_in_}")
+            raise ValueError(
+                f"Y has {Yc.shape[1]} quaternions per sample, the model {self.n_features_in_}"
+            )
         with compute_threads(float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)):
             codes, _ = sparse_code(
-                Yc, self.dictionary_log_, self.sparsity, residual=self.residual,
-                coef_solver=self.coef_solver, n_sweeps=self.n_sweeps, refit=self.refit,
+                Yc,
+                self.dictionary_log_,
+                self.sparsity,
+                residual=self.residual,
+                coef_solver=self.coef_solver,
+                n_sweeps=self.n_sweeps,
+                refit=self.refit,
             )
         return codes_to_matrix(codes, self.n_atoms)
 
@@ -523,4 +595,3 @@ class QSSD(TransformerMixin, BaseEstimator):
         """Quaternion combination (Eq. 2-3) of weights ``W`` ``(N, K)``: ``-> (N, n, 4)``."""
         self._check_fitted()
         return quaternion_combination(self.dictionary_log_, W)
-
