@@ -29,12 +29,13 @@ def test_one_atom_sample_is_coded_exactly(solver: str) -> None:
     assert objective[0] < 1e-14
 
 
-def test_two_atom_sample_is_coded_exactly_in_descending_order() -> None:
+@pytest.mark.parametrize("refit", ["final", "every"])
+def test_two_atom_sample_is_coded_exactly_in_descending_order(refit: str) -> None:
     rng = np.random.default_rng(2)
     Dlog = _unit_logs(rng, 8, 6)
     # Eq. 2: the larger |weight| on the left.
     Y = quat.canonicalize(quat.multiply(quat.exp(0.9 * Dlog[1]), quat.exp(-0.5 * Dlog[4])))[None]
-    codes, objective = sparse_code(Y, Dlog, 2, coef_solver="gauss-newton", n_sweeps=10)
+    codes, objective = sparse_code(Y, Dlog, 2, coef_solver="gauss-newton", n_sweeps=10, refit=refit)
     assert list(codes.idx[0, : codes.count[0]]) == [1, 4]
     np.testing.assert_allclose(codes.coef[0, :2], [0.9, -0.5], atol=1e-9)
     assert objective[0] < 1e-14

@@ -7,12 +7,15 @@
   500 positive + 500 negative pairs labelled by Kovar's windowed point-cloud distance, see
   :mod:`quatmotion.pose.labels`) and scored on pairs of other subjects by Eq. 36-37.
 * **Features x learners** (Fig. 6): the ``FEATURE+LEARNER`` methods arranged as a matrix.
-* **Rank sweep** (Fig. 4): GPD+RDSR at several ranks.
-* **Unlabeled count sweep** (Fig. 7): GPD+RDSR (and SDA) with N' unlabeled poses.
+* **Rank sweep** (Fig. 4): GPD+RDSR at ranks :data:`RANKS`.
+* **Unlabeled count sweep** (Fig. 7): GPD+RDSR and GPD+SDA with N' in :data:`UNLABELED_COUNTS`
+  (N' = 0 is RDSR's Eq. 46 and SDA's LDA limit), and RDSR's label weight ``alpha`` over
+  :data:`ALPHAS`. The sweeps run on ``sweep_datasets`` only.
 * **Pose retrieval** (section 6, Fig. 8): k-means poses per subject, correct = same class and
   DTW phase within 10 %; methods trained on correct / other-class pairs of training subjects;
   precision at scopes 5..50 on the test subjects (results from the query's own clip excluded).
-* Fit and query times of every method.
+* Fit and query times of every method (aliases such as ``"RDSR"`` for ``"GPD+RDSR"`` run once).
+  A method that raises is recorded with its error and the benchmark goes on.
 * **ANN index**: hnswlib over 1,000,000 synthetic 50-dimensional "projected poses" (100,000 in
   quick mode): build time, median / p95 per-query latency (one query at a time, one thread)
   and recall@10 against exact search.
@@ -21,8 +24,11 @@ Datasets: ``hdm05`` (groups are actors, 11 classes), ``cmu`` (ASF subjects 01-03
 subjects 07-08; transition only, no classes), ``bandai`` (one performer: groups are *styles*,
 classes are contents). Every third group in sorted order is held out for testing (HDM05: dg;
 CMU: 03 and 08), the others train.
-Clips are resampled to 30 frames/s and every body scaled to 170 cm (the paper normalises body
-height). A dataset whose folder or reader is missing is skipped and listed in ``skipped``.
+Clips are resampled to 30 frames/s and every body scaled to a 170 cm stature
+(:func:`quatmotion.pose.skeleton16.stature16`; the paper normalises body height).
+Figures: ``<out stem>_<dataset>_fig4_rank.png``, ``_fig5_transition``,
+``_fig6_features_learners``, ``_fig7_unlabeled``, ``_fig8_retrieval``. A dataset whose folder
+or reader is missing is skipped and listed in ``skipped``.
 """
 
 from __future__ import annotations
@@ -46,8 +52,9 @@ from quatmotion.pose.index import PoseIndex, exact_knn, recall_at_k
 
 TARGET_FPS = 30.0
 BODY_HEIGHT = 170.0  # cm: every subject is scaled to this standing height
-RANKS = (5, 10, 20, 30, 50, 80, 120, 200)
-UNLABELED_COUNTS = (0, 1000, 2000, 5000, 10000)
+RANKS = (10, 20, 50, 100, 200)
+UNLABELED_COUNTS = (0, 1000, 2000, 5000)
+ALPHAS = (0.1, 1.0, 10.0, 100.0)
 FEATURES = ("JO", "JC", "JRF", "GPD")
 LEARNERS = ("L2", "LMS", "Xing", "SDA", "RDSR")
 
@@ -221,7 +228,7 @@ def _transition_experiment(
     train_pose_ids = np.concatenate(
         [indexer.offsets[c] + np.arange(len(clips[c].local)) for c in train]
     )
-    n_unl = 1500 if quick else 10000
+    n_unl = 1500 if quick else 5000
     unlabeled = rng.permutation(train_pose_ids)[:n_unl]
     tr_pairs = np.stack(
         [indexer(tr.pairs[:, 0], tr.pairs[:, 1]), indexer(tr.pairs[:, 2], tr.pairs[:, 3])], 1
@@ -268,7 +275,7 @@ def _transition_experiment(
 
     if sweeps and "GPD+RDSR" in methods:
         sweep = {}
-        for r in RANKS[:4] if quick else RANKS:
+        for r in RANKS[:3] if quick else RANKS:
             try:
                 method, fit_s = task.fit(methods["GPD+RDSR"], default_unl, n_components=r)
                 d = method.distances(test_a, test_b)
@@ -299,6 +306,20 @@ def _transition_experiment(
                     unl_sweep[name][str(n)] = {"error": f"{type(exc).__name__}: {exc}"}
                 log(f"  unlabeled {name} {n}: {unl_sweep[name][str(n)]}")
         result["unlabeled_sweep"] = unl_sweep
+        # RDSR's label weight: alpha scales S_W against the sparse-representation term
+        alpha_sweep: dict[str, dict[str, Any]] = {}
+        for alpha in ALPHAS[1:3] if quick else ALPHAS:
+            try:
+                method, fit_s = task.fit(methods["GPD+RDSR"], default_unl, alpha=alpha)
+                d = method.distances(test_a, test_b)
+                alpha_sweep[str(alpha)] = {
+                    "precision": evaluate.transition_precision(d, te.labels)[0],
+                    "fit_seconds": fit_s,
+                }
+            except Exception as exc:
+                alpha_sweep[str(alpha)] = {"error": f"{type(exc).__name__}: {exc}"}
+            log(f"  alpha {alpha}: {alpha_sweep[str(alpha)]}")
+        result["alpha_sweep"] = alpha_sweep
     return result
 
 
@@ -478,10 +499,12 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
                     im = ax.imshow(grid, cmap="viridis")
                     ax.set_xticks(range(len(FEATURES)), FEATURES)
                     ax.set_yticks(range(len(LEARNERS)), LEARNERS)
+                    mid = 0.5 * (np.nanmin(grid) + np.nanmax(grid))
                     for (i, j), v in np.ndenumerate(grid):
                         if np.isfinite(v):
+                            ink = "k" if v > mid else "w"  # readable on viridis
                             ax.text(
-                                j, i, f"{v:.3f}", ha="center", va="center", color="w", fontsize=8
+                                j, i, f"{v:.3f}", ha="center", va="center", color=ink, fontsize=8
                             )
                     fig.colorbar(im)
                     ax.set_title(f"{ds}: features x learners (Fig. 6)")
@@ -522,6 +545,8 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
                         label=name,
                         lw=2 if name == "GPD+RDSR" else 1,
                     )
+            if "oracle" in rt:
+                ax.plot(rt["scopes"], rt["oracle"], "k--", lw=1, label="oracle (all correct first)")
             ax.set_xlabel("scope s")
             ax.set_ylabel("precision@s")
             ax.legend(fontsize=6, ncol=2)

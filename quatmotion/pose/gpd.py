@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import itertools
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator, TransformerMixin
@@ -184,15 +185,6 @@ N_FEATURES: int = sum(FEATURE_COUNTS.values())
 N_DIMENSIONS: int = len(FEATURE_NAMES)
 
 
-def _unit(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(norm, _EPS)
-
-
-def _angle(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.arccos(np.clip(np.einsum("...k,...k->...", u, v), -1.0, 1.0))
-
-
 def _check_joint_array(name: str, a: ArrayLike, n: int | None) -> NDArray[np.float64]:
     arr = np.asarray(a, dtype=np.float64)
     if arr.ndim != 3 or arr.shape[1:] != (len(JOINTS), 3):
@@ -232,7 +224,10 @@ def gpd_features(
     """
     pos = _check_joint_array("positions", positions, None)
     n = pos.shape[0]
-    vel = np.zeros_like(pos) if velocities is None else _check_joint_array("velocities", velocities, n)
+    if velocities is None:
+        vel = np.zeros_like(pos)
+    else:
+        vel = _check_joint_array("velocities", velocities, n)
     acc = (
         np.zeros_like(pos)
         if accelerations is None
@@ -244,47 +239,143 @@ def gpd_features(
         height = np.asarray(hip_height, dtype=np.float64).reshape(-1)
         if height.shape != (n,):
             raise ValueError(f"hip_height has shape {height.shape}, expected ({n},)")
-    # Every geometric feature is relative, so subtracting the Hip is a no-op for them; it makes
-    # J_c body-local even when the caller kept the Hip's height in row 0.
-    pos = pos - pos[:, :1, :]
+    out = np.empty((n, N_DIMENSIONS))
+    _gpd_kernel(
+        np.ascontiguousarray(pos), np.ascontiguousarray(vel), np.ascontiguousarray(acc),
+        np.ascontiguousarray(height), _JOINT_PAIRS, _LINES, _PLANES, _JOINT_LINE, _LINE_PAIRS,
+        _JOINT_PLANE, _LINE_PLANE, _PLANE_PAIRS, out,
+    )  # fmt: skip
+    return out
 
-    diff = pos[:, _JOINT_PAIRS[:, 1]] - pos[:, _JOINT_PAIRS[:, 0]]  # (N, 120, 3)
-    jj_d = np.linalg.norm(diff, axis=-1)
-    jj_o = diff / np.maximum(jj_d, _EPS)[..., None]
 
-    line_dir = _unit(pos[:, _LINES[:, 1]] - pos[:, _LINES[:, 0]])  # (N, 30, 3)
-    # |(J - J1) x u| = 2 * area(J, J1, J2) / |J1 J2| (Eq. 4) without Heron's cancellation.
-    rel = pos[:, _JOINT_LINE[:, 0]] - pos[:, _LINES[_JOINT_LINE[:, 1], 0]]
-    jl_d = np.linalg.norm(np.cross(rel, line_dir[:, _JOINT_LINE[:, 1]]), axis=-1)
+@numba.njit(cache=True, inline="always")
+def _clipped_acos(c: float) -> float:  # pragma: no cover - compiled
+    return np.arccos(min(1.0, max(-1.0, c)))
 
-    ll_a = _angle(line_dir[:, _LINE_PAIRS[:, 0]], line_dir[:, _LINE_PAIRS[:, 1]])
 
-    p1 = pos[:, _PLANES[:, 0]]
-    normal = _unit(np.cross(pos[:, _PLANES[:, 1]] - p1, pos[:, _PLANES[:, 2]] - p1))  # (N, 5, 3)
-    jp_rel = pos[:, _JOINT_PLANE[:, 0]] - p1[:, _JOINT_PLANE[:, 1]]
-    jp_d = np.einsum("nfk,nfk->nf", jp_rel, normal[:, _JOINT_PLANE[:, 1]])
-
-    lp_a = _angle(line_dir[:, _LINE_PLANE[:, 0]], normal[:, _LINE_PLANE[:, 1]])
-    pp_a = _angle(normal[:, _PLANE_PAIRS[:, 0]], normal[:, _PLANE_PAIRS[:, 1]])
-
-    kinetic = np.concatenate((vel[:, 1:], acc[:, 1:]), axis=-1).reshape(n, -1)
-    return np.concatenate(
-        (
-            pos[:, 1:].reshape(n, -1),
-            height[:, None],
-            jj_d,
-            jj_o.reshape(n, -1),
-            jl_d,
-            ll_a,
-            jp_d,
-            lp_a,
-            pp_a,
-            kinetic,
-            vel[:, 0, 1:2],
-            acc[:, 0, 1:2],
-        ),
-        axis=1,
-    )
+@numba.njit(cache=True, parallel=True)
+def _gpd_kernel(
+    pos_all: NDArray[np.float64],
+    vel: NDArray[np.float64],
+    acc: NDArray[np.float64],
+    height: NDArray[np.float64],
+    joint_pairs: NDArray[np.intp],
+    lines: NDArray[np.intp],
+    planes: NDArray[np.intp],
+    joint_line: NDArray[np.intp],
+    line_pairs: NDArray[np.intp],
+    joint_plane: NDArray[np.intp],
+    line_plane: NDArray[np.intp],
+    plane_pairs: NDArray[np.intp],
+    out: NDArray[np.float64],
+) -> None:  # pragma: no cover - compiled
+    """One pose per iteration, columns in the order of :data:`FEATURE_NAMES`."""
+    n_joints = pos_all.shape[1]
+    for i in numba.prange(pos_all.shape[0]):
+        row = out[i]
+        # Every geometric feature is relative, so subtracting the Hip changes none of them; it
+        # makes J_c body-local even when the caller kept the Hip's height in row 0.
+        pos = np.empty((n_joints, 3))
+        for j in range(n_joints):
+            for c in range(3):
+                pos[j, c] = pos_all[i, j, c] - pos_all[i, 0, c]
+        col = 0
+        for j in range(1, n_joints):  # J_c
+            for c in range(3):
+                row[col] = pos[j, c]
+                col += 1
+        row[col] = height[i]
+        col += 1
+        n_pairs = joint_pairs.shape[0]
+        for f in range(n_pairs):  # JJ_d, then JJ_o right after the distances
+            a, b = joint_pairs[f, 0], joint_pairs[f, 1]
+            dx = pos[b, 0] - pos[a, 0]
+            dy = pos[b, 1] - pos[a, 1]
+            dz = pos[b, 2] - pos[a, 2]
+            norm = np.sqrt(dx * dx + dy * dy + dz * dz)
+            row[col + f] = norm
+            inv = 1.0 / max(norm, _EPS)
+            base = col + n_pairs + 3 * f
+            row[base] = dx * inv
+            row[base + 1] = dy * inv
+            row[base + 2] = dz * inv
+        col += 4 * n_pairs
+        n_lines = lines.shape[0]
+        line_dir = np.empty((n_lines, 3))
+        for m in range(n_lines):
+            a, b = lines[m, 0], lines[m, 1]
+            dx = pos[b, 0] - pos[a, 0]
+            dy = pos[b, 1] - pos[a, 1]
+            dz = pos[b, 2] - pos[a, 2]
+            inv = 1.0 / max(np.sqrt(dx * dx + dy * dy + dz * dz), _EPS)
+            line_dir[m, 0] = dx * inv
+            line_dir[m, 1] = dy * inv
+            line_dir[m, 2] = dz * inv
+        for f in range(joint_line.shape[0]):  # JL_d = |(J - J1) x u| (Eq. 4)
+            j, m = joint_line[f, 0], joint_line[f, 1]
+            a = lines[m, 0]
+            rx = pos[j, 0] - pos[a, 0]
+            ry = pos[j, 1] - pos[a, 1]
+            rz = pos[j, 2] - pos[a, 2]
+            ux, uy, uz = line_dir[m, 0], line_dir[m, 1], line_dir[m, 2]
+            cx = ry * uz - rz * uy
+            cy = rz * ux - rx * uz
+            cz = rx * uy - ry * ux
+            row[col + f] = np.sqrt(cx * cx + cy * cy + cz * cz)
+        col += joint_line.shape[0]
+        for f in range(line_pairs.shape[0]):  # LL_a
+            a, b = line_pairs[f, 0], line_pairs[f, 1]
+            row[col + f] = _clipped_acos(
+                line_dir[a, 0] * line_dir[b, 0]
+                + line_dir[a, 1] * line_dir[b, 1]
+                + line_dir[a, 2] * line_dir[b, 2]
+            )
+        col += line_pairs.shape[0]
+        n_planes = planes.shape[0]
+        normal = np.empty((n_planes, 3))
+        for p in range(n_planes):
+            a, b, c3 = planes[p, 0], planes[p, 1], planes[p, 2]
+            ex, ey, ez = pos[b, 0] - pos[a, 0], pos[b, 1] - pos[a, 1], pos[b, 2] - pos[a, 2]
+            fx, fy, fz = pos[c3, 0] - pos[a, 0], pos[c3, 1] - pos[a, 1], pos[c3, 2] - pos[a, 2]
+            nx = ey * fz - ez * fy
+            ny = ez * fx - ex * fz
+            nz = ex * fy - ey * fx
+            inv = 1.0 / max(np.sqrt(nx * nx + ny * ny + nz * nz), _EPS)
+            normal[p, 0] = nx * inv
+            normal[p, 1] = ny * inv
+            normal[p, 2] = nz * inv
+        for f in range(joint_plane.shape[0]):  # JP_d, signed
+            j, p = joint_plane[f, 0], joint_plane[f, 1]
+            a = planes[p, 0]
+            row[col + f] = (
+                (pos[j, 0] - pos[a, 0]) * normal[p, 0]
+                + (pos[j, 1] - pos[a, 1]) * normal[p, 1]
+                + (pos[j, 2] - pos[a, 2]) * normal[p, 2]
+            )
+        col += joint_plane.shape[0]
+        for f in range(line_plane.shape[0]):  # LP_a
+            m, p = line_plane[f, 0], line_plane[f, 1]
+            row[col + f] = _clipped_acos(
+                line_dir[m, 0] * normal[p, 0]
+                + line_dir[m, 1] * normal[p, 1]
+                + line_dir[m, 2] * normal[p, 2]
+            )
+        col += line_plane.shape[0]
+        for f in range(plane_pairs.shape[0]):  # PP_a
+            a, b = plane_pairs[f, 0], plane_pairs[f, 1]
+            row[col + f] = _clipped_acos(
+                normal[a, 0] * normal[b, 0]
+                + normal[a, 1] * normal[b, 1]
+                + normal[a, 2] * normal[b, 2]
+            )
+        col += plane_pairs.shape[0]
+        for j in range(1, n_joints):  # J_k
+            for c in range(3):
+                row[col + c] = vel[i, j, c]
+                row[col + 3 + c] = acc[i, j, c]
+            col += 6
+        row[col] = vel[i, 0, 1]
+        row[col + 1] = acc[i, 0, 1]
 
 
 class GPD(TransformerMixin, BaseEstimator):
@@ -343,9 +434,8 @@ class GPD(TransformerMixin, BaseEstimator):
         self.scale_ = np.where(constant, 0.0, 1.0 / np.where(constant, 1.0, span))
         self.offset_ = -self.data_min_ * self.scale_
         self.n_features_in_ = arr.shape[1]
-        self.feature_names_ = np.asarray(
-            FEATURE_NAMES if arr.shape[1] == N_DIMENSIONS else [f"x{k}" for k in range(arr.shape[1])]
-        )
+        generic = [f"x{k}" for k in range(arr.shape[1])]
+        self.feature_names_ = np.asarray(FEATURE_NAMES if arr.shape[1] == N_DIMENSIONS else generic)
         return self
 
     def transform(self, X: ArrayLike) -> NDArray[np.float64]:

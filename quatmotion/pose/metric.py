@@ -500,10 +500,9 @@ class RDSR(TransformerMixin, BaseEstimator):
         B_L = residuals.T @ residuals  # X S_L X^T (Eq. 17-18)
         tr_sw = float(np.trace(S_W_k))
         tr_bl = float(np.trace(B_L))
-        if n >= 2 and tr_sw > 0:
-            B = B_L + (self.alpha * tr_bl / tr_sw) * S_W_k
-        else:
-            B = B_L + S_W_k
+        # alpha is relative to the traces; with no unlabeled data S_W stands alone (Eq. 46).
+        weight = self.alpha * tr_bl / tr_sw if n >= 2 and tr_sw > 0 else 1.0
+        B = B_L + weight * S_W_k
         k = basis.shape[1]
         B += (self.reg * max(np.trace(B), 1e-300) / k) * np.eye(k)
         timings["B"] = time.perf_counter() - t
@@ -537,23 +536,23 @@ class RDSR(TransformerMixin, BaseEstimator):
     def _principal_basis(self, centred: FloatArray, diffs: FloatArray) -> FloatArray:
         """Orthonormal (D, k) basis of the directions the training poses vary along."""
         d = centred.shape[1]
-        source = centred if centred.shape[0] >= 2 else diffs
+        if centred.shape[0] < 2:
+            return np.eye(d)  # Eq. 46 needs the least-scatter directions of S_W: keep them all
+        scatter = centred.T @ centred  # the full-space A; its eigenbasis is the PCA basis
         with threadpool_limits(limits=1, user_api="blas"):
-            _, sv, vt = scipy.linalg.svd(source, full_matrices=False, lapack_driver="gesdd")
-        energy = np.cumsum(sv**2)
+            variances, vectors = scipy.linalg.eigh(scatter, driver="evd")
+        variances, vectors = np.maximum(variances[::-1], 0.0), vectors[:, ::-1]
+        energy = np.cumsum(variances)
         if energy[-1] <= 0:
             raise ValueError("the training poses do not vary: no metric to learn")
         k = int(np.searchsorted(energy, self.variance_kept * energy[-1]) + 1)
-        k = min(max(k, self.n_components), vt.shape[0], d)
-        if k < self.n_components:
-            raise ValueError(
-                f"the training poses span {k} dimensions, fewer than n_components="
-                f"{self.n_components}"
-            )
-        return np.ascontiguousarray(vt[:k].T)
+        k = min(max(k, self.n_components), d)
+        return np.ascontiguousarray(vectors[:, :k])
 
     @staticmethod
-    def _validate(X_unlabeled: ArrayLike, positive_pairs: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    def _validate(
+        X_unlabeled: ArrayLike, positive_pairs: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
         X = np.asarray(X_unlabeled, dtype=np.float64)
         if X.ndim != 2:
             raise ValueError(f"X_unlabeled must be (N, D), got shape {X.shape}")

@@ -29,18 +29,40 @@ Conventions and what the paper leaves open
 
 Changes to the algorithm as printed (each switchable, to measure its effect)
 ----------------------------------------------------------------------------
+Measured on the paper's simulation (``quatmotion bench qssd``); the defaults are the changes.
+
 * ``residual="left"``: Algorithm 2 line 8 prints ``R = Y (D_P (x) X_P)^-1``. The next atom is
   appended on the right of the combination (its weight is smaller), so what it must explain is
   ``C^-1 Y``; ``Y C^-1 = C (C^-1 Y) C^-1`` is that residual rotated by ``C``, whose log points
-  the wrong way once ``C`` is far from the identity. ``residual="right"`` is the printed rule.
-* ``coef_solver="weighted"``: Eq. 6 solves ``x a_j = b_j`` by plain least squares; each joint's
-  term of Eq. 5 is ``rho_j cos(x a_j - b_j)``, so weighting the squares by ``rho_j`` is the
-  second-order model of the actual objective. ``coef_solver="paper"`` is plain Eq. 6.
-* ``safeguard=True``: the rank-1 SVD of ``ln E`` minimises a log-space surrogate, and new weights
-  may reorder the product. An atom update is kept only if the objective over the samples that
-  use the atom (recomputed with the re-sorted order) does not increase; the dictionary stage is
-  therefore monotone. ``safeguard=False`` always accepts (the algorithm as printed).
-* ``n_sweeps``: block coordinate descent sweeps per added atom (the paper does not say).
+  the wrong way once ``C`` is far from the identity (with the true dictionary at weight scale 2,
+  the right residual finds the true atom set for 87 % of samples, the left one for 97 %).
+  ``residual="right"`` is the printed rule.
+* ``coef_solver="gauss-newton"``: block coordinate descent with Eq. 6 (``"paper"``; or
+  ``"weighted"``, each joint's square weighted by the amplitude ``rho_j`` of its term
+  ``rho_j cos(x a_j - b_j)`` of Eq. 5) converges slowly when atoms do not commute: with the true
+  dictionary and support it leaves 0.08 deg (scale 0.5) to 0.45 deg (scale 1) of error. A joint
+  Gauss-Newton step on all chosen weights (the residual log is linear in them to first order,
+  the Jacobian columns are the atom logs rotated by the suffix products) is exact on exact
+  data. The descending-order constraint makes the objective discontinuous where two weights are
+  nearly tied; a fit that stays poor also tries the swapped order of the two closest pairs.
+* ``refit="final"``: the paper refits all weights after every added atom; refitting only after
+  the last one (the others get their Eq. 6 weight against the residual, and the residual
+  advances by one product per joint) costs O(L) instead of O(L^2) refits for the same support
+  recovery at weight scales up to 1. ``refit="every"`` is the printed schedule.
+* ``init="log-ksvd"``: random samples (Algorithm 4 line 1, ``init="samples"``) are mixtures of
+  atoms, and QSSD learns slowly from them (N=200: restoration 0.5-0.8 after 20 iterations).
+  To first order ``ln(A^a B^b) = a ln A + b ln B``, so ``init_iter`` iterations of linear K-SVD
+  on the sample logs, started from the random samples, give atoms that QSSD then refines
+  (restoration 1.0 on 2 of 3 seeds after 20 iterations).
+* ``robust=True``: samples coded with a wrong atom set leave large unrelated residuals in
+  ``ln E``; each atom is refit once without the samples whose rank-1 misfit exceeds three
+  times the median (a small gain in the simulation).
+* ``safeguard=True`` (off by default): the rank-1 SVD of ``ln E`` minimises a log-space
+  surrogate and new weights may reorder the product; with the safeguard an atom update is kept
+  only if the objective over its samples (with the re-sorted order) does not increase, so the
+  dictionary stage is monotone. It slowed recovery (updates that first increase the objective
+  are needed to leave poor starting atoms), hence off.
+* ``n_sweeps``: Gauss-Newton steps (or coordinate-descent sweeps) per refit.
 """
 
 from __future__ import annotations
@@ -163,8 +185,8 @@ def sparse_code(
         Atom logs.
     sparsity : int
         ``L``, the largest number of atoms per sample.
-    residual, coef_solver, n_sweeps
-        See the module docstring.
+    residual, coef_solver, n_sweeps, refit
+        See the module docstring and :class:`QSSD`.
 
     Returns
     -------
@@ -393,12 +415,21 @@ class QSSD(TransformerMixin, BaseEstimator):
         ``0`` runs all ``max_iter`` iterations.
     residual : {"left", "right"}
         Residual for atom selection; see the module docstring.
-    coef_solver : {"weighted", "paper"}
-        Eq. 6 as least squares, weighted or plain.
+    coef_solver : {"gauss-newton", "weighted", "paper"}
+        Weight refit: joint Gauss-Newton, or coordinate descent with weighted or plain Eq. 6.
     n_sweeps : int
-        Block coordinate descent sweeps after each added atom.
+        Gauss-Newton steps or coordinate-descent sweeps per refit.
+    refit : {"final", "every"}
+        Refit all weights after the last added atom only, or after every one (the paper).
     safeguard : bool
         Monotone dictionary stage (module docstring).
+    robust : bool
+        Refit each atom without the samples it fits worst (module docstring).
+    init : {"log-ksvd", "samples"}
+        Initial atoms: random samples (the paper), refined by ``init_iter`` iterations of
+        linear K-SVD on the sample logs for ``"log-ksvd"``.
+    init_iter : int
+        Linear K-SVD iterations of ``init="log-ksvd"``.
     random_state : int, RandomState or None
         Seeds the choice of initial atoms (Algorithm 4 line 1: random samples).
     verbose : bool
@@ -419,6 +450,8 @@ class QSSD(TransformerMixin, BaseEstimator):
     objective_ : ndarray, shape (n_iter_,)
         The objective ``sum 1 - |<Y, Yhat>|`` after each coding stage.
     iteration_seconds_ : ndarray, shape (n_iter_,)
+    iteration_cpu_seconds_ : ndarray, shape (n_iter_,)
+        Processor time of each iteration summed over threads (robust to a shared machine).
         Wall time of each iteration (coding + dictionary update).
     n_features_in_ : int
         ``n``, quaternions per sample.
@@ -515,10 +548,12 @@ class QSSD(TransformerMixin, BaseEstimator):
         errors: list[float] = []
         objectives: list[float] = []
         seconds: list[float] = []
+        cpu_seconds: list[float] = []
         previous = np.inf
         work = float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)
         for it in range(self.max_iter):
             t0 = time.perf_counter()
+            c0 = time.process_time()
             with compute_threads(work):
                 codes, objective = sparse_code(
                     Yc,
@@ -543,6 +578,7 @@ class QSSD(TransformerMixin, BaseEstimator):
                 )
             Dlog = result.dictionary_log
             seconds.append(time.perf_counter() - t0)
+            cpu_seconds.append(time.process_time() - c0)
             if self.verbose:
                 print(
                     f"QSSD iter {it + 1}: error {errors[-1]:.6g} deg, objective {total:.6g}, "
@@ -558,6 +594,7 @@ class QSSD(TransformerMixin, BaseEstimator):
         self.errors_ = np.asarray(errors)
         self.objective_ = np.asarray(objectives)
         self.iteration_seconds_ = np.asarray(seconds)
+        self.iteration_cpu_seconds_ = np.asarray(cpu_seconds)
         self.n_features_in_ = Yc.shape[1]
         return self
 
