@@ -19,8 +19,6 @@ Conventions
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -32,6 +30,7 @@ from rich.console import Console
 from rich.table import Table
 
 from quatmotion import quat
+from quatmotion._atomic import atomic_output, atomic_write_text
 from quatmotion.motion import Motion, forward_kinematics
 
 __all__ = ["angular_displacements", "plot_stick_figure", "run_demo"]
@@ -77,18 +76,6 @@ def _find_clips(paths: Sequence[Path]) -> list[Path]:
     if not found:
         raise ValueError("no .amc or .bvh clips in the given paths")
     return list(dict.fromkeys(found))[:_MAX_USER_CLIPS]
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(handle, "w", encoding="utf-8") as out:
-            out.write(text)
-        os.replace(temp, path)
-    except BaseException:
-        Path(temp).unlink(missing_ok=True)
-        raise
 
 
 def plot_stick_figure(motion: Motion, path: str | Path, n_poses: int = 8) -> Path:
@@ -148,15 +135,11 @@ def plot_stick_figure(motion: Motion, path: str | Path, n_poses: int = 8) -> Pat
     fig.suptitle(f"{motion.name}: {motion.n_frames} frames at {motion.fps:g} fps, "
                  f"{len(frames)} poses (dark = early)")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png")
-    os.close(handle)
     try:
-        fig.savefig(temp, dpi=90)
-        os.replace(temp, path)
+        with atomic_output(path, suffix=".png") as temp:
+            fig.savefig(temp, dpi=90)
     finally:
         plt.close(fig)
-        Path(temp).unlink(missing_ok=True)
     return path
 
 
@@ -273,6 +256,6 @@ def run_demo(paths: Sequence[Path] = (), out_dir: str | Path = "demo-out", seed:
         console.print(result)
     summary["methods"] = rows or []
     summary["seconds"] = time.perf_counter() - start
-    _atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
+    atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
     console.print(f"summary: {out_dir / 'summary.json'} ({summary['seconds']:.1f} s)")
     return summary

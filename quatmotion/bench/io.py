@@ -18,7 +18,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import pathlib
 import platform
@@ -29,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from quatmotion._atomic import atomic_output, atomic_write_json
 from quatmotion.io import (
     asf_bone_end_positions,
     find_asf_for_amc,
@@ -49,18 +49,6 @@ def _data_root() -> pathlib.Path:
     if env:
         return pathlib.Path(env).resolve()
     return (pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "data").resolve()
-
-
-def _write_json(path: pathlib.Path, payload: dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as handle:
-            json.dump(payload, handle, indent=2, default=float)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def _subset(files: list[pathlib.Path], quick: bool, rng: np.random.Generator, n: int) -> list:
@@ -170,11 +158,9 @@ def _figure(out: pathlib.Path, result: dict[str, Any]) -> str | None:
     axis.legend()
     figure.tight_layout()
     path = out.with_name(f"{out.stem}_parse.png")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    figure.savefig(tmp, dpi=120)
+    with atomic_output(path, suffix=".png") as temp:
+        figure.savefig(temp, dpi=120)
     plt.close(figure)
-    os.replace(tmp, path)
     return path.name
 
 
@@ -249,5 +235,5 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     result["reference_max_error_cm"] = max(errors.values()) if errors else None
     figure = _figure(out, result)
     result["figures"] = [figure] if figure else []
-    _write_json(out, result)
+    atomic_write_json(out, result)
     return result

@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import contextlib
 import http.client
-import os
-import tempfile
 import urllib.error
 import urllib.request
 from collections.abc import Iterable, Mapping
@@ -34,6 +32,7 @@ from rich.progress import (
     TransferSpeedColumn,
 )
 
+from quatmotion._atomic import atomic_output
 from quatmotion.datasets.catalogue import cmu_index, data_root
 
 __all__ = ["DEFAULT_CMU_BASE_URL", "FetchError", "cmu_trials", "cmu_url", "fetch_cmu"]
@@ -122,12 +121,10 @@ def _download(url: str, target: Path, timeout: float, progress: Progress | None)
         raise FetchError(f"{url}: HTTP {error.code} {error.reason}") from None
     except (urllib.error.URLError, OSError, http.client.HTTPException) as error:
         raise FetchError(f"{url}: {getattr(error, 'reason', error)}") from None
-    handle, temp_name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.",
-                                         suffix=".part")
     written = 0
     task = None
     try:
-        with response, os.fdopen(handle, "wb") as out:
+        with atomic_output(target, suffix=".part") as temp, response, temp.open("wb") as out:
             length = response.headers.get("Content-Length")
             if progress is not None:
                 task = progress.add_task(target.name, total=int(length) if length else None)
@@ -136,23 +133,10 @@ def _download(url: str, target: Path, timeout: float, progress: Progress | None)
                 written += len(chunk)
                 if task is not None:
                     progress.update(task, advance=len(chunk))
-            out.flush()
-            os.fsync(out.fileno())
-        if length is not None and written != int(length):
-            raise FetchError(f"{url}: got {written} of {length} bytes")
-        os.replace(temp_name, target)
+            if length is not None and written != int(length):
+                raise FetchError(f"{url}: got {written} of {length} bytes")
     except (OSError, urllib.error.URLError, http.client.HTTPException) as error:
-        with contextlib.suppress(OSError):
-            os.unlink(temp_name)
         raise FetchError(f"{url}: download failed ({type(error).__name__}: {error})") from None
-    except FetchError:
-        with contextlib.suppress(OSError):
-            os.unlink(temp_name)
-        raise
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temp_name)
-        raise
     return written
 
 

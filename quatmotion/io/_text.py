@@ -22,10 +22,7 @@ Conventions
 
 from __future__ import annotations
 
-import contextlib
-import os
 import re
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -34,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion import quat
+from quatmotion._atomic import atomic_write_bytes
 from quatmotion.errors import FormatError
 
 # Bytes that never occur in a text file: C0 controls except tab, LF, VT, FF, CR; and DEL.
@@ -99,29 +97,8 @@ def parse_int(token: str, path: str | Path, line: int, what: str = "integer") ->
 
 
 def atomic_write(path: str | Path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically (encoded as Latin-1; motion files are ASCII).
-
-    The text goes to a temporary file in the same folder which is then renamed over ``path``
-    with :func:`os.replace`; on any failure the temporary file is removed and ``path`` is left
-    as it was.
-
-    Parameters
-    ----------
-    path : str or Path
-    text : str
-        Must be encodable as Latin-1 (motion files are ASCII).
-    """
-    path = Path(path)
-    data = text.encode("latin-1")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+    """Write ``text`` to ``path`` atomically, encoded as Latin-1 (motion files are ASCII)."""
+    atomic_write_bytes(path, text.encode("latin-1"))
 
 
 _AXIS_INDEX = {"x": 1, "y": 2, "z": 3}
