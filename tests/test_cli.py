@@ -6,7 +6,6 @@ import contextlib
 import functools
 import http.server
 import json
-import os
 import re
 import sys
 import threading
@@ -19,12 +18,13 @@ from typer.testing import CliRunner
 
 from quatmotion import cli
 from quatmotion.cli import app
+from quatmotion.datasets import data_root
 from quatmotion.motion import forward_kinematics
 
 io = pytest.importorskip("quatmotion.io")
 
 PROJECT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get("QUATMOTION_DATA") or PROJECT / ".." / "shared" / "data").resolve()
+DATA = data_root(must_exist=False)
 CLIPS = {
     "cmu_amc": DATA / "cmu" / "02" / "02_01.amc",
     "hdm05_amc": DATA / "hdm05" / "clips" / "kickLFront1Reps"

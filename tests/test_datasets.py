@@ -6,7 +6,6 @@ import contextlib
 import functools
 import http.server
 import json
-import os
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -27,7 +26,7 @@ from quatmotion.datasets import (
 )
 
 PROJECT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get(DATA_ENV_VAR) or PROJECT / ".." / "shared" / "data").resolve()
+DATA = data_root(must_exist=False)
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"mocap data folder {DATA} is absent "
                                 f"(set {DATA_ENV_VAR})")
 

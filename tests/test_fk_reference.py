@@ -6,20 +6,16 @@ BVH clips; README.md there states the conventions. Agreement is required within 
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from quatmotion.datasets import data_root
 from quatmotion.io import asf_bone_end_positions, read_amc, read_bvh
 from quatmotion.motion import forward_kinematics
 
-DATA = Path(
-    os.environ.get(
-        "QUATMOTION_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
-    )
-)
+DATA = data_root(must_exist=False)
 needs_data = pytest.mark.skipif(
     not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
 )

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from collections import defaultdict
 from pathlib import Path
 
@@ -10,6 +9,7 @@ import numpy as np
 import pytest
 
 from quatmotion import FormatError, quat
+from quatmotion.datasets import data_root
 from quatmotion.io import (
     asf_bone_end_positions,
     find_asf_for_amc,
@@ -24,11 +24,7 @@ from quatmotion.io import (
 )
 from quatmotion.motion import forward_kinematics
 
-DATA = Path(
-    os.environ.get(
-        "QUATMOTION_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
-    )
-)
+DATA = data_root(must_exist=False)
 needs_data = pytest.mark.skipif(
     not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
 )

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from quatmotion import FormatError, quat
+from quatmotion.datasets import data_root
 from quatmotion.io import (
     detect_bvh_scale,
     read_bvh,
@@ -18,11 +19,7 @@ from quatmotion.io import (
 )
 from quatmotion.motion import forward_kinematics
 
-DATA = Path(
-    os.environ.get(
-        "QUATMOTION_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
-    )
-)
+DATA = data_root(must_exist=False)
 needs_data = pytest.mark.skipif(
     not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
 )

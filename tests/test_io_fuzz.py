@@ -7,7 +7,6 @@ flips, line deletion or duplication, and token replacement. Any exception other 
 
 from __future__ import annotations
 
-import os
 import tempfile
 from datetime import timedelta
 from pathlib import Path
@@ -18,14 +17,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from quatmotion import FormatError
+from quatmotion.datasets import data_root
 from quatmotion.io import read_amc, read_asf, read_bvh
 from quatmotion.motion import Motion, Skeleton
 
-DATA = Path(
-    os.environ.get(
-        "QUATMOTION_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
-    )
-)
+DATA = data_root(must_exist=False)
 pytestmark = pytest.mark.skipif(
     not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
 )

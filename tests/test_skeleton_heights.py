@@ -13,20 +13,16 @@ more, far outside the bands below.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from quatmotion.datasets import data_root
 from quatmotion.io import read_asf, read_bvh
 from quatmotion.motion import forward_kinematics
 
-DATA = Path(
-    os.environ.get(
-        "QUATMOTION_DATA", Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
-    )
-)
+DATA = data_root(must_exist=False)
 pytestmark = pytest.mark.skipif(
     not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
 )

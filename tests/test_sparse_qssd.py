@@ -173,3 +173,11 @@ def test_bad_input_raises_value_error() -> None:
         model.transform(good[:, :2])
     with pytest.raises(ValueError, match="shape"):
         model.inverse_transform(np.zeros((3, 5)))
+
+
+def test_keep_best_returns_the_dictionary_with_the_lowest_training_objective() -> None:
+    data = make_sparse_quaternion_data(80, 5, 6, 3, weight_scale=2.0, random_state=10)
+    model = QSSD(n_atoms=6, sparsity=3, max_iter=6, tol=0, random_state=2).fit(data.Y)
+    Yhat = model.inverse_transform(model.transform(data.Y))
+    objective = np.sum(1 - np.abs(np.sum(check_quaternion_samples(data.Y) * Yhat, -1)))
+    assert objective == pytest.approx(np.min(model.objective_), rel=1e-9)
