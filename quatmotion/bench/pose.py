@@ -23,7 +23,7 @@
 Datasets: ``hdm05`` (groups are actors, 11 classes), ``cmu`` (ASF subjects 01-03 and BVH
 subjects 07-08; transition only, no classes), ``bandai`` (one performer: groups are *styles*,
 classes are contents). Every third group in sorted order is held out for testing (HDM05: dg;
-CMU: 03 and 08), the others train.
+CMU: 03; Bandai: 5 of the 15 styles), the others train.
 Clips are resampled to 30 frames/s and every body scaled to a 170 cm stature
 (:func:`quatmotion.pose.skeleton16.stature16`; the paper normalises body height).
 Figures: ``<out stem>_<dataset>_fig4_rank.png``, ``_fig5_transition``,

@@ -62,6 +62,10 @@ Measured on the paper's simulation (``quatmotion bench qssd``); the defaults are
   only if the objective over its samples (with the re-sorted order) does not increase, so the
   dictionary stage is monotone. It slowed recovery (updates that first increase the objective
   are needed to leave poor starting atoms), hence off.
+* ``keep_best=True``: neither greedy coding nor the log-space dictionary update is monotone in
+  the objective. On real motion data without the safeguard the training error rose from 2.2 to
+  4.3 deg over 20 iterations (CMU, K=500, L=15); the estimator returns the dictionary whose
+  coding had the lowest training objective. For real data use ``safeguard=True`` as well.
 * ``n_sweeps``: Gauss-Newton steps (or coordinate-descent sweeps) per refit.
 """
 
@@ -425,6 +429,9 @@ class QSSD(TransformerMixin, BaseEstimator):
         Monotone dictionary stage (module docstring).
     robust : bool
         Refit each atom without the samples it fits worst (module docstring).
+    keep_best : bool
+        Return the dictionary whose coding had the lowest training objective, rather than the
+        last one (neither stage is guaranteed monotone without the safeguard).
     init : {"log-ksvd", "samples"}
         Initial atoms: random samples (the paper), refined by ``init_iter`` iterations of
         linear K-SVD on the sample logs for ``"log-ksvd"``.
@@ -469,6 +476,7 @@ class QSSD(TransformerMixin, BaseEstimator):
         refit: str = "final",
         safeguard: bool = False,
         robust: bool = True,
+        keep_best: bool = True,
         init: str = "log-ksvd",
         init_iter: int = 100,
         random_state: int | np.random.RandomState | None = None,
@@ -484,6 +492,7 @@ class QSSD(TransformerMixin, BaseEstimator):
         self.refit = refit
         self.safeguard = safeguard
         self.robust = robust
+        self.keep_best = keep_best
         self.init = init
         self.init_iter = init_iter
         self.random_state = random_state
@@ -550,6 +559,8 @@ class QSSD(TransformerMixin, BaseEstimator):
         seconds: list[float] = []
         cpu_seconds: list[float] = []
         previous = np.inf
+        best_total = np.inf
+        best_Dlog: NDArray[np.float64] | None = None
         work = float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)
         for it in range(self.max_iter):
             t0 = time.perf_counter()
@@ -567,6 +578,8 @@ class QSSD(TransformerMixin, BaseEstimator):
                 total = float(np.sum(objective))
                 errors.append(_mean_angle_deg(Yc, _combine_codes(Dlog, codes)))
             objectives.append(total)
+            if total < best_total:
+                best_total, best_Dlog = total, Dlog
             with compute_threads(work, blas_single=True):
                 result = update_dictionary(
                     Yc,
@@ -588,6 +601,10 @@ class QSSD(TransformerMixin, BaseEstimator):
             if self.tol > 0 and it > 0 and abs(previous - total) <= self.tol * previous:
                 break
             previous = total
+        if self.keep_best and best_Dlog is not None:
+            # Greedy coding and the log-space dictionary update are not monotone in the
+            # objective; keep the dictionary that coded the training set best.
+            Dlog = best_Dlog
         self.dictionary_log_ = Dlog
         self.dictionary_ = quat.exp(Dlog)
         self.n_iter_ = len(errors)
