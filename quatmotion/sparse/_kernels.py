@@ -313,7 +313,9 @@ def _refit_with_swaps(Y_i, Dlog, idx_row, coef_row, m, n_iter, A, suf, Wmat):  #
             trial_coef[t] = coef_row[t]
         trial_idx[s], trial_idx[s + 1] = idx_row[s + 1], idx_row[s]
         trial_coef[s], trial_coef[s + 1] = coef_row[s + 1], coef_row[s]
-        value = _gauss_newton(Y_i, Dlog, trial_idx, trial_coef, m, min(n_iter, 2), A, suf, Wmat, False)
+        value = _gauss_newton(
+            Y_i, Dlog, trial_idx, trial_coef, m, min(n_iter, 2), A, suf, Wmat, False
+        )
         consistent = True
         for t in range(m - 1):
             if abs(trial_coef[t]) < abs(trial_coef[t + 1]):
