@@ -2,13 +2,9 @@
 
 from __future__ import annotations
 
-import contextlib
-import functools
-import http.server
 import json
 import re
 import sys
-import threading
 import types
 from pathlib import Path
 
@@ -181,24 +177,6 @@ def test_broken_amc_exits_2(tmp_path):
     _assert_bad_input(_invoke("info", tmp_path / "s_01.amc"), "s_01.amc")
 
 
-@contextlib.contextmanager
-def _serve(directory: Path):
-    """A quiet static HTTP server on 127.0.0.1 (free port) in a thread; yields its URL."""
-
-    class Quiet(http.server.SimpleHTTPRequestHandler):
-        def log_message(self, *args):
-            pass
-
-    server = http.server.ThreadingHTTPServer(
-        ("127.0.0.1", 0), functools.partial(Quiet, directory=str(directory)))
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    try:
-        yield f"http://127.0.0.1:{server.server_address[1]}"
-    finally:
-        server.shutdown()
-        server.server_close()
-        thread.join(timeout=5)
 
 
 # --- bench, datasets, demo -----------------------------------------------------------------------
@@ -243,17 +221,17 @@ def test_datasets_list_counts_the_collection():
 
 
 @needs_data
-def test_datasets_fetch_against_a_local_server(tmp_path):
+def test_datasets_fetch_against_a_local_server(tmp_path, serve_directory):
     site = tmp_path / "site" / "subjects"
     site.mkdir(parents=True)
     (site / "03").symlink_to(DATA / "cmu" / "03", target_is_directory=True)
     dest = tmp_path / "dest"
-    with _serve(tmp_path / "site") as url:
-        result = _invoke("datasets", "fetch", "cmu", "--subjects", "3", "--trials", "1,2",
-                         "--dest", dest, "--base-url", url)
-        assert result.exit_code == 0, result.output
-        bad = _invoke("datasets", "fetch", "cmu", "--subjects", "4", "--dest", dest,
-                      "--base-url", url)
+    url = serve_directory(tmp_path / "site")
+    result = _invoke("datasets", "fetch", "cmu", "--subjects", "3", "--trials", "1,2",
+                     "--dest", dest, "--base-url", url)
+    assert result.exit_code == 0, result.output
+    bad = _invoke("datasets", "fetch", "cmu", "--subjects", "4", "--dest", dest,
+                  "--base-url", url)
     for name in ("03.asf", "03_01.amc", "03_02.amc"):
         assert (dest / "03" / name).read_bytes() == (DATA / "cmu" / "03" / name).read_bytes()
     _assert_bad_input(bad, "404")

@@ -2,15 +2,11 @@
 
 from __future__ import annotations
 
-import contextlib
-import functools
-import http.server
 import json
-import threading
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from conftest import QuietHandler
 
 from quatmotion.datasets import (
     DATA_ENV_VAR,
@@ -164,25 +160,6 @@ def test_catalogue_of_the_real_data_matches_its_files():
 # --- fetch against a local server -----------------------------------------------------------------
 
 
-class _QuietHandler(http.server.SimpleHTTPRequestHandler):
-    def log_message(self, format, *args):  # noqa: A002 (the base class's signature)
-        pass
-
-
-@contextlib.contextmanager
-def _serve(directory: Path, handler=_QuietHandler) -> Iterator[str]:
-    server = http.server.ThreadingHTTPServer(
-        ("127.0.0.1", 0), functools.partial(handler, directory=str(directory)))
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    try:
-        yield f"http://127.0.0.1:{server.server_address[1]}"
-    finally:
-        server.shutdown()
-        server.server_close()
-        thread.join(timeout=5)
-
-
 @pytest.fixture()
 def cmu_site(tmp_path: Path) -> Path:
     """A folder laid out like the CMU site, ``subjects/SS`` -> the data folder's ``cmu/SS``."""
@@ -195,10 +172,10 @@ def cmu_site(tmp_path: Path) -> Path:
     return tmp_path / "site"
 
 
-def test_fetch_by_probing_downloads_identical_files(cmu_site, tmp_path):
+def test_fetch_by_probing_downloads_identical_files(cmu_site, tmp_path, serve_directory):
     dest = tmp_path / "dest"
-    with _serve(cmu_site) as url:
-        files = fetch_cmu([3], dest=dest, base_url=url, index={}, show_progress=False)
+    url = serve_directory(cmu_site)
+    files = fetch_cmu([3], dest=dest, base_url=url, index={}, show_progress=False)
     source = sorted((DATA / "cmu" / "03").iterdir())
     assert [f.name for f in files] == [p.name for p in source]  # ASF first, then trials in order
     for f, original in zip(files, source, strict=True):
@@ -206,30 +183,30 @@ def test_fetch_by_probing_downloads_identical_files(cmu_site, tmp_path):
     assert not list(dest.rglob("*.part"))
 
 
-def test_fetch_uses_the_index_and_skips_existing_files(cmu_site, tmp_path):
+def test_fetch_uses_the_index_and_skips_existing_files(cmu_site, tmp_path, serve_directory):
     dest = tmp_path / "dest"
     index = {"02_01": "walk", "02_02": "walk"}
-    with _serve(cmu_site) as url:
-        files = fetch_cmu(["2"], dest=dest, base_url=url, index=index, show_progress=False)
-        assert [f.name for f in files] == ["02.asf", "02_01.amc", "02_02.amc"]
-        (dest / "02" / "02_01.amc").write_text("kept")
-        again = fetch_cmu([2], dest=dest, base_url=url, index=index, show_progress=False)
-        assert (dest / "02" / "02_01.amc").read_text() == "kept" and again == files
-        fetch_cmu([2], dest=dest, base_url=url, trials=[1], overwrite=True, show_progress=False)
+    url = serve_directory(cmu_site)
+    files = fetch_cmu(["2"], dest=dest, base_url=url, index=index, show_progress=False)
+    assert [f.name for f in files] == ["02.asf", "02_01.amc", "02_02.amc"]
+    (dest / "02" / "02_01.amc").write_text("kept")
+    again = fetch_cmu([2], dest=dest, base_url=url, index=index, show_progress=False)
+    assert (dest / "02" / "02_01.amc").read_text() == "kept" and again == files
+    fetch_cmu([2], dest=dest, base_url=url, trials=[1], overwrite=True, show_progress=False)
     assert (dest / "02" / "02_01.amc").read_bytes() == (DATA / "cmu/02/02_01.amc").read_bytes()
 
 
-def test_fetch_errors(cmu_site, tmp_path):
-    with _serve(cmu_site) as url:
-        with pytest.raises(FetchError, match="404"):
-            fetch_cmu([99], dest=tmp_path / "d", base_url=url, index={}, show_progress=False)
-        with pytest.raises(FetchError, match="404"):
-            fetch_cmu([2], dest=tmp_path / "d", base_url=url, trials=[42], show_progress=False)
+def test_fetch_errors(cmu_site, tmp_path, serve_directory):
+    url = serve_directory(cmu_site)
+    with pytest.raises(FetchError, match="404"):
+        fetch_cmu([99], dest=tmp_path / "d", base_url=url, index={}, show_progress=False)
+    with pytest.raises(FetchError, match="404"):
+        fetch_cmu([2], dest=tmp_path / "d", base_url=url, trials=[42], show_progress=False)
     with pytest.raises(FetchError):
         fetch_cmu([], dest=tmp_path / "d")
 
 
-class _TruncatingHandler(_QuietHandler):
+class _TruncatingHandler(QuietHandler):
     """Promises more bytes than it sends, then hangs up: a download cut off mid-file."""
 
     def do_GET(self):  # noqa: N802 (http.server's naming)
@@ -241,9 +218,10 @@ class _TruncatingHandler(_QuietHandler):
         self.close_connection = True
 
 
-def test_interrupted_download_leaves_no_file(tmp_path):
+def test_interrupted_download_leaves_no_file(tmp_path, serve_directory):
     dest = tmp_path / "dest"
-    with _serve(tmp_path, _TruncatingHandler) as url, pytest.raises(FetchError):
+    url = serve_directory(tmp_path, _TruncatingHandler)
+    with pytest.raises(FetchError):
         fetch_cmu([1], dest=dest, base_url=url, index={}, show_progress=False)
     assert not (dest / "01" / "01.asf").exists()
     assert not [p for p in dest.rglob("*") if p.is_file()]

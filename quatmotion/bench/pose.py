@@ -36,7 +36,6 @@ from __future__ import annotations
 import json
 import os
 import pathlib
-import tempfile
 import time
 import traceback
 from collections.abc import Callable
@@ -46,6 +45,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from quatmotion._atomic import atomic_output, atomic_write_json
 from quatmotion.pose import evaluate, labels, skeleton16
 from quatmotion.pose.data import PoseData
 from quatmotion.pose.index import PoseIndex, exact_knn, recall_at_k
@@ -470,7 +470,8 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
     def save(fig: Any, suffix: str) -> None:
         path = out.with_name(f"{out.stem}_{suffix}.png")
         fig.tight_layout()
-        fig.savefig(path, dpi=110)
+        with atomic_output(path, suffix=".png") as temp:
+            fig.savefig(temp, dpi=110)
         plt.close(fig)
         written.append(str(path))
 
@@ -553,19 +554,6 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
             ax.set_title(f"{ds}: pose retrieval (Fig. 8)")
             save(fig, f"{ds}_fig8_retrieval")
     return written
-
-
-def _write_json(path: pathlib.Path, payload: dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(payload, fh, indent=2, default=float)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def run(
@@ -659,10 +647,10 @@ def run(
                 res["retrieval_error"] = f"{type(exc).__name__}: {exc}"
                 log(f"  retrieval failed: {exc}")
         results["datasets"][kind] = res
-        _write_json(out, results)  # partial results survive a later failure
+        atomic_write_json(out, results)  # partial results survive a later failure
     if ann:
         results["ann"] = _ann_benchmark(quick, seed, log)
     results["figures"] = _figures(out, results)
     results["seconds"] = time.perf_counter() - t_start
-    _write_json(out, results)
+    atomic_write_json(out, results)
     return results

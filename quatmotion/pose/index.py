@@ -29,6 +29,8 @@ import hnswlib
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from quatmotion._atomic import atomic_output
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
@@ -351,16 +353,8 @@ class PoseLibrary:
             "meta": np.asarray(json.dumps(meta)),
         }
         payload.update({f"model_{k}": v for k, v in self.model.items()})
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **payload)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        with atomic_output(path) as temp, temp.open("wb") as fh:
+            np.savez(fh, **payload)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], ef_search: int = 64) -> PoseLibrary:
