@@ -199,6 +199,30 @@ def sparse_code(
     objective : ndarray, shape (N,)
         ``sum_j 1 - |<Y_j, Yhat_j>|`` per sample.
     """
+    codes, objective, _ = _sparse_code(
+        Y,
+        dictionary_log,
+        sparsity,
+        residual=residual,
+        coef_solver=coef_solver,
+        n_sweeps=n_sweeps,
+        refit=refit,
+    )
+    return codes, objective
+
+
+def _sparse_code(
+    Y: NDArray[np.float64],
+    dictionary_log: NDArray[np.float64],
+    sparsity: int,
+    *,
+    residual: str = "left",
+    coef_solver: str = "gauss-newton",
+    n_sweeps: int = 3,
+    refit: str = "final",
+) -> tuple[Codes, NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`sparse_code`, also returning the residual logs ``(N, n, 3)``: half the rotation
+    angle between each sample quaternion and its reconstruction is their norm."""
     if residual not in ("left", "right"):
         raise ValueError(f"residual must be 'left' or 'right', got {residual!r}")
     if refit not in ("every", "final"):
@@ -214,6 +238,10 @@ def sparse_code(
     codes = _empty_codes(N, L)
     objective = np.sum(1.0 - Y[..., 0], axis=-1)
     Rlog = np.ascontiguousarray(quat.log(Y))
+    # Residual quaternions kept beside their logs: the next step needs both, and keeping them
+    # saves an exp per joint and step.
+    Rq = np.array(Y, dtype=np.float64, order="C", copy=True)
+    signal = np.einsum("ijk,ijk->i", Rlog, Rlog)
     left = residual == "left"
     solver = _SOLVERS[coef_solver]
     for step in range(L):
@@ -245,10 +273,12 @@ def sparse_code(
             n_sweeps,
             solver,
             do_refit,
+            signal,
+            Rq,
             Rlog,
             objective,
         )
-    return codes, objective
+    return codes, objective, Rlog
 
 
 @dataclass
@@ -369,7 +399,8 @@ def update_dictionary(
             objective[samples] = candidate
         n_accepted += 1
     if not safeguard:
-        objective = _objective_rows(Y, _combine_codes(Dlog, codes))
+        # The cached powers are up to date (commit_atom refreshes every touched sample).
+        kern.objective_from_powers(Y, A, codes.count, objective)
     return DictionaryUpdateResult(Dlog, codes, objective, n_accepted, n_rejected, n_reseeded)
 
 
@@ -396,11 +427,6 @@ def _reseed_unused(
             Dlog[k] = r / norm
             done += 1
     return done
-
-
-def _mean_angle_deg(Y: NDArray[np.float64], Yhat: NDArray[np.float64]) -> float:
-    d = np.minimum(np.abs(np.sum(Y * Yhat, axis=-1)), 1.0)
-    return float(np.degrees(2.0 * np.mean(np.arccos(d))))
 
 
 class QSSD(TransformerMixin, BaseEstimator):
@@ -565,8 +591,10 @@ class QSSD(TransformerMixin, BaseEstimator):
         for it in range(self.max_iter):
             t0 = time.perf_counter()
             c0 = time.process_time()
-            with compute_threads(work):
-                codes, objective = sparse_code(
+            # BLAS on one thread here too: the atom projections are tiny products, and idle
+            # BLAS threads spinning after each one take the cores from Numba's threads.
+            with compute_threads(work, blas_single=True):
+                codes, objective, Rlog = _sparse_code(
                     Yc,
                     Dlog,
                     self.sparsity,
@@ -576,7 +604,9 @@ class QSSD(TransformerMixin, BaseEstimator):
                     refit=self.refit,
                 )
                 total = float(np.sum(objective))
-                errors.append(_mean_angle_deg(Yc, _combine_codes(Dlog, codes)))
+                # The rotation angle between sample and reconstruction is twice the norm of
+                # the residual log (left or right residual alike): no second combination.
+                errors.append(float(np.degrees(2.0 * np.mean(np.linalg.norm(Rlog, axis=-1)))))
             objectives.append(total)
             if total < best_total:
                 best_total, best_Dlog = total, Dlog
@@ -633,7 +663,8 @@ class QSSD(TransformerMixin, BaseEstimator):
             raise ValueError(
                 f"Y has {Yc.shape[1]} quaternions per sample, the model {self.n_features_in_}"
             )
-        with compute_threads(float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)):
+        work = float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)
+        with compute_threads(work, blas_single=True):
             codes, _ = sparse_code(
                 Yc,
                 self.dictionary_log_,
