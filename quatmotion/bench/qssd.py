@@ -17,16 +17,15 @@
 
 from __future__ import annotations
 
-import json
 import os
 import pathlib
-import tempfile
 import time
 from typing import Any
 
 import numpy as np
 
 from quatmotion import quat
+from quatmotion._atomic import atomic_output, atomic_write_json
 from quatmotion.sparse import (
     KSVD,
     QSSD,
@@ -86,18 +85,6 @@ VARIANTS = {
         "refit": "every",
     },
 }
-
-
-def _write_json(path: pathlib.Path, payload: dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(payload, fh, indent=2, default=float)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def _simulate_once(
@@ -332,6 +319,15 @@ def table2(quick: bool, seed: int) -> dict[str, Any]:
     }
 
 
+def _save(fig: Any, path: pathlib.Path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    with atomic_output(path, suffix=".png") as temp:
+        fig.savefig(temp, dpi=110)
+    plt.close(fig)
+
+
 def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
     import matplotlib
 
@@ -362,9 +358,7 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
         ax.set_title("QSSD simulation (Fig. 1)")
         ax.legend(fontsize=8)
         path = out.with_name(out.stem + "_fig1_error.png")
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        _save(fig, path)
         written.append(path.name)
         sweep = sim["weight_scale_sweep"]
         fig, ax = plt.subplots(figsize=(6, 4))
@@ -383,9 +377,7 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
         ax.set_ylim(-0.02, 1.02)
         ax.legend(fontsize=8)
         path = out.with_name(out.stem + "_fig1_scale.png")
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        _save(fig, path)
         written.append(path.name)
     t2 = results.get("table2")
     if t2:
@@ -404,9 +396,7 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
         ax.set_ylabel("seconds per iteration")
         ax.legend(fontsize=8)
         path = out.with_name(out.stem + "_table2.png")
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
+        _save(fig, path)
         written.append(path.name)
     return written
 
@@ -419,7 +409,7 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
         t0 = time.perf_counter()
         results[name] = fn(quick, seed)
         results[name]["wall_seconds"] = time.perf_counter() - t0
-        _write_json(out, results)  # partial results survive a later failure
+        atomic_write_json(out, results)  # partial results survive a later failure
     results["figures"] = _figures(out, results)
-    _write_json(out, results)
+    atomic_write_json(out, results)
     return results
