@@ -31,7 +31,7 @@ from rich.table import Table
 
 from quatmotion import quat
 from quatmotion._atomic import atomic_output, atomic_write_text
-from quatmotion.motion import Motion, forward_kinematics
+from quatmotion.motion import Motion, forward_kinematics, standing_height
 
 __all__ = ["angular_displacements", "plot_stick_figure", "run_demo"]
 
@@ -209,12 +209,12 @@ def run_demo(paths: Sequence[Path] = (), out_dir: str | Path = "demo-out", seed:
     clips = _load(list(paths), seed, quick)
     source = "given clips" if paths else "generated library"
     table = Table(title=f"{len(clips)} clips ({source})", title_justify="left")
-    for column in ("clip", "label", "frames", "fps", "seconds", "joints", "height cm"):
+    for column in ("clip", "label", "frames", "fps", "seconds", "joints", "standing cm"):
         table.add_column(column, justify="left" if column in ("clip", "label") else "right")
     for motion, label in clips:
         table.add_row(motion.name, label, str(motion.n_frames), f"{motion.fps:g}",
                       f"{motion.duration:.2f}", str(motion.n_joints),
-                      f"{motion.skeleton.height():.0f}")
+                      f"{standing_height(motion, max(1, motion.n_frames // 100)):.0f}")
     console.print(table)
 
     figure = plot_stick_figure(clips[0][0], out_dir / f"stick_{clips[0][0].name}.png")
