@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from quatmotion.datasets import data_root
+
 
 class QuietHandler(http.server.SimpleHTTPRequestHandler):
     """Serves files without logging each request to stderr."""
@@ -41,3 +43,11 @@ def serve_directory() -> Iterator[Callable[..., str]]:
         server.shutdown()
         server.server_close()
         thread.join(timeout=5)
+
+
+# The real mocap folder ($QUATMOTION_DATA, else ../shared/data): tests that read it are marked
+# ``needs_data`` and skip, naming the folder, only where it is absent (CI always has it).
+DATA = data_root(must_exist=False)
+needs_data = pytest.mark.skipif(
+    not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
+)

@@ -10,17 +10,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA, needs_data
 from typer.testing import CliRunner
 
 from quatmotion import cli
 from quatmotion.cli import app
-from quatmotion.datasets import data_root
 from quatmotion.motion import forward_kinematics
 
 io = pytest.importorskip("quatmotion.io")
 
 PROJECT = Path(__file__).resolve().parents[1]
-DATA = data_root(must_exist=False)
 CLIPS = {
     "cmu_amc": DATA / "cmu" / "02" / "02_01.amc",
     "hdm05_amc": DATA / "hdm05" / "clips" / "kickLFront1Reps"
@@ -28,8 +27,6 @@ CLIPS = {
     "bandai_bvh": DATA / "bandai1" / "clips" / "dataset-1_walk_normal_001.bvh",
     "cmu_bvh": DATA / "cmu_bvh" / "07" / "07_01.bvh",
 }
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"mocap data folder {DATA} is absent "
-                                "(set QUATMOTION_DATA)")
 
 runner = CliRunner()
 

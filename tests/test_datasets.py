@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
-from conftest import QuietHandler
+from conftest import DATA, QuietHandler, needs_data
 
 from quatmotion.datasets import (
     DATA_ENV_VAR,
@@ -22,9 +22,6 @@ from quatmotion.datasets import (
 )
 
 PROJECT = Path(__file__).resolve().parents[1]
-DATA = data_root(must_exist=False)
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"mocap data folder {DATA} is absent "
-                                f"(set {DATA_ENV_VAR})")
 
 
 # --- data_root ----------------------------------------------------------------------------------

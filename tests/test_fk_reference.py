@@ -10,15 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA, needs_data
 
-from quatmotion.datasets import data_root
 from quatmotion.io import asf_bone_end_positions, read_amc, read_bvh
 from quatmotion.motion import forward_kinematics
 
-DATA = data_root(must_exist=False)
-needs_data = pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
-)
 REFERENCES = sorted((DATA / "reference").glob("*.npz")) if DATA.is_dir() else []
 AMC_REFERENCES = [r for r in REFERENCES if "positions_cm" in np.load(r).files]
 TOLERANCE_CM = 1e-3

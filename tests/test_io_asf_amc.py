@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA, needs_data
 
 from quatmotion import FormatError, quat
-from quatmotion.datasets import data_root
 from quatmotion.io import (
     asf_bone_end_positions,
     find_asf_for_amc,
@@ -24,10 +24,6 @@ from quatmotion.io import (
 )
 from quatmotion.motion import forward_kinematics
 
-DATA = data_root(must_exist=False)
-needs_data = pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
-)
 UNIT_CM = 2.54 / 0.45  # one ASF unit at ':units length 0.45'
 
 TINY_ASF = """# a two-bone test skeleton

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA, needs_data
 
 from quatmotion import FormatError, quat
-from quatmotion.datasets import data_root
 from quatmotion.io import (
     detect_bvh_scale,
     read_bvh,
@@ -18,11 +18,6 @@ from quatmotion.io import (
     write_motion,
 )
 from quatmotion.motion import forward_kinematics
-
-DATA = data_root(must_exist=False)
-needs_data = pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
-)
 
 TINY_BVH = """HIERARCHY
 ROOT hips

@@ -12,19 +12,15 @@ from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
-import pytest
+from conftest import DATA, needs_data
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from quatmotion import FormatError
-from quatmotion.datasets import data_root
 from quatmotion.io import read_amc, read_asf, read_bvh
 from quatmotion.motion import Motion, Skeleton
 
-DATA = data_root(must_exist=False)
-pytestmark = pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
-)
+pytestmark = needs_data
 N_FRAMES = 50
 FUZZ = settings(
     max_examples=60,

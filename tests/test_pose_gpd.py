@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import os
 import re
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA
 
 from quatmotion import quat
 from quatmotion.pose import gpd
@@ -272,8 +271,6 @@ def test_orientations_from_positions() -> None:
     assert np.linalg.norm(np.delete(w, J["LElbow"], axis=0)) < 1e-9
 
 
-PROJECT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get("QUATMOTION_DATA", PROJECT / ".." / "shared" / "data"))
 
 
 @pytest.mark.skipif(not (DATA / "cmu").is_dir(), reason=f"no mocap data folder at {DATA}")

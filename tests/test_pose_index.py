@@ -3,20 +3,14 @@
 from __future__ import annotations
 
 import json
-import os
 import pathlib
 
 import numpy as np
 import pytest
+from conftest import DATA
 from scipy.spatial.distance import cdist
 
 from quatmotion.pose.index import PoseIndex, PoseLibrary, exact_knn, recall_at_k
-
-DATA = pathlib.Path(
-    os.environ.get(
-        "QUATMOTION_DATA", pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "data"
-    )
-)
 
 
 def _pose_like(n: int, dim: int = 50, seed: int = 0) -> np.ndarray:

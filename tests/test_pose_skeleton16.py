@@ -2,22 +2,13 @@
 
 from __future__ import annotations
 
-import os
-import pathlib
-
 import numpy as np
 import pytest
+from conftest import DATA, needs_data
 
 from quatmotion import quat
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
 from quatmotion.pose import skeleton16 as s16
-
-DATA = pathlib.Path(
-    os.environ.get(
-        "QUATMOTION_DATA", pathlib.Path(__file__).resolve().parents[1].parent / "shared" / "data"
-    )
-)
-needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f"mocap data folder {DATA} is absent")
 
 # A Bandai-named skeleton in a T-pose facing +Z (left is +X), offsets in cm.
 _BONES = [

@@ -17,15 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import DATA, needs_data
 
-from quatmotion.datasets import data_root
 from quatmotion.io import read_asf, read_bvh
 from quatmotion.motion import forward_kinematics
 
-DATA = data_root(must_exist=False)
-pytestmark = pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
-)
+pytestmark = needs_data
 ASFS = (
     sorted(DATA.glob("cmu/*/*.asf")) + sorted(DATA.glob("hdm05/skeletons/*.asf"))
     if DATA.is_dir()
