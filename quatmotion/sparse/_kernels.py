@@ -61,6 +61,15 @@ def _qmul(aw, ax, ay, az, bw, bx, by, bz):  # type: ignore[no-untyped-def]
 
 
 @njit(inline="always", cache=True)
+def _residual(c, y, left):  # type: ignore[no-untyped-def]
+    """One joint's residual of sample ``y`` against its combination ``c``: ``c^-1 y`` if
+    ``left`` (what the next, smaller atom must explain), else ``y c^-1`` (as printed)."""
+    if left:
+        return _qmul(c[0], -c[1], -c[2], -c[3], y[0], y[1], y[2], y[3])
+    return _qmul(y[0], y[1], y[2], y[3], c[0], -c[1], -c[2], -c[3])
+
+
+@njit(inline="always", cache=True)
 def _qexp(vx, vy, vz):  # type: ignore[no-untyped-def]
     a = math.sqrt(vx * vx + vy * vy + vz * vz)
     # Below 1e-8, sin(a)/a = 1 - a^2/6 to double precision.
@@ -671,28 +680,7 @@ def residual_logs(Y, Dlog, idx, coef, count, left, out):  # type: ignore[no-unty
         tmp = np.empty((n, 4))
         _combine_row(Dlog, idx[i], coef[i], count[i], C, tmp)
         for j in range(n):
-            if left:
-                r = _qmul(
-                    C[j, 0],
-                    -C[j, 1],
-                    -C[j, 2],
-                    -C[j, 3],
-                    Y[i, j, 0],
-                    Y[i, j, 1],
-                    Y[i, j, 2],
-                    Y[i, j, 3],
-                )
-            else:
-                r = _qmul(
-                    Y[i, j, 0],
-                    Y[i, j, 1],
-                    Y[i, j, 2],
-                    Y[i, j, 3],
-                    C[j, 0],
-                    -C[j, 1],
-                    -C[j, 2],
-                    -C[j, 3],
-                )
+            r = _residual(C[j], Y[i, j], left)
             lx, ly, lz = _qlog(r[0], r[1], r[2], r[3])
             out[i, j, 0] = lx
             out[i, j, 1] = ly
@@ -886,28 +874,7 @@ def add_atom_and_refit(
                 if not have_combination:
                     _combine_row(Dlog, idx[i], coef[i], m, C, tmp)
                 for j in range(n):
-                    if left:
-                        r = _qmul(
-                            C[j, 0],
-                            -C[j, 1],
-                            -C[j, 2],
-                            -C[j, 3],
-                            Y[i, j, 0],
-                            Y[i, j, 1],
-                            Y[i, j, 2],
-                            Y[i, j, 3],
-                        )
-                    else:
-                        r = _qmul(
-                            Y[i, j, 0],
-                            Y[i, j, 1],
-                            Y[i, j, 2],
-                            Y[i, j, 3],
-                            C[j, 0],
-                            -C[j, 1],
-                            -C[j, 2],
-                            -C[j, 3],
-                        )
+                    r = _residual(C[j], Y[i, j], left)
                     R[j, 0] = r[0]
                     R[j, 1] = r[1]
                     R[j, 2] = r[2]
