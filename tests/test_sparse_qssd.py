@@ -104,18 +104,11 @@ def test_unused_atoms_are_reseeded_from_worst_fit_samples() -> None:
     result = update_dictionary(Y, Dlog, codes, objective=objective)
     assert result.n_reseeded == 5
     worst = np.argmax(objective)
-    from quatmotion.sparse import _kernels
+    from quatmotion.sparse.qssd import _from_soa, _residual_logs, _to_soa
 
-    rlog = np.empty((1, 4, 3))
-    _kernels.residual_logs(
-        Y[worst : worst + 1],
-        Dlog,
-        codes.idx[worst : worst + 1],
-        codes.coef[worst : worst + 1],
-        codes.count[worst : worst + 1],
-        True,
-        rlog,
-    )
+    row = slice(worst, worst + 1)
+    sub = Codes(codes.idx[row], codes.coef[row], codes.count[row])
+    rlog = _from_soa(_residual_logs(_to_soa(Y[row]), _to_soa(Dlog), sub))
     np.testing.assert_allclose(result.dictionary_log[1], rlog[0] / np.linalg.norm(rlog), atol=1e-12)
 
 

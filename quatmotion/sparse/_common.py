@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
 from quatmotion import quat
+from quatmotion.sparse._kernels import gram_matvec
 
 UNIT_TOLERANCE = 1e-6
 # Below this many quaternion products per kernel call, thread start-up and waiting for a
@@ -148,7 +149,8 @@ def rank1(
     ``w = sigma_1 v_1`` and ``u`` the first right singular vector (the atom in K-SVD, Algorithm 1
     line 13; ``ln`` of the atom in Algorithm 3 line 9). Small problems use LAPACK's SVD; large
     ones power iteration on ``A^T A`` warm-started from the current atom ``warm``, which is
-    already close, so a few products with ``A`` replace an ``O(d^2 M)`` factorisation. The sign
+    already close, so a few passes over ``A`` (:func:`gram_matvec`, one pass per step) replace
+    an ``O(d^2 M)`` factorisation. The sign
     is chosen so that ``u . warm >= 0`` (the atom does not flip between iterations).
     """
     M, d = A.shape
@@ -160,14 +162,16 @@ def rank1(
         if not np.any(u):
             u = A[np.argmax(np.einsum("ij,ij->i", A, A))].copy()
             u /= max(np.linalg.norm(u), 1e-300)
+        A = np.ascontiguousarray(A)
+        z = np.empty(d)
         for _ in range(30):
-            z = A.T @ (A @ u)
+            gram_matvec(A, u, z)
             norm = np.linalg.norm(z)
             if norm == 0.0:
                 break
             z /= norm
             change = np.linalg.norm(z - u)
-            u = z
+            u = z.copy()
             if change < 1e-8:
                 break
     if np.dot(u, warm) < 0.0:

@@ -1,13 +1,18 @@
 """Numba kernels for QSSD: batched quaternion combination, sparse coding and atom residuals.
 
 Conventions shared by every kernel (the estimator in :mod:`quatmotion.sparse.qssd` owns the
-validation; these functions trust their inputs):
+validation and the layout changes; these functions trust their inputs):
 
-* ``Y`` is ``(N, n, 4)`` unit quaternions, w first, each with ``w >= 0``.
-* A dictionary is stored by its logarithms ``Dlog`` ``(K, n, 3)``: atom ``k`` joint ``j`` is
-  ``exp(Dlog[k, j])`` and ``atom ** x = exp(x * Dlog[k, j])``. ``Dnorm`` ``(K, n)`` holds the
-  per-joint half angles ``|Dlog[k, j]|`` and ``Daxis`` ``(K, n, 3)`` the unit axes (zero where
-  the half angle is zero).
+* **Structure of arrays.** A sample's ``n`` quaternions are stored as ``(4, n)`` (w, x, y, z,
+  each a contiguous run over the joints) and logs as ``(3, n)``; a flattened log is
+  component-major (``3n``, all x first). ``YT`` is ``(N, 4, n)`` unit quaternions with
+  ``w >= 0``. Every per-joint loop then walks contiguous memory with no dependence between
+  joints, so LLVM vectorises it (4 or 8 joints per instruction): the quaternion products, the
+  sines and cosines and the arctangents of all joints of one slot advance together.
+* A dictionary is stored by its logarithms ``DlogT`` ``(K, 3, n)``: atom ``k`` joint ``j`` is
+  ``exp(DlogT[k, :, j])`` and ``atom ** x = exp(x * log)``. ``Dnorm`` ``(K, n)`` holds the
+  per-joint half angles and ``DaxisT`` ``(K, 3, n)`` the unit axes (zero where the half angle
+  is zero), so ``atom ** x = (cos(x a), sin(x a) u)``.
 * A sparse code is stored per sample as slots in combination order: ``idx`` ``(N, L)`` atom
   indices, ``coef`` ``(N, L)`` weights, ``count`` ``(N,)`` the number of used slots. The
   combination (paper Eq. 2) is ``A_0 A_1 ... A_{m-1}`` with ``A_s = atom(idx_s) ** coef_s``, the
@@ -19,22 +24,24 @@ Every kernel that walks over samples runs them in parallel with ``prange``: samp
 independent in both sparse coding and the residual computation of one atom. Kernels that need
 scratch buffers take the samples in chunks of ``_CHUNK`` and allocate once per chunk.
 
-Where the time goes, and what keeps it down (the Gauss-Newton refit of the last coding step is
-about half of an iteration, the residual logs of the dictionary update most of the rest):
+What keeps the time down, besides the layout:
 
-* a residual evaluation forms each power ``(cos(x a), sin(x a) u)`` from the precomputed half
-  angles and axes and multiplies it straight into the suffix products; the powers are kept so
-  that a re-sort or a swapped-order trial reuses them without ``sin``/``cos``;
+* sine, cosine and arctangent are branch-free polynomials (:func:`_sincos`,
+  :func:`_atan_ratio`) that vectorise, where libm's are scalar calls of about 20 ns each;
+* a residual evaluation forms each power and multiplies it straight into the suffix products;
+  the powers are kept so that a re-sort or a swapped-order trial reuses them;
 * the solver's trial steps go to a second set of buffers (no re-evaluation on rejection), and
   the last combination and residual log become the sample's residual without recomputation;
 * the residual quaternions are carried beside their logs between coding steps (no ``exp``);
-* logs use ``2 atan(|v| / (1 + w))`` instead of ``atan2(|v|, w)`` (twice as cheap in libm);
-* the dictionary update moves cached powers when slots re-sort instead of recomputing them,
-  reads each cached power as one contiguous block, and gets the final objective from them.
+* the dictionary update forms the powers afresh for each atom's residuals: caching all
+  ``N L`` of them made every atom's pass stream them from memory, which was slower;
+* loops that update an array in place take it once (:func:`_rmul`): passed as two arguments,
+  LLVM's runtime overlap check fails and the scalar loop runs; loops over five or more arrays
+  are split in two for the same reason.
 
-The results are those of the straightforward formulation up to rounding (the objective of a
-coding pass agrees to about 1e-10 relative), except for ``GN_STEP_TOL``, which skips refit
-steps whose predicted gain is below 1e-10 of the residual.
+Floating-point flags: the functions that use the polynomials allow contraction into fused
+multiply-adds only; sums over joints are separate functions that also allow reassociation (so
+that they vectorise), which changes only the order of the additions.
 """
 
 from __future__ import annotations
@@ -44,10 +51,78 @@ import math
 import numpy as np
 from numba import njit, prange
 
-_EPS = 1e-12
 # Samples per work unit of the parallel kernels that need scratch buffers: the buffers are
 # allocated once per unit instead of once per sample.
 _CHUNK = 16
+_FM = {"contract"}
+_FM_SUM = {"contract", "reassoc"}
+
+# sin and cos together, written by hand because glibc's cost about 20 ns each here, Numba
+# calls them one at a time and LLVM cannot vectorise a loop that calls them; they were most of
+# the Gauss-Newton refit. Reduction by pi/2 in two parts (Cody-Waite: exact for |x| < 1.6e6,
+# beyond which the error is of the order of ulp(x), the precision the argument itself has),
+# then fdlibm's kernel polynomials on [-pi/4, pi/4]; within 2 ulp of libm. No branches: the
+# quadrant is selected arithmetically.
+_PIO2_HI = 1.57079632673412561417e00
+_PIO2_LO = 6.07710050650619224932e-11
+_TWO_OVER_PI = 0.63661977236758134308
+_S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
+_S4, _S5, _S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
+_C1, _C2, _C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
+_C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
+
+# atan on [-0.66, 0.66] (Cephes' rational approximation, relative error about 1e-16), for the
+# same reason as _sincos: libm's atan does not vectorise.
+_AP0, _AP1, _AP2 = (
+    -8.750608600031904122785e-01,
+    -1.615753718733365076637e01,
+    -7.500855792314704667340e01,
+)
+_AP3, _AP4 = -1.228866684490136173410e02, -6.485021904942025371773e01
+_AQ0, _AQ1, _AQ2 = (
+    2.485846490142306297962e01,
+    1.650270098316988542046e02,
+    4.328810604912902668951e02,
+)
+_AQ3, _AQ4 = 4.853903996359136964868e02, 1.945506571482613964425e02
+_PIO2 = math.pi / 2.0
+_PIO4 = math.pi / 4.0
+
+
+@njit(inline="always", cache=True)
+def _sincos(x):  # type: ignore[no-untyped-def]
+    """``(sin x, cos x)``."""
+    k = np.floor(x * _TWO_OVER_PI + 0.5)
+    r = (x - k * _PIO2_HI) - k * _PIO2_LO
+    z = r * r
+    sp = r + r * z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))
+    cp = 1.0 - 0.5 * z + z * z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
+    quadrant = k - 4.0 * np.floor(0.25 * k)  # 0, 1, 2 or 3
+    odd = quadrant == 1.0 or quadrant == 3.0
+    s = cp if odd else sp
+    c = sp if odd else cp
+    s = -s if quadrant >= 2.0 else s
+    c = -c if (quadrant == 1.0 or quadrant == 2.0) else c
+    return s, c
+
+
+@njit(inline="always", cache=True)
+def _atan_ratio(num, den):  # type: ignore[no-untyped-def]
+    """``atan2(num, den)`` for ``num, den >= 0``, in ``[0, pi/2]`` (0 when both are 0)."""
+    big = num > den
+    hi = num if big else den
+    lo = den if big else num
+    # With t = lo / hi in [0, 1]: atan t directly up to 0.66, else pi/4 + atan((t-1)/(t+1)),
+    # whose argument is (lo - hi) / (lo + hi): one division either way.
+    mid = lo > 0.66 * hi
+    x = (lo - hi if mid else lo) / max(lo + hi if mid else hi, 1e-300)
+    z = x * x
+    p = (z * ((((_AP0 * z + _AP1) * z + _AP2) * z + _AP3) * z + _AP4)) / (
+        ((((z + _AQ0) * z + _AQ1) * z + _AQ2) * z + _AQ3) * z + _AQ4
+    )
+    a = x + x * p
+    a = a + _PIO4 if mid else a
+    return _PIO2 - a if big else a
 
 
 @njit(inline="always", cache=True)
@@ -61,32 +136,214 @@ def _qmul(aw, ax, ay, az, bw, bx, by, bz):  # type: ignore[no-untyped-def]
 
 
 @njit(inline="always", cache=True)
-def _residual(c, y, left):  # type: ignore[no-untyped-def]
-    """One joint's residual of sample ``y`` against its combination ``c``: ``c^-1 y`` if
-    ``left`` (what the next, smaller atom must explain), else ``y c^-1`` (as printed)."""
-    if left:
-        return _qmul(c[0], -c[1], -c[2], -c[3], y[0], y[1], y[2], y[3])
-    return _qmul(y[0], y[1], y[2], y[3], c[0], -c[1], -c[2], -c[3])
-
-
-@njit(inline="always", cache=True)
-def _qexp(vx, vy, vz):  # type: ignore[no-untyped-def]
-    a = math.sqrt(vx * vx + vy * vy + vz * vz)
-    # Below 1e-8, sin(a)/a = 1 - a^2/6 to double precision.
-    s = 1.0 - a * a / 6.0 if a < 1e-8 else math.sin(a) / a
-    return math.cos(a), vx * s, vy * s, vz * s
-
-
-@njit(inline="always", cache=True)
 def _qlog(w, x, y, z):  # type: ignore[no-untyped-def]
     """Shortest-arc log (the sign of ``q`` is chosen so that ``w >= 0``)."""
-    if w < 0.0:
-        w, x, y, z = -w, -x, -y, -z
+    sign = -1.0 if w < 0.0 else 1.0
+    w *= sign
     vn = math.sqrt(x * x + y * y + z * z)
-    # atan2(vn, w) = 2 atan(vn / (1 + w)) on the unit sphere with w >= 0; libm's atan2 costs
-    # more than twice atan, and this log is in every kernel's inner loop.
-    s = 1.0 / max(w, 1e-300) if vn < 1e-12 else 2.0 * math.atan(vn / (1.0 + w)) / vn
+    half_angle = _atan_ratio(vn, w)
+    # half_angle / vn, or its limit 1 / w for a (numerically) zero angle: one division.
+    tiny = vn < 1e-12
+    s = sign * (1.0 if tiny else half_angle) / max(w if tiny else vn, 1e-300)
     return x * s, y * s, z * s
+
+
+@njit(inline="always", cache=True)
+def _rotate_by_conj(sw, sx, sy, sz, vx, vy, vz):  # type: ignore[no-untyped-def]
+    """``S^* v S`` for unit ``S`` and the pure quaternion ``v`` (a rotation by ``S^*``)."""
+    # v' = v + w t + u x t, t = 2 u x v, with (w, u) = S^* = (sw, -sx, -sy, -sz).
+    ux, uy, uz = -sx, -sy, -sz
+    tx = 2.0 * (uy * vz - uz * vy)
+    ty = 2.0 * (uz * vx - ux * vz)
+    tz = 2.0 * (ux * vy - uy * vx)
+    return (
+        vx + sw * tx + (uy * tz - uz * ty),
+        vy + sw * ty + (uz * tx - ux * tz),
+        vz + sw * tz + (ux * ty - uy * tx),
+    )
+
+
+# ----------------------------------------------------------------------------------------------
+# Per-joint building blocks: each is one vectorised loop over the n joints of one sample.
+
+
+@njit(cache=True, fastmath=_FM_SUM, error_model="numpy")
+def _sum(v):  # type: ignore[no-untyped-def]
+    total = 0.0
+    for t in range(v.shape[0]):
+        total += v[t]
+    return total
+
+
+@njit(cache=True, fastmath=_FM_SUM, error_model="numpy")
+def _sumsq(v):  # type: ignore[no-untyped-def]
+    total = 0.0
+    for t in range(v.shape[0]):
+        total += v[t] * v[t]
+    return total
+
+
+@njit(cache=True, fastmath=_FM_SUM, error_model="numpy")
+def _row_objective(YTi, C):  # type: ignore[no-untyped-def]
+    """``sum_j 1 - |<Y_j, C_j>|`` for ``(4, n)`` quaternions."""
+    total = 0.0
+    for j in range(YTi.shape[1]):
+        d = YTi[0, j] * C[0, j] + YTi[1, j] * C[1, j] + YTi[2, j] * C[2, j] + YTi[3, j] * C[3, j]
+        total += 1.0 - min(abs(d), 1.0)
+    return total
+
+
+@njit(cache=True, fastmath=_FM_SUM, error_model="numpy")
+def _residual_objective(R):  # type: ignore[no-untyped-def]
+    """``sum_j 1 - |w(R_j)|``: the objective from a residual (left or right alike)."""
+    total = 0.0
+    for j in range(R.shape[1]):
+        total += 1.0 - min(abs(R[0, j]), 1.0)
+    return total
+
+
+@njit(cache=True)
+def _copy(src, dst):  # type: ignore[no-untyped-def]
+    for c in range(src.shape[0]):
+        for j in range(src.shape[1]):
+            dst[c, j] = src[c, j]
+
+
+@njit(cache=True)
+def _identity_into(Q):  # type: ignore[no-untyped-def]
+    for j in range(Q.shape[1]):
+        Q[0, j] = 1.0
+        Q[1, j] = 0.0
+        Q[2, j] = 0.0
+        Q[3, j] = 0.0
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _power_into(dn, da, x, out):  # type: ignore[no-untyped-def]
+    """``out`` ``(4, n)`` = ``atom ** x`` from its half angles ``dn`` and unit axes ``da``."""
+    for j in range(dn.shape[0]):
+        sn, c = _sincos(x * dn[j])
+        out[0, j] = c
+        out[1, j] = sn * da[0, j]
+        out[2, j] = sn * da[1, j]
+        out[3, j] = sn * da[2, j]
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _exp_into(v, x, out):  # type: ignore[no-untyped-def]
+    """``out`` ``(4, n)`` = ``exp(x v)`` for logs ``v`` ``(3, n)``."""
+    for j in range(v.shape[1]):
+        a = math.sqrt(v[0, j] * v[0, j] + v[1, j] * v[1, j] + v[2, j] * v[2, j])
+        sn, c = _sincos(x * a)
+        s = sn / max(a, 1e-300) if a > 0.0 else 0.0
+        out[0, j] = c
+        out[1, j] = s * v[0, j]
+        out[2, j] = s * v[1, j]
+        out[3, j] = s * v[2, j]
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _times(a, b, out):  # type: ignore[no-untyped-def]
+    """``out = a b`` per joint (``out`` distinct from both; see :func:`_rmul`)."""
+    for j in range(a.shape[1]):
+        w, x, y, z = _qmul(a[0, j], a[1, j], a[2, j], a[3, j], b[0, j], b[1, j], b[2, j], b[3, j])
+        out[0, j] = w
+        out[1, j] = x
+        out[2, j] = y
+        out[3, j] = z
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _conj_times(a, b, out):  # type: ignore[no-untyped-def]
+    """``out = a^-1 b`` per joint for unit ``a`` (``out`` distinct from both)."""
+    for j in range(a.shape[1]):
+        w, x, y, z = _qmul(
+            a[0, j], -a[1, j], -a[2, j], -a[3, j], b[0, j], b[1, j], b[2, j], b[3, j]
+        )
+        out[0, j] = w
+        out[1, j] = x
+        out[2, j] = y
+        out[3, j] = z
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _times_conj(a, b, out):  # type: ignore[no-untyped-def]
+    """``out = a b^-1`` per joint for unit ``b`` (``out`` distinct from both)."""
+    for j in range(a.shape[1]):
+        w, x, y, z = _qmul(
+            a[0, j], a[1, j], a[2, j], a[3, j], b[0, j], -b[1, j], -b[2, j], -b[3, j]
+        )
+        out[0, j] = w
+        out[1, j] = x
+        out[2, j] = y
+        out[3, j] = z
+
+
+# In-place products take the updated array once: given as two arguments, LLVM's runtime
+# check finds them overlapping and runs the scalar loop.
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _rmul(io, b):  # type: ignore[no-untyped-def]
+    """``io <- io b`` per joint."""
+    for j in range(io.shape[1]):
+        w, x, y, z = _qmul(
+            io[0, j], io[1, j], io[2, j], io[3, j], b[0, j], b[1, j], b[2, j], b[3, j]
+        )
+        io[0, j] = w
+        io[1, j] = x
+        io[2, j] = y
+        io[3, j] = z
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _rmul_conj(io, b):  # type: ignore[no-untyped-def]
+    """``io <- io b^-1`` per joint for unit ``b``."""
+    for j in range(io.shape[1]):
+        w, x, y, z = _qmul(
+            io[0, j], io[1, j], io[2, j], io[3, j], b[0, j], -b[1, j], -b[2, j], -b[3, j]
+        )
+        io[0, j] = w
+        io[1, j] = x
+        io[2, j] = y
+        io[3, j] = z
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _lmul_conj(a, io):  # type: ignore[no-untyped-def]
+    """``io <- a^-1 io`` per joint for unit ``a``."""
+    for j in range(io.shape[1]):
+        w, x, y, z = _qmul(
+            a[0, j], -a[1, j], -a[2, j], -a[3, j], io[0, j], io[1, j], io[2, j], io[3, j]
+        )
+        io[0, j] = w
+        io[1, j] = x
+        io[2, j] = y
+        io[3, j] = z
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _log_into(Q, out):  # type: ignore[no-untyped-def]
+    """``out`` ``(3, n)`` = shortest-arc logs of ``Q`` ``(4, n)``."""
+    for j in range(Q.shape[1]):
+        lx, ly, lz = _qlog(Q[0, j], Q[1, j], Q[2, j], Q[3, j])
+        out[0, j] = lx
+        out[1, j] = ly
+        out[2, j] = lz
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _residual_log(YTi, C, r):  # type: ignore[no-untyped-def]
+    """``r`` ``(3, n)`` = ``ln(C^-1 Y)``; returns ``|r|^2``."""
+    for j in range(YTi.shape[1]):
+        w, x, y, z = _qmul(
+            C[0, j], -C[1, j], -C[2, j], -C[3, j], YTi[0, j], YTi[1, j], YTi[2, j], YTi[3, j]
+        )
+        lx, ly, lz = _qlog(w, x, y, z)
+        r[0, j] = lx
+        r[1, j] = ly
+        r[2, j] = lz
+    return _sumsq(r.reshape(r.size))
 
 
 @njit(cache=True)
@@ -108,9 +365,9 @@ def _sort_slots(idx_row, coef_row, m):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _sort_slots_with_powers(idx_row, coef_row, A_i, m):  # type: ignore[no-untyped-def]
-    """:func:`_sort_slots` that moves the cached powers ``A_i`` ``(L, n, 4)`` along."""
-    n = A_i.shape[1]
+def _sort_slots_with_powers(idx_row, coef_row, A_i, m, saved):  # type: ignore[no-untyped-def]
+    """:func:`_sort_slots` that moves the cached powers ``A_i`` ``(L, 4, n)`` along
+    (``saved`` is a ``(4, n)`` scratch buffer)."""
     moved = False
     for s in range(1, m):
         ci = coef_row[s]
@@ -119,69 +376,75 @@ def _sort_slots_with_powers(idx_row, coef_row, A_i, m):  # type: ignore[no-untyp
         if not abs(coef_row[t]) < abs(ci):
             continue
         moved = True
-        saved = A_i[s].copy()
+        _copy(A_i[s], saved)
         while t >= 0 and abs(coef_row[t]) < abs(ci):
             coef_row[t + 1] = coef_row[t]
             idx_row[t + 1] = idx_row[t]
-            for j in range(n):
-                A_i[t + 1, j, 0] = A_i[t, j, 0]
-                A_i[t + 1, j, 1] = A_i[t, j, 1]
-                A_i[t + 1, j, 2] = A_i[t, j, 2]
-                A_i[t + 1, j, 3] = A_i[t, j, 3]
+            _copy(A_i[t], A_i[t + 1])
             t -= 1
         coef_row[t + 1] = ci
         idx_row[t + 1] = ii
-        A_i[t + 1] = saved
+        _copy(saved, A_i[t + 1])
     return moved
 
 
-@njit(cache=True)
-def _power_into(Dlog, k, x, out):  # type: ignore[no-untyped-def]
-    n = Dlog.shape[1]
-    for j in range(n):
-        w, qx, qy, qz = _qexp(x * Dlog[k, j, 0], x * Dlog[k, j, 1], x * Dlog[k, j, 2])
-        out[j, 0] = w
-        out[j, 1] = qx
-        out[j, 2] = qy
-        out[j, 3] = qz
-
-
-@njit(cache=True)
-def _solve_coef(E, Dnorm, Daxis, k, weighted):  # type: ignore[no-untyped-def]
-    """Weight ``x`` maximising ``sum_j <E_j, atom_k_j ** x>`` (paper Eq. 5-6).
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _solve_coef(E, dn, da, weighted, scratch):  # type: ignore[no-untyped-def]
+    """Weight ``x`` maximising ``sum_j <E_j, atom_j ** x>`` (paper Eq. 5-6).
 
     Per joint the optimum satisfies ``tan(x phi_j / 2) = (u_j . v_j) tan(theta_j / 2)``, i.e.
-    ``x a_j = b_j`` with ``a_j = phi_j / 2`` and ``b_j = atan2(v_j . vec(E_j), w(E_j))``
-    (the same arctan without forming ``tan``). Eq. 6 combines the joints by least squares. With
-    ``weighted`` each joint is weighted by ``rho_j = |(w, v_j . vec)|``, the amplitude of its
+    ``x a_j = b_j`` with ``a_j = phi_j / 2`` and ``b_j = atan2(u_j . vec(E_j), w(E_j))``
+    (the same arctan without forming ``tan``). Eq. 6 combines the joints by least squares; a
+    joint with ``a_j = 0`` carries no information and adds nothing to either sum. With
+    ``weighted`` each joint is weighted by ``rho_j = |(w, u_j . vec)|``, the amplitude of its
     term ``rho_j cos(x a_j - b_j)``: the exact second-order model of Eq. 5 around each optimum.
+    ``scratch`` is ``(2, n)``.
     """
-    n = E.shape[0]
-    num = 0.0
-    den = 0.0
-    for j in range(n):
-        a = Dnorm[k, j]
-        if a <= 0.0:
-            continue
-        w = E[j, 0]
-        p = Daxis[k, j, 0] * E[j, 1] + Daxis[k, j, 1] * E[j, 2] + Daxis[k, j, 2] * E[j, 3]
-        if w < 0.0:
-            w = -w
-            p = -p
-        rho = math.sqrt(w * w + p * p)
-        # atan2(p, w) for w >= 0, by the half-angle identity (cheaper than libm's atan2).
-        b = 2.0 * math.atan(p / (rho + w)) if rho > 0.0 else 0.0
-        if not weighted:
-            rho = 1.0
-        num += rho * a * b
-        den += rho * a * a
+    for j in range(dn.shape[0]):
+        a = dn[j]
+        w = E[0, j]
+        p = da[0, j] * E[1, j] + da[1, j] * E[2, j] + da[2, j] * E[3, j]
+        sign = -1.0 if w < 0.0 else 1.0
+        w *= sign
+        p *= sign
+        b = _atan_ratio(abs(p), w)
+        b = -b if p < 0.0 else b
+        weight = math.sqrt(w * w + p * p) if weighted else 1.0
+        scratch[0, j] = weight * a * b
+        scratch[1, j] = weight * a * a
+    num = _sum(scratch[0])
+    den = _sum(scratch[1])
     if den <= 0.0:
         return 0.0
     return num / den
 
 
 @njit(cache=True)
-def _bcd(Y_i, Dlog, Dnorm, Daxis, idx_row, coef_row, m, n_sweeps, weighted, A, suf, Lq, E):  # type: ignore[no-untyped-def]
+def _combine_row(Dnorm, DaxisT, idx_row, coef_row, m, out, tmp):  # type: ignore[no-untyped-def]
+    """``out`` ``(4, n)`` = combination of the first ``m`` slots."""
+    _identity_into(out)
+    for s in range(m):
+        k = idx_row[s]
+        _power_into(Dnorm[k], DaxisT[k], coef_row[s], tmp)
+        _rmul(out, tmp)
+
+
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _residual_into(C, YTi, left, out):  # type: ignore[no-untyped-def]
+    """One sample's residual against its combination ``C``: ``C^-1 Y`` if ``left`` (what the
+    next, smaller atom must explain), else ``Y C^-1`` (Algorithm 2 line 8 as printed)."""
+    if left:
+        _conj_times(C, YTi, out)
+    else:
+        _times_conj(YTi, C, out)
+
+
+# ----------------------------------------------------------------------------------------------
+# Coefficient solvers for one sample.
+
+
+@njit(cache=True)
+def _bcd(YTi, Dnorm, DaxisT, idx_row, coef_row, m, n_sweeps, weighted, A, suf, Lq, E, scratch):  # type: ignore[no-untyped-def]
     """Block coordinate descent over the ``m`` weights of one sample, keeping the order sorted.
 
     Each sweep visits the slots left to right. For slot ``s`` the other factors are fixed:
@@ -190,76 +453,27 @@ def _bcd(Y_i, Dlog, Dnorm, Daxis, idx_row, coef_row, m, n_sweeps, weighted, A, s
     the left factor ``P^-1 Y`` is carried along, so a sweep costs O(m n) quaternion products.
     After each sweep the slots are re-sorted by magnitude, which is the order Eq. 2 defines.
     """
-    n = Y_i.shape[0]
     for s in range(m):
-        _power_into(Dlog, idx_row[s], coef_row[s], A[s])
+        k = idx_row[s]
+        _power_into(Dnorm[k], DaxisT[k], coef_row[s], A[s])
     for _ in range(n_sweeps):
         # suf[s] = A_s A_{s+1} ... A_{m-1}; suf[m] = identity.
-        for j in range(n):
-            suf[m, j, 0] = 1.0
-            suf[m, j, 1] = 0.0
-            suf[m, j, 2] = 0.0
-            suf[m, j, 3] = 0.0
-        for s in range(m - 1, -1, -1):
-            for j in range(n):
-                r = _qmul(
-                    A[s, j, 0],
-                    A[s, j, 1],
-                    A[s, j, 2],
-                    A[s, j, 3],
-                    suf[s + 1, j, 0],
-                    suf[s + 1, j, 1],
-                    suf[s + 1, j, 2],
-                    suf[s + 1, j, 3],
-                )
-                suf[s, j, 0] = r[0]
-                suf[s, j, 1] = r[1]
-                suf[s, j, 2] = r[2]
-                suf[s, j, 3] = r[3]
-        for j in range(n):
-            Lq[j, 0] = Y_i[j, 0]
-            Lq[j, 1] = Y_i[j, 1]
-            Lq[j, 2] = Y_i[j, 2]
-            Lq[j, 3] = Y_i[j, 3]
+        _identity_into(suf[m])
+        for t in range(m):
+            s = m - 1 - t
+            _times(A[s], suf[s + 1], suf[s])
+        _copy(YTi, Lq)
         for s in range(m):
-            for j in range(n):
-                # E = Lq * conj(suf[s + 1])
-                r = _qmul(
-                    Lq[j, 0],
-                    Lq[j, 1],
-                    Lq[j, 2],
-                    Lq[j, 3],
-                    suf[s + 1, j, 0],
-                    -suf[s + 1, j, 1],
-                    -suf[s + 1, j, 2],
-                    -suf[s + 1, j, 3],
-                )
-                E[j, 0] = r[0]
-                E[j, 1] = r[1]
-                E[j, 2] = r[2]
-                E[j, 3] = r[3]
-            x = _solve_coef(E, Dnorm, Daxis, idx_row[s], weighted)
+            _times_conj(Lq, suf[s + 1], E)
+            k = idx_row[s]
+            x = _solve_coef(E, Dnorm[k], DaxisT[k], weighted, scratch)
             coef_row[s] = x
-            _power_into(Dlog, idx_row[s], x, A[s])
-            for j in range(n):
-                # Lq <- A_s^-1 Lq
-                r = _qmul(
-                    A[s, j, 0],
-                    -A[s, j, 1],
-                    -A[s, j, 2],
-                    -A[s, j, 3],
-                    Lq[j, 0],
-                    Lq[j, 1],
-                    Lq[j, 2],
-                    Lq[j, 3],
-                )
-                Lq[j, 0] = r[0]
-                Lq[j, 1] = r[1]
-                Lq[j, 2] = r[2]
-                Lq[j, 3] = r[3]
+            _power_into(Dnorm[k], DaxisT[k], x, A[s])
+            _lmul_conj(A[s], Lq)
         if _sort_slots(idx_row, coef_row, m):
             for s in range(m):
-                _power_into(Dlog, idx_row[s], coef_row[s], A[s])
+                k = idx_row[s]
+                _power_into(Dnorm[k], DaxisT[k], coef_row[s], A[s])
 
 
 # Relative size of the predicted Gauss-Newton decrease of |r|^2 below which a refit stops:
@@ -270,97 +484,55 @@ GN_STEP_TOL = 1e-10
 SWAP_GAP = 0.05
 
 
-@njit(inline="always", cache=True)
-def _rotate_by_conj(sw, sx, sy, sz, vx, vy, vz):  # type: ignore[no-untyped-def]
-    """``S^* v S`` for unit ``S`` and the pure quaternion ``v`` (a rotation by ``S^*``)."""
-    # v' = v + w t + u x t, t = 2 u x v, with (w, u) = S^* = (sw, -sx, -sy, -sz).
-    ux, uy, uz = -sx, -sy, -sz
-    tx = 2.0 * (uy * vz - uz * vy)
-    ty = 2.0 * (uz * vx - ux * vz)
-    tz = 2.0 * (ux * vy - uy * vx)
-    return (
-        vx + sw * tx + (uy * tz - uz * ty),
-        vy + sw * ty + (uz * tx - ux * tz),
-        vz + sw * tz + (ux * ty - uy * tx),
-    )
-
-
 @njit(cache=True)
-def _gn_eval(Y_i, Dnorm, Daxis, idx_row, coef, m, Apow, suf, r):  # type: ignore[no-untyped-def]
+def _gn_eval(YTi, Dnorm, DaxisT, idx_row, coef, m, Apow, suf, r):  # type: ignore[no-untyped-def]
     """``suf[s] = A_s .. A_{m-1}`` for weights ``coef``, ``r = ln(suf[0]^-1 Y)``; ``|r|^2``.
 
-    One pass per joint: each power ``A_s = (cos(x a), sin(x a) u)`` (half angle ``a``, unit
-    axis ``u`` precomputed) is formed, kept in ``Apow`` (a re-ordering of the same weights
-    then needs no ``sin``/``cos``, :func:`_gn_eval_powers`) and multiplied into the suffix.
+    Each power ``A_s`` is formed, kept in ``Apow`` (a re-ordering of the same weights then
+    needs no sines, :func:`_gn_eval_powers`) and multiplied into the suffix.
     """
-    n = Y_i.shape[0]
-    total = 0.0
-    for j in range(n):
-        pw, px, py, pz = 1.0, 0.0, 0.0, 0.0
-        suf[m, j, 0] = 1.0
-        suf[m, j, 1] = 0.0
-        suf[m, j, 2] = 0.0
-        suf[m, j, 3] = 0.0
-        for s in range(m - 1, -1, -1):
-            k = idx_row[s]
-            angle = coef[s] * Dnorm[k, j]
-            c = math.cos(angle)
-            sn = math.sin(angle)
-            ax, ay, az = sn * Daxis[k, j, 0], sn * Daxis[k, j, 1], sn * Daxis[k, j, 2]
-            Apow[s, j, 0] = c
-            Apow[s, j, 1] = ax
-            Apow[s, j, 2] = ay
-            Apow[s, j, 3] = az
-            pw, px, py, pz = _qmul(c, ax, ay, az, pw, px, py, pz)
-            suf[s, j, 0] = pw
-            suf[s, j, 1] = px
-            suf[s, j, 2] = py
-            suf[s, j, 3] = pz
-        q = _qmul(pw, -px, -py, -pz, Y_i[j, 0], Y_i[j, 1], Y_i[j, 2], Y_i[j, 3])
-        lx, ly, lz = _qlog(q[0], q[1], q[2], q[3])
-        r[3 * j] = lx
-        r[3 * j + 1] = ly
-        r[3 * j + 2] = lz
-        total += lx * lx + ly * ly + lz * lz
-    return total
+    _identity_into(suf[m])
+    for t in range(m):
+        s = m - 1 - t
+        k = idx_row[s]
+        # Two loops rather than one: a loop over five or more arrays is left scalar by LLVM
+        # (too many runtime alias checks), these two vectorise.
+        _power_into(Dnorm[k], DaxisT[k], coef[s], Apow[s])
+        _times(Apow[s], suf[s + 1], suf[s])
+    return _residual_log(YTi, suf[0], r)
 
 
 @njit(cache=True)
-def _gn_eval_powers(Y_i, Apow, m, suf, r):  # type: ignore[no-untyped-def]
-    """:func:`_gn_eval` from the powers ``Apow`` ``(m, n, 4)`` already formed."""
-    n = Y_i.shape[0]
-    total = 0.0
-    for j in range(n):
-        pw, px, py, pz = 1.0, 0.0, 0.0, 0.0
-        suf[m, j, 0] = 1.0
-        suf[m, j, 1] = 0.0
-        suf[m, j, 2] = 0.0
-        suf[m, j, 3] = 0.0
-        for s in range(m - 1, -1, -1):
-            pw, px, py, pz = _qmul(
-                Apow[s, j, 0], Apow[s, j, 1], Apow[s, j, 2], Apow[s, j, 3], pw, px, py, pz
-            )
-            suf[s, j, 0] = pw
-            suf[s, j, 1] = px
-            suf[s, j, 2] = py
-            suf[s, j, 3] = pz
-        q = _qmul(pw, -px, -py, -pz, Y_i[j, 0], Y_i[j, 1], Y_i[j, 2], Y_i[j, 3])
-        lx, ly, lz = _qlog(q[0], q[1], q[2], q[3])
-        r[3 * j] = lx
-        r[3 * j + 1] = ly
-        r[3 * j + 2] = lz
-        total += lx * lx + ly * ly + lz * lz
-    return total
+def _gn_eval_powers(YTi, Apow, m, suf, r):  # type: ignore[no-untyped-def]
+    """:func:`_gn_eval` from the powers ``Apow`` ``(m, 4, n)`` already formed."""
+    _identity_into(suf[m])
+    for t in range(m):
+        s = m - 1 - t
+        _times(Apow[s], suf[s + 1], suf[s])
+    return _residual_log(YTi, suf[0], r)
 
 
-@njit(cache=True, fastmath={"reassoc", "contract"})
-def _normal_equations(Wmat, r, G, g, m):  # type: ignore[no-untyped-def]
-    """``G = W W^T``, ``g = W r`` for the first ``m`` rows of ``Wmat``; returns ``trace(G)``.
+@njit(cache=True, fastmath=_FM, error_model="numpy")
+def _jacobian_row(S, v, out):  # type: ignore[no-untyped-def]
+    """``out`` ``(3, n)`` = the logs ``v`` ``(3, n)`` rotated by ``S^*`` (``S^* v S``)."""
+    for j in range(v.shape[1]):
+        wx, wy, wz = _rotate_by_conj(S[0, j], S[1, j], S[2, j], S[3, j], v[0, j], v[1, j], v[2, j])
+        out[0, j] = wx
+        out[1, j] = wy
+        out[2, j] = wz
 
-    Reassociation lets LLVM vectorise the ``3n``-long dot products (they were a chain of
-    dependent additions, as long as a residual evaluation); only the summation order changes.
+
+@njit(cache=True, fastmath=_FM_SUM, error_model="numpy")
+def _normal_equations(Wmat3, r3, G, g, m):  # type: ignore[no-untyped-def]
+    """``G = W W^T``, ``g = W r`` for the first ``m`` rows of ``Wmat3`` ``(L, 3, n)`` and
+    ``r3`` ``(3, n)``, both read as ``3n``-vectors; returns ``trace(G)``.
+
+    Reassociation lets LLVM vectorise the ``3n``-long dot products; only the summation order
+    changes.
     """
-    n3 = Wmat.shape[1]
+    n3 = r3.size
+    Wmat = Wmat3.reshape((Wmat3.shape[0], n3))
+    r = r3.reshape(n3)
     trace = 0.0
     for a in range(m):
         acc = 0.0
@@ -378,11 +550,39 @@ def _normal_equations(Wmat, r, G, g, m):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def _cholesky_solve(G, g, out, m):  # type: ignore[no-untyped-def]
+    """Solve ``G out = g`` for SPD ``G`` ``(m, m)``; G is overwritten. False if singular."""
+    for a in range(m):
+        acc = G[a, a]
+        for t in range(a):
+            acc -= G[a, t] * G[a, t]
+        if acc <= 0.0:
+            return False
+        G[a, a] = math.sqrt(acc)
+        for b in range(a + 1, m):
+            acc = G[b, a]
+            for t in range(a):
+                acc -= G[b, t] * G[a, t]
+            G[b, a] = acc / G[a, a]
+    for a in range(m):
+        acc = g[a]
+        for t in range(a):
+            acc -= G[a, t] * out[t]
+        out[a] = acc / G[a, a]
+    for a in range(m - 1, -1, -1):
+        acc = out[a]
+        for t in range(a + 1, m):
+            acc -= G[t, a] * out[t]
+        out[a] = acc / G[a, a]
+    return True
+
+
+@njit(cache=True)
 def _gauss_newton(  # type: ignore[no-untyped-def]
-    Y_i,
-    Dlog,
+    YTi,
+    DlogT,
     Dnorm,
-    Daxis,
+    DaxisT,
     idx_row,
     coef_row,
     m,
@@ -396,7 +596,7 @@ def _gauss_newton(  # type: ignore[no-untyped-def]
 ):
     """Joint Gauss-Newton refinement of the ``m`` weights of one sample, order kept sorted.
 
-    With ``Yhat = A_0 .. A_{m-1}`` and the residual ``r = ln(Yhat^-1 Y)`` (``3n``-vector), moving
+    With ``Yhat = A_0 .. A_{m-1}`` and the residual ``r = ln(Yhat^-1 Y)`` (a ``3n``-vector), moving
     weight ``s`` by ``delta`` right-multiplies ``Yhat`` by ``exp(delta w_s)``, where
     ``w_s = S^-1 v_s S`` is the atom log ``v_s`` rotated by the suffix ``S = A_{s+1} .. A_{m-1}``.
     So ``r(x + delta) ~ r - W delta`` and one step solves the ``m x m`` normal equations
@@ -409,35 +609,20 @@ def _gauss_newton(  # type: ignore[no-untyped-def]
     ``coef_row`` in ``ws[9]`` already.
 
     Trial weights are evaluated into a second set of buffers (``ws``), swapped in on acceptance,
-    so a rejected step costs no re-evaluation. On exit ``C_out`` ``(n, 4)`` holds the
-    combination of the returned weights, ``r_out`` ``(3n,)`` its residual log and ``P_out``
-    ``(L, n, 4)`` the powers of its slots; returns ``|r|^2``.
+    so a rejected step costs no re-evaluation. On exit ``C_out`` ``(4, n)`` holds the
+    combination of the returned weights, ``r_out`` ``(3, n)`` its residual log and ``P_out``
+    ``(L, 4, n)`` the powers of its slots; returns ``|r|^2``.
     """
-    n = Y_i.shape[0]
-    suf, suf2, r, r2, Wmat, G, g, delta, trial, Apow, Apow2 = ws
+    suf, suf2, r, r2, Wmat, G, g, delta, trial, Apow, Apow2, saved = ws
     if from_powers:
-        current = _gn_eval_powers(Y_i, Apow, m, suf, r)
+        current = _gn_eval_powers(YTi, Apow, m, suf, r)
     else:
-        current = _gn_eval(Y_i, Dnorm, Daxis, idx_row, coef_row, m, Apow, suf, r)
+        current = _gn_eval(YTi, Dnorm, DaxisT, idx_row, coef_row, m, Apow, suf, r)
     for _ in range(n_iter):
         if current < 1e-28:
             break
-        # Columns w_s: rotate v_s by conj(suf[s + 1]), i.e. S^* v S.
         for s in range(m):
-            k = idx_row[s]
-            for j in range(n):
-                wx, wy, wz = _rotate_by_conj(
-                    suf[s + 1, j, 0],
-                    suf[s + 1, j, 1],
-                    suf[s + 1, j, 2],
-                    suf[s + 1, j, 3],
-                    Dlog[k, j, 0],
-                    Dlog[k, j, 1],
-                    Dlog[k, j, 2],
-                )
-                Wmat[s, 3 * j] = wx
-                Wmat[s, 3 * j + 1] = wy
-                Wmat[s, 3 * j + 2] = wz
+            _jacobian_row(suf[s + 1], DlogT[idx_row[s]], Wmat[s])
         trace = _normal_equations(Wmat, r, G, g, m)
         ridge = 1e-12 * trace + 1e-300
         for a in range(m):
@@ -455,7 +640,7 @@ def _gauss_newton(  # type: ignore[no-untyped-def]
         for _half in range(3):
             for s in range(m):
                 trial[s] = coef_row[s] + step * delta[s]
-            value = _gn_eval(Y_i, Dnorm, Daxis, idx_row, trial, m, Apow2, suf2, r2)
+            value = _gn_eval(YTi, Dnorm, DaxisT, idx_row, trial, m, Apow2, suf2, r2)
             if value < current:
                 accepted = True
                 break
@@ -468,25 +653,21 @@ def _gauss_newton(  # type: ignore[no-untyped-def]
         r, r2 = r2, r
         Apow, Apow2 = Apow2, Apow
         current = value
-        if keep_sorted and _sort_slots_with_powers(idx_row, coef_row, Apow, m):
-            current = _gn_eval_powers(Y_i, Apow, m, suf, r)
-    for j in range(n):
-        C_out[j, 0] = suf[0, j, 0]
-        C_out[j, 1] = suf[0, j, 1]
-        C_out[j, 2] = suf[0, j, 2]
-        C_out[j, 3] = suf[0, j, 3]
-    for t in range(3 * n):
-        r_out[t] = r[t]
-    P_out[:m] = Apow[:m]
+        if keep_sorted and _sort_slots_with_powers(idx_row, coef_row, Apow, m, saved):
+            current = _gn_eval_powers(YTi, Apow, m, suf, r)
+    _copy(suf[0], C_out)
+    _copy(r, r_out)
+    for s in range(m):
+        _copy(Apow[s], P_out[s])
     return current
 
 
 @njit(cache=True)
 def _refit_with_swaps(  # type: ignore[no-untyped-def]
-    Y_i,
-    Dlog,
+    YTi,
+    DlogT,
     Dnorm,
-    Daxis,
+    DaxisT,
     idx_row,
     coef_row,
     m,
@@ -512,10 +693,10 @@ def _refit_with_swaps(  # type: ignore[no-untyped-def]
     returned weights (see :func:`_gauss_newton`).
     """
     best = _gauss_newton(
-        Y_i,
-        Dlog,
+        YTi,
+        DlogT,
         Dnorm,
-        Daxis,
+        DaxisT,
         idx_row,
         coef_row,
         m,
@@ -555,16 +736,17 @@ def _refit_with_swaps(  # type: ignore[no-untyped-def]
             trial_coef[t] = coef_row[t]
         trial_idx[s], trial_idx[s + 1] = idx_row[s + 1], idx_row[s]
         trial_coef[s], trial_coef[s + 1] = coef_row[s + 1], coef_row[s]
-        # The swapped order starts from the same powers, swapped: no sin/cos to redo.
+        # The swapped order starts from the same powers, swapped: no sines to redo.
         Apow = ws[9]
-        Apow[:m] = P_best[:m]
-        Apow[s] = P_best[s + 1]
-        Apow[s + 1] = P_best[s]
+        for t in range(m):
+            _copy(P_best[t], Apow[t])
+        _copy(P_best[s + 1], Apow[s])
+        _copy(P_best[s], Apow[s + 1])
         value = _gauss_newton(
-            Y_i,
-            Dlog,
+            YTi,
+            DlogT,
             Dnorm,
-            Daxis,
+            DaxisT,
             trial_idx,
             trial_coef,
             m,
@@ -586,125 +768,60 @@ def _refit_with_swaps(  # type: ignore[no-untyped-def]
             for t in range(m):
                 idx_row[t] = trial_idx[t]
                 coef_row[t] = trial_coef[t]
-            C_best[:, :] = C_trial
-            r_best[:] = r_trial
-            P_best[:m] = P_trial[:m]
+                _copy(P_trial[t], P_best[t])
+            _copy(C_trial, C_best)
+            _copy(r_trial, r_best)
     return best
 
 
-@njit(cache=True)
-def _cholesky_solve(G, g, out, m):  # type: ignore[no-untyped-def]
-    """Solve ``G out = g`` for SPD ``G`` ``(m, m)``; G is overwritten. False if singular."""
-    for a in range(m):
-        acc = G[a, a]
-        for t in range(a):
-            acc -= G[a, t] * G[a, t]
-        if acc <= 0.0:
-            return False
-        G[a, a] = math.sqrt(acc)
-        for b in range(a + 1, m):
-            acc = G[b, a]
-            for t in range(a):
-                acc -= G[b, t] * G[a, t]
-            G[b, a] = acc / G[a, a]
-    for a in range(m):
-        acc = g[a]
-        for t in range(a):
-            acc -= G[a, t] * out[t]
-        out[a] = acc / G[a, a]
-    for a in range(m - 1, -1, -1):
-        acc = out[a]
-        for t in range(a + 1, m):
-            acc -= G[t, a] * out[t]
-        out[a] = acc / G[a, a]
-    return True
-
-
-@njit(cache=True)
-def _combine_row(Dlog, idx_row, coef_row, m, out, tmp):  # type: ignore[no-untyped-def]
-    n = out.shape[0]
-    for j in range(n):
-        out[j, 0] = 1.0
-        out[j, 1] = 0.0
-        out[j, 2] = 0.0
-        out[j, 3] = 0.0
-    for s in range(m):
-        _power_into(Dlog, idx_row[s], coef_row[s], tmp)
-        for j in range(n):
-            r = _qmul(
-                out[j, 0],
-                out[j, 1],
-                out[j, 2],
-                out[j, 3],
-                tmp[j, 0],
-                tmp[j, 1],
-                tmp[j, 2],
-                tmp[j, 3],
-            )
-            out[j, 0] = r[0]
-            out[j, 1] = r[1]
-            out[j, 2] = r[2]
-            out[j, 3] = r[3]
-
-
-@njit(cache=True)
-def _row_objective(Y_i, Q):  # type: ignore[no-untyped-def]
-    total = 0.0
-    for j in range(Y_i.shape[0]):
-        d = Y_i[j, 0] * Q[j, 0] + Y_i[j, 1] * Q[j, 1] + Y_i[j, 2] * Q[j, 2] + Y_i[j, 3] * Q[j, 3]
-        total += 1.0 - min(abs(d), 1.0)
-    return total
+# ----------------------------------------------------------------------------------------------
+# Parallel kernels over samples.
 
 
 @njit(parallel=True, cache=True)
-def combine(Dlog, idx, coef, count, out):  # type: ignore[no-untyped-def]
-    """Quaternion combination of every sample (Eq. 2-3) into ``out`` ``(N, n, 4)``."""
+def combine(Dnorm, DaxisT, idx, coef, count, out):  # type: ignore[no-untyped-def]
+    """Quaternion combination of every sample (Eq. 2-3) into ``out`` ``(N, 4, n)``."""
     N = idx.shape[0]
-    n = Dlog.shape[1]
-    for i in prange(N):
-        tmp = np.empty((n, 4))
-        _combine_row(Dlog, idx[i], coef[i], count[i], out[i], tmp)
+    n = Dnorm.shape[1]
+    n_chunks = (N + _CHUNK - 1) // _CHUNK
+    for c in prange(n_chunks):
+        tmp = np.empty((4, n))
+        for i in range(c * _CHUNK, min(N, (c + 1) * _CHUNK)):
+            _combine_row(Dnorm, DaxisT, idx[i], coef[i], count[i], out[i], tmp)
 
 
 @njit(parallel=True, cache=True)
-def residual_logs(Y, Dlog, idx, coef, count, left, out):  # type: ignore[no-untyped-def]
-    """Shortest-arc logs of the residuals into ``out`` ``(N, n, 3)``.
+def logs(QT, out):  # type: ignore[no-untyped-def]
+    """Shortest-arc logs ``(N, 3, n)`` of quaternions ``QT`` ``(N, 4, n)``."""
+    for i in prange(QT.shape[0]):
+        _log_into(QT[i], out[i])
+
+
+@njit(parallel=True, cache=True)
+def residual_logs(YT, Dnorm, DaxisT, idx, coef, count, left, out):  # type: ignore[no-untyped-def]
+    """Shortest-arc logs of the residuals into ``out`` ``(N, 3, n)``.
 
     ``left``: ``R = C^-1 Y`` (what remains to the right of the combination ``C``, where the next,
     smaller atom goes). Otherwise ``R = Y C^-1``, Algorithm 2 line 8 as printed.
     """
     N = idx.shape[0]
-    n = Dlog.shape[1]
-    for i in prange(N):
-        C = np.empty((n, 4))
-        tmp = np.empty((n, 4))
-        _combine_row(Dlog, idx[i], coef[i], count[i], C, tmp)
-        for j in range(n):
-            r = _residual(C[j], Y[i, j], left)
-            lx, ly, lz = _qlog(r[0], r[1], r[2], r[3])
-            out[i, j, 0] = lx
-            out[i, j, 1] = ly
-            out[i, j, 2] = lz
-
-
-@njit(cache=True)
-def _power_axis_into(Dnorm, Daxis, k, x, out):  # type: ignore[no-untyped-def]
-    """``atom_k ** x`` per joint as ``(cos(x a), sin(x a) u)`` ``(n, 4)``."""
-    for j in range(Dnorm.shape[1]):
-        angle = x * Dnorm[k, j]
-        sn = math.sin(angle)
-        out[j, 0] = math.cos(angle)
-        out[j, 1] = sn * Daxis[k, j, 0]
-        out[j, 2] = sn * Daxis[k, j, 1]
-        out[j, 3] = sn * Daxis[k, j, 2]
+    n = Dnorm.shape[1]
+    n_chunks = (N + _CHUNK - 1) // _CHUNK
+    for c in prange(n_chunks):
+        C = np.empty((4, n))
+        tmp = np.empty((4, n))
+        for i in range(c * _CHUNK, min(N, (c + 1) * _CHUNK)):
+            _combine_row(Dnorm, DaxisT, idx[i], coef[i], count[i], C, tmp)
+            _residual_into(C, YT[i], left, tmp)
+            _log_into(tmp, out[i])
 
 
 @njit(parallel=True, cache=True)
 def add_atom_and_refit(
-    Y,
-    Dlog,
+    YT,
+    DlogT,
     Dnorm,
-    Daxis,
+    DaxisT,
     idx,
     coef,
     count,
@@ -718,61 +835,62 @@ def add_atom_and_refit(
     Rq,
     Rlog,
     obj,
+    resid_sq,
 ):  # type: ignore[no-untyped-def]
     """One step of Algorithm 2 for every active sample.
 
-    ``Rq`` ``(N, n, 4)`` and ``Rlog`` ``(N, n, 3)`` hold each sample's residual (``C^-1 Y`` if
+    ``Rq`` ``(N, 4, n)`` and ``Rlog`` ``(N, 3, n)`` hold each sample's residual (``C^-1 Y`` if
     ``left``, else ``Y C^-1``) and its log on entry, the updated ones on exit. Appends
     ``new_atom[i]`` with its Eq. 6 weight against the residual; if ``refit``, refits all
     weights (``solver``: 0 coordinate descent with plain Eq. 6, 1 with weighted Eq. 6, 2 joint
     Gauss-Newton with order swaps; ``n_sweeps`` sweeps or steps). ``signal`` ``(N,)`` is
     ``|ln Y_i|^2`` (used by the order swaps). Slots stay sorted by magnitude. ``obj[i]``
-    receives ``sum_j 1 - |<Y_j, C_j>|``, which equals ``sum_j 1 - |w(R_j)|`` for either residual.
+    receives ``sum_j 1 - |<Y_j, C_j>|``, which equals ``sum_j 1 - |w(R_j)|`` for either residual,
+    and ``resid_sq[i]`` the squared norm of the residual log.
     When the new atom lands last and nothing is refit, the left residual is updated with one
     product per joint instead of recomputing the whole combination; after a Gauss-Newton refit
     the solver's last combination and residual log are reused.
     """
     N = idx.shape[0]
-    n = Dlog.shape[1]
+    n = Dnorm.shape[1]
     L = idx.shape[1]
     n_chunks = (N + _CHUNK - 1) // _CHUNK
     for c in prange(n_chunks):
-        R = np.empty((n, 4))
-        tmp = np.empty((n, 4))
-        C = np.empty((n, 4))
-        A = np.empty((L, n, 4))
-        suf = np.empty((L + 1, n, 4))
+        R = np.empty((4, n))
+        tmp = np.empty((4, n))
+        C = np.empty((4, n))
+        E = np.empty((4, n))
+        scratch = np.empty((2, n))
+        A = np.empty((L, 4, n))
+        suf = np.empty((L + 1, 4, n))
         ws = (
             suf,
-            np.empty((L + 1, n, 4)),
-            np.empty(3 * n),
-            np.empty(3 * n),
-            np.empty((L, 3 * n)),
+            np.empty((L + 1, 4, n)),
+            np.empty((3, n)),
+            np.empty((3, n)),
+            np.empty((L, 3, n)),
             np.empty((L, L)),
             np.empty(L),
             np.empty(L),
             np.empty(L),
-            np.empty((L, n, 4)),
-            np.empty((L, n, 4)),
+            np.empty((L, 4, n)),
+            np.empty((L, 4, n)),
+            np.empty((4, n)),
         )
-        r_best = np.empty(3 * n)
-        C_trial = np.empty((n, 4))
-        r_trial = np.empty(3 * n)
+        r_best = np.empty((3, n))
+        C_trial = np.empty((4, n))
+        r_trial = np.empty((3, n))
         trial_idx = np.empty(L, dtype=idx.dtype)
         trial_coef = np.empty(L)
-        P_best = np.empty((L, n, 4))
-        P_trial = np.empty((L, n, 4))
+        P_best = np.empty((L, 4, n))
+        P_trial = np.empty((L, 4, n))
         for i in range(c * _CHUNK, min(N, (c + 1) * _CHUNK)):
             if not active[i]:
                 continue
             m = count[i]
-            for j in range(n):
-                R[j, 0] = Rq[i, j, 0]
-                R[j, 1] = Rq[i, j, 1]
-                R[j, 2] = Rq[i, j, 2]
-                R[j, 3] = Rq[i, j, 3]
+            _copy(Rq[i], R)
             k = new_atom[i]
-            x = _solve_coef(R, Dnorm, Daxis, k, solver >= 1)
+            x = _solve_coef(R, Dnorm[k], DaxisT[k], solver >= 1, scratch)
             idx[i, m] = k
             coef[i, m] = x
             m += 1
@@ -781,67 +899,39 @@ def add_atom_and_refit(
             # assumes descending), so the left residual advances by one product; the refit
             # sorts them.
             moved = _sort_slots(idx[i], coef[i], m) if (refit or not left) else False
-            recompute = True
-            have_combination = False
-            if refit:
-                if solver == 2:
-                    _refit_with_swaps(
-                        Y[i],
-                        Dlog,
-                        Dnorm,
-                        Daxis,
-                        idx[i],
-                        coef[i],
-                        m,
-                        n_sweeps,
-                        signal[i],
-                        ws,
-                        C,
-                        r_best,
-                        C_trial,
-                        r_trial,
-                        trial_idx,
-                        trial_coef,
-                        P_best,
-                        P_trial,
-                    )
-                    if left:
-                        # r_best = ln(C^-1 Y) is the left residual's log already.
-                        total = 0.0
-                        for j in range(n):
-                            Rlog[i, j, 0] = r_best[3 * j]
-                            Rlog[i, j, 1] = r_best[3 * j + 1]
-                            Rlog[i, j, 2] = r_best[3 * j + 2]
-                            d = (
-                                C[j, 0] * Y[i, j, 0]
-                                + C[j, 1] * Y[i, j, 1]
-                                + C[j, 2] * Y[i, j, 2]
-                                + C[j, 3] * Y[i, j, 3]
-                            )
-                            total += 1.0 - min(abs(d), 1.0)
-                            q = _qmul(
-                                C[j, 0],
-                                -C[j, 1],
-                                -C[j, 2],
-                                -C[j, 3],
-                                Y[i, j, 0],
-                                Y[i, j, 1],
-                                Y[i, j, 2],
-                                Y[i, j, 3],
-                            )
-                            Rq[i, j, 0] = q[0]
-                            Rq[i, j, 1] = q[1]
-                            Rq[i, j, 2] = q[2]
-                            Rq[i, j, 3] = q[3]
-                        obj[i] = total
-                        continue
-                    have_combination = True  # C holds the combination
+            if refit and solver == 2:
+                _refit_with_swaps(
+                    YT[i],
+                    DlogT,
+                    Dnorm,
+                    DaxisT,
+                    idx[i],
+                    coef[i],
+                    m,
+                    n_sweeps,
+                    signal[i],
+                    ws,
+                    C,
+                    r_best,
+                    C_trial,
+                    r_trial,
+                    trial_idx,
+                    trial_coef,
+                    P_best,
+                    P_trial,
+                )
+                _residual_into(C, YT[i], left, R)
+                if left:
+                    # r_best = ln(C^-1 Y) is the left residual's log already.
+                    _copy(r_best, Rlog[i])
                 else:
+                    _log_into(R, Rlog[i])
+            else:
+                if refit:
                     _bcd(
-                        Y[i],
-                        Dlog,
+                        YT[i],
                         Dnorm,
-                        Daxis,
+                        DaxisT,
                         idx[i],
                         coef[i],
                         m,
@@ -849,196 +939,137 @@ def add_atom_and_refit(
                         solver == 1,
                         A,
                         suf,
-                        R,
                         tmp,
+                        E,
+                        scratch,
                     )
-            elif left and not moved:
-                _power_axis_into(Dnorm, Daxis, k, x, tmp)
-                for j in range(n):
-                    r = _qmul(
-                        tmp[j, 0],
-                        -tmp[j, 1],
-                        -tmp[j, 2],
-                        -tmp[j, 3],
-                        R[j, 0],
-                        R[j, 1],
-                        R[j, 2],
-                        R[j, 3],
-                    )
-                    R[j, 0] = r[0]
-                    R[j, 1] = r[1]
-                    R[j, 2] = r[2]
-                    R[j, 3] = r[3]
-                recompute = False
-            if recompute:
-                if not have_combination:
-                    _combine_row(Dlog, idx[i], coef[i], m, C, tmp)
-                for j in range(n):
-                    r = _residual(C[j], Y[i, j], left)
-                    R[j, 0] = r[0]
-                    R[j, 1] = r[1]
-                    R[j, 2] = r[2]
-                    R[j, 3] = r[3]
-            total = 0.0
-            for j in range(n):
-                lx, ly, lz = _qlog(R[j, 0], R[j, 1], R[j, 2], R[j, 3])
-                Rlog[i, j, 0] = lx
-                Rlog[i, j, 1] = ly
-                Rlog[i, j, 2] = lz
-                Rq[i, j, 0] = R[j, 0]
-                Rq[i, j, 1] = R[j, 1]
-                Rq[i, j, 2] = R[j, 2]
-                Rq[i, j, 3] = R[j, 3]
-                total += 1.0 - min(abs(R[j, 0]), 1.0)
-            obj[i] = total
+                if left and not moved and not refit:
+                    _power_into(Dnorm[k], DaxisT[k], x, tmp)
+                    _lmul_conj(tmp, R)
+                else:
+                    _combine_row(Dnorm, DaxisT, idx[i], coef[i], m, C, tmp)
+                    _residual_into(C, YT[i], left, R)
+                _log_into(R, Rlog[i])
+            _copy(R, Rq[i])
+            obj[i] = _residual_objective(R)
+            resid_sq[i] = _sumsq(Rlog[i].reshape(3 * n))
 
 
 @njit(parallel=True, cache=True)
-def objective_from_powers(Y, A, count, out):  # type: ignore[no-untyped-def]
-    """Per-sample objective ``sum_j 1 - |<Y_j, C_j>|`` ``(N,)`` from cached slot powers ``A``
-    ``(N, L, n, 4)`` (:func:`slot_powers`): the combination without any ``exp``."""
-    N = Y.shape[0]
-    n = Y.shape[1]
-    for i in prange(N):
-        total = 0.0
-        for j in range(n):
-            pw, px, py, pz = 1.0, 0.0, 0.0, 0.0
-            for s in range(count[i]):
-                pw, px, py, pz = _qmul(
-                    pw, px, py, pz, A[i, s, j, 0], A[i, s, j, 1], A[i, s, j, 2], A[i, s, j, 3]
-                )
-            d = Y[i, j, 0] * pw + Y[i, j, 1] * px + Y[i, j, 2] * py + Y[i, j, 3] * pz
-            total += 1.0 - min(abs(d), 1.0)
-        out[i] = total
-
-
-@njit(parallel=True, cache=True)
-def slot_powers(Dlog, idx, coef, count, A):  # type: ignore[no-untyped-def]
-    """``A[i, s] = atom(idx[i, s]) ** coef[i, s]`` for the used slots: ``(N, L, n, 4)``."""
+def objectives(YT, Dnorm, DaxisT, idx, coef, count, out):  # type: ignore[no-untyped-def]
+    """Per-sample objective ``sum_j 1 - |<Y_j, C_j>|`` ``(N,)`` of the codes."""
     N = idx.shape[0]
-    for i in prange(N):
-        for s in range(count[i]):
-            _power_into(Dlog, idx[i, s], coef[i, s], A[i, s])
+    n = Dnorm.shape[1]
+    n_chunks = (N + _CHUNK - 1) // _CHUNK
+    for c in prange(n_chunks):
+        C = np.empty((4, n))
+        tmp = np.empty((4, n))
+        for i in range(c * _CHUNK, min(N, (c + 1) * _CHUNK)):
+            _combine_row(Dnorm, DaxisT, idx[i], coef[i], count[i], C, tmp)
+            out[i] = _row_objective(YT[i], C)
 
 
 @njit(parallel=True, cache=True)
-def atom_residual_logs(Y, A, count, samples, positions, out):  # type: ignore[no-untyped-def]
-    """Algorithm 3 line 5 for one atom: ``ln E`` with ``E = P^-1 Y S^-1`` into ``(M, n, 3)``.
+def atom_residual_logs(YT, Dnorm, DaxisT, idx, coef, count, samples, positions, out):  # type: ignore[no-untyped-def]
+    """Algorithm 3 line 5 for one atom: ``ln E`` with ``E = P^-1 Y S^-1`` into ``(M, 3, n)``.
 
     ``P`` is the product of the slots left of ``positions[r]`` (larger weights) and ``S`` of
-    the slots right of it, for sample ``samples[r]``. Slot by slot over all joints, so each
-    cached power ``A[i, s]`` is read as one contiguous block.
+    the slots right of it, for sample ``samples[r]``. The powers are formed afresh rather than
+    cached: a cache of every slot's power is ``N L`` blocks of ``4n`` numbers that each atom's
+    pass streams from memory, which took longer than the vectorised sines.
     """
     M = samples.shape[0]
-    n = Y.shape[1]
+    n = YT.shape[2]
     n_chunks = (M + _CHUNK - 1) // _CHUNK
     for c in prange(n_chunks):
-        E = np.empty((n, 4))
+        E = np.empty((4, n))
+        tmp = np.empty((4, n))
         for r in range(c * _CHUNK, min(M, (c + 1) * _CHUNK)):
             i = samples[r]
             p = positions[r]
-            m = count[i]
-            for j in range(n):
-                E[j, 0] = Y[i, j, 0]
-                E[j, 1] = Y[i, j, 1]
-                E[j, 2] = Y[i, j, 2]
-                E[j, 3] = Y[i, j, 3]
+            _copy(YT[i], E)
             for s in range(p - 1, -1, -1):
-                As = A[i, s]
-                for j in range(n):
-                    q = _qmul(
-                        As[j, 0],
-                        -As[j, 1],
-                        -As[j, 2],
-                        -As[j, 3],
-                        E[j, 0],
-                        E[j, 1],
-                        E[j, 2],
-                        E[j, 3],
-                    )
-                    E[j, 0] = q[0]
-                    E[j, 1] = q[1]
-                    E[j, 2] = q[2]
-                    E[j, 3] = q[3]
-            for s in range(m - 1, p, -1):
-                As = A[i, s]
-                for j in range(n):
-                    q = _qmul(
-                        E[j, 0],
-                        E[j, 1],
-                        E[j, 2],
-                        E[j, 3],
-                        As[j, 0],
-                        -As[j, 1],
-                        -As[j, 2],
-                        -As[j, 3],
-                    )
-                    E[j, 0] = q[0]
-                    E[j, 1] = q[1]
-                    E[j, 2] = q[2]
-                    E[j, 3] = q[3]
-            for j in range(n):
-                ex, ey, ez = _qlog(E[j, 0], E[j, 1], E[j, 2], E[j, 3])
-                out[r, j, 0] = ex
-                out[r, j, 1] = ey
-                out[r, j, 2] = ez
+                k = idx[i, s]
+                _power_into(Dnorm[k], DaxisT[k], coef[i, s], tmp)
+                _lmul_conj(tmp, E)
+            for s in range(count[i] - 1, p, -1):
+                k = idx[i, s]
+                _power_into(Dnorm[k], DaxisT[k], coef[i, s], tmp)
+                _rmul_conj(E, tmp)
+            _log_into(E, out[r])
 
 
 @njit(parallel=True, cache=True)
 def candidate_objective(
-    Y, Dlog, A, idx, coef, count, samples, positions, atom_log, new_weights, out
+    YT, Dnorm, DaxisT, idx, coef, count, samples, positions, atom_logT, new_weights, out
 ):  # type: ignore[no-untyped-def]
     """Objective of each sample in ``samples`` if its slot ``positions[r]`` became
-    ``exp(new_weights[r] * atom_log)``, with the slots re-sorted by magnitude (Eq. 2 order)."""
+    ``exp(new_weights[r] * atom_logT)`` (``atom_logT`` ``(3, n)``), with the slots re-sorted by
+    magnitude (Eq. 2 order)."""
     M = samples.shape[0]
-    n = Y.shape[1]
-    L = idx.shape[1]
-    for r in prange(M):
-        i = samples[r]
-        p = positions[r]
-        m = count[i]
+    n = YT.shape[2]
+    L = coef.shape[1]
+    n_chunks = (M + _CHUNK - 1) // _CHUNK
+    for c in prange(n_chunks):
         order_idx = np.empty(L, dtype=np.int64)
         order_coef = np.empty(L)
-        for s in range(m):
-            order_idx[s] = s
-            order_coef[s] = coef[i, s]
-        order_coef[p] = new_weights[r]
-        _sort_slots(order_idx, order_coef, m)
-        P = np.empty((n, 4))
-        for j in range(n):
-            P[j, 0] = 1.0
-            P[j, 1] = 0.0
-            P[j, 2] = 0.0
-            P[j, 3] = 0.0
-        for t in range(m):
-            s = order_idx[t]
-            for j in range(n):
+        P = np.empty((4, n))
+        power = np.empty((4, n))
+        for r in range(c * _CHUNK, min(M, (c + 1) * _CHUNK)):
+            i = samples[r]
+            p = positions[r]
+            m = count[i]
+            for s in range(m):
+                order_idx[s] = s
+                order_coef[s] = coef[i, s]
+            order_coef[p] = new_weights[r]
+            _sort_slots(order_idx, order_coef, m)
+            _identity_into(P)
+            for t in range(m):
+                s = order_idx[t]
                 if s == p:
-                    x = new_weights[r]
-                    bw, bx, by, bz = _qexp(
-                        x * atom_log[j, 0], x * atom_log[j, 1], x * atom_log[j, 2]
-                    )
+                    _exp_into(atom_logT, new_weights[r], power)
                 else:
-                    bw, bx, by, bz = A[i, s, j, 0], A[i, s, j, 1], A[i, s, j, 2], A[i, s, j, 3]
-                q = _qmul(P[j, 0], P[j, 1], P[j, 2], P[j, 3], bw, bx, by, bz)
-                P[j, 0] = q[0]
-                P[j, 1] = q[1]
-                P[j, 2] = q[2]
-                P[j, 3] = q[3]
-        out[r] = _row_objective(Y[i], P)
+                    k = idx[i, s]
+                    _power_into(Dnorm[k], DaxisT[k], coef[i, s], power)
+                _rmul(P, power)
+            out[r] = _row_objective(YT[i], P)
 
 
 @njit(parallel=True, cache=True)
-def commit_atom(Dlog, A, idx, coef, count, samples, positions, k, new_weights):  # type: ignore[no-untyped-def]
-    """Write the accepted weights of atom ``k`` (already in ``Dlog[k]``), refresh the cached
-    power of its slot and re-sort the slots of the touched samples (powers move along)."""
-    M = samples.shape[0]
-    for r in prange(M):
+def commit_atom(idx, coef, count, samples, positions, new_weights):  # type: ignore[no-untyped-def]
+    """Write the accepted weights of an atom and re-sort the slots of the touched samples."""
+    for r in prange(samples.shape[0]):
         i = samples[r]
-        p = positions[r]
-        coef[i, p] = new_weights[r]
-        _power_into(Dlog, k, new_weights[r], A[i, p])
-        _sort_slots_with_powers(idx[i], coef[i], A[i], count[i])
+        coef[i, positions[r]] = new_weights[r]
+        _sort_slots(idx[i], coef[i], count[i])
+
+
+@njit(parallel=True, cache=True, fastmath=_FM_SUM)
+def gram_matvec(A, u, out):  # type: ignore[no-untyped-def]
+    """``out = A^T (A u)`` for ``A`` ``(M, d)`` in one pass over ``A`` (BLAS takes two).
+
+    Rows are summed in fixed blocks and the blocks in order, so the result does not depend on
+    the number of threads.
+    """
+    M, d = A.shape
+    block = 256
+    n_blocks = (M + block - 1) // block
+    partial = np.zeros((n_blocks, d))
+    for b in prange(n_blocks):
+        acc = partial[b]
+        for i in range(b * block, min(M, (b + 1) * block)):
+            row = A[i]
+            t = 0.0
+            for k in range(d):
+                t += row[k] * u[k]
+            for k in range(d):
+                acc[k] += t * row[k]
+    for k in range(d):
+        out[k] = 0.0
+    for b in range(n_blocks):
+        for k in range(d):
+            out[k] += partial[b, k]
 
 
 @njit(parallel=True, cache=True)

@@ -72,7 +72,7 @@ Measured on the paper's simulation (``quatmotion bench qssd``); the defaults are
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -107,27 +107,55 @@ _CODE_TOL = 1e-10
 _SOLVERS = {"paper": 0, "weighted": 1, "gauss-newton": 2}
 
 
-def _atom_geometry(Dlog: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Per-joint half angles ``(K, n)`` and unit axes ``(K, n, 3)`` (zero for a zero log)."""
-    Dnorm = np.linalg.norm(Dlog, axis=-1)
-    Daxis = np.where(
-        Dnorm[..., None] > 0.0, Dlog / np.where(Dnorm > 0.0, Dnorm, 1.0)[..., None], 0.0
-    )
-    return np.ascontiguousarray(Dnorm), np.ascontiguousarray(Daxis)
+# The kernels work on a structure-of-arrays layout (see :mod:`quatmotion.sparse._kernels`):
+# samples ``(N, 4, n)``, logs ``(..., 3, n)``. The public functions take and return the
+# ``(..., n, 4)`` / ``(..., n, 3)`` layout of the rest of the package and convert at the boundary.
+
+
+def _to_soa(Q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(..., n, c) -> (..., c, n)``, contiguous."""
+    return np.ascontiguousarray(np.swapaxes(Q, -1, -2))
+
+
+def _from_soa(Q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(..., c, n) -> (..., n, c)``, contiguous."""
+    return np.ascontiguousarray(np.swapaxes(Q, -1, -2))
+
+
+def _atom_geometry(DlogT: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per-joint half angles ``(..., n)`` and unit axes ``(..., 3, n)`` (zero for a zero log)
+    of logs ``(..., 3, n)``."""
+    Dnorm = np.linalg.norm(DlogT, axis=-2)
+    safe = np.where(Dnorm > 0.0, Dnorm, 1.0)
+    DaxisT = np.where(Dnorm[..., None, :] > 0.0, DlogT / safe[..., None, :], 0.0)
+    return np.ascontiguousarray(Dnorm), np.ascontiguousarray(DaxisT)
 
 
 def _empty_codes(N: int, L: int) -> Codes:
     return Codes(np.zeros((N, L), dtype=np.int64), np.zeros((N, L)), np.zeros(N, dtype=np.int64))
 
 
-def _combine_codes(Dlog: NDArray[np.float64], codes: Codes) -> NDArray[np.float64]:
-    out = np.empty((codes.idx.shape[0], Dlog.shape[1], 4))
-    kern.combine(Dlog, codes.idx, codes.coef, codes.count, out)
+def _combine_codes(DlogT: NDArray[np.float64], codes: Codes) -> NDArray[np.float64]:
+    """Combinations ``(N, 4, n)`` of ``codes`` on atoms with logs ``DlogT`` ``(K, 3, n)``."""
+    Dnorm, DaxisT = _atom_geometry(DlogT)
+    out = np.empty((codes.idx.shape[0], 4, DlogT.shape[2]))
+    kern.combine(Dnorm, DaxisT, codes.idx, codes.coef, codes.count, out)
     return out
 
 
-def _objective_rows(Y: NDArray[np.float64], Yhat: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.sum(1.0 - np.minimum(np.abs(np.sum(Y * Yhat, axis=-1)), 1.0), axis=-1)
+def _objective_rows(YT: NDArray[np.float64], CT: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``sum_j 1 - |<Y_j, C_j>|`` per sample, ``(N, 4, n)`` inputs."""
+    return np.sum(1.0 - np.minimum(np.abs(np.sum(YT * CT, axis=1)), 1.0), axis=-1)
+
+
+def _residual_logs(
+    YT: NDArray[np.float64], DlogT: NDArray[np.float64], codes: Codes, left: bool = True
+) -> NDArray[np.float64]:
+    """Residual logs ``(N, 3, n)``: ``ln(C^-1 Y)`` if ``left``, else ``ln(Y C^-1)``."""
+    Dnorm, DaxisT = _atom_geometry(DlogT)
+    out = np.empty((YT.shape[0], 3, YT.shape[2]))
+    kern.residual_logs(YT, Dnorm, DaxisT, codes.idx, codes.coef, codes.count, left, out)
+    return out
 
 
 def _check_dictionary_log(Dlog: ArrayLike, n: int | None = None) -> NDArray[np.float64]:
@@ -162,7 +190,7 @@ def quaternion_combination(
     """
     Dlog = _check_dictionary_log(dictionary_log)
     codes = matrix_to_codes(W, Dlog.shape[0])
-    return _combine_codes(Dlog, codes)
+    return _from_soa(_combine_codes(_to_soa(Dlog), codes))
 
 
 def sparse_code(
@@ -199,9 +227,12 @@ def sparse_code(
     objective : ndarray, shape (N,)
         ``sum_j 1 - |<Y_j, Yhat_j>|`` per sample.
     """
+    if Y.ndim != 3 or Y.shape[-1] != 4:
+        raise ValueError(f"Y must have shape (N, n, 4), got {Y.shape}")
+    Dlog = _check_dictionary_log(dictionary_log, Y.shape[1])
     codes, objective, _ = _sparse_code(
-        Y,
-        dictionary_log,
+        _to_soa(Y),
+        _to_soa(Dlog),
         sparsity,
         residual=residual,
         coef_solver=coef_solver,
@@ -212,8 +243,8 @@ def sparse_code(
 
 
 def _sparse_code(
-    Y: NDArray[np.float64],
-    dictionary_log: NDArray[np.float64],
+    YT: NDArray[np.float64],
+    DlogT: NDArray[np.float64],
     sparsity: int,
     *,
     residual: str = "left",
@@ -221,49 +252,52 @@ def _sparse_code(
     n_sweeps: int = 3,
     refit: str = "final",
 ) -> tuple[Codes, NDArray[np.float64], NDArray[np.float64]]:
-    """:func:`sparse_code`, also returning the residual logs ``(N, n, 3)``: half the rotation
-    angle between each sample quaternion and its reconstruction is their norm."""
+    """:func:`sparse_code` on samples ``YT`` ``(N, 4, n)`` and atom logs ``DlogT``
+    ``(K, 3, n)``, also returning the residual logs ``(N, 3, n)``: half the rotation angle
+    between each sample quaternion and its reconstruction is their norm."""
     if residual not in ("left", "right"):
         raise ValueError(f"residual must be 'left' or 'right', got {residual!r}")
     if refit not in ("every", "final"):
         raise ValueError(f"refit must be 'every' or 'final', got {refit!r}")
     if coef_solver not in _SOLVERS:
         raise ValueError(f"coef_solver must be one of {sorted(_SOLVERS)}, got {coef_solver!r}")
-    Dlog = _check_dictionary_log(dictionary_log, Y.shape[1])
-    N, n, _ = Y.shape
-    K = Dlog.shape[0]
+    N, _, n = YT.shape
+    K = DlogT.shape[0]
     L = min(sparsity, K)
-    Dnorm, Daxis = _atom_geometry(Dlog)
-    Dflat = Dlog.reshape(K, 3 * n)
+    Dnorm, DaxisT = _atom_geometry(DlogT)
+    Dflat = DlogT.reshape(K, 3 * n)
     codes = _empty_codes(N, L)
-    objective = np.sum(1.0 - Y[..., 0], axis=-1)
-    Rlog = np.ascontiguousarray(quat.log(Y))
+    objective = np.sum(1.0 - YT[:, 0, :], axis=-1)
+    Rlog = np.empty((N, 3, n))
+    kern.logs(YT, Rlog)
+    Rflat = Rlog.reshape(N, 3 * n)
     # Residual quaternions kept beside their logs: the next step needs both, and keeping them
     # saves an exp per joint and step.
-    Rq = np.array(Y, dtype=np.float64, order="C", copy=True)
-    signal = np.einsum("ijk,ijk->i", Rlog, Rlog)
+    Rq = YT.copy()
+    signal = np.einsum("ij,ij->i", Rflat, Rflat)
+    resid_sq = signal.copy()
     left = residual == "left"
     solver = _SOLVERS[coef_solver]
+    new_atom = np.zeros(N, dtype=np.int64)
     for step in range(L):
-        Rflat = Rlog.reshape(N, 3 * n)
-        active = (codes.count == step) & (np.einsum("ij,ij->i", Rflat, Rflat) > _CODE_TOL**2)
+        active = (codes.count == step) & (resid_sq > _CODE_TOL**2)
         if not np.any(active):
             break
-        new_atom = np.zeros(N, dtype=np.int64)
-        rows = np.flatnonzero(active)
-        for start in range(0, rows.size, _PROJECTION_CHUNK):
-            chunk = rows[start : start + _PROJECTION_CHUNK]
-            proj = np.abs(Rflat[chunk] @ Dflat.T)
+        # Projections of every row (inactive ones are ignored): slicing, unlike selecting the
+        # active rows, copies nothing.
+        for start in range(0, N, _PROJECTION_CHUNK):
+            rows = slice(start, start + _PROJECTION_CHUNK)
+            proj = np.abs(Rflat[rows] @ Dflat.T)
             if step:
                 # An atom appears once per code: its weight is refit, never duplicated.
-                np.put_along_axis(proj, codes.idx[chunk, :step], -1.0, axis=1)
-            new_atom[chunk] = np.argmax(proj, axis=1)
+                np.put_along_axis(proj, codes.idx[rows, :step], -1.0, axis=1)
+            new_atom[rows] = np.argmax(proj, axis=1)
         do_refit = refit == "every" or step == L - 1
         kern.add_atom_and_refit(
-            Y,
-            Dlog,
+            YT,
+            DlogT,
             Dnorm,
-            Daxis,
+            DaxisT,
             codes.idx,
             codes.coef,
             codes.count,
@@ -277,6 +311,7 @@ def _sparse_code(
             Rq,
             Rlog,
             objective,
+            resid_sq,
         )
     return codes, objective, Rlog
 
@@ -317,8 +352,8 @@ def update_dictionary(
 
     For atom ``k`` and each sample ``i`` using it, ``E_i = P_i^-1 Y_i S_i^-1`` with ``P_i`` the
     combination of the atoms left of ``k`` (larger weights) and ``S_i`` of those right of it;
-    the rank-1 SVD ``ln E = w u^T`` gives the new atom ``exp(u)`` and weights ``w``. The powers
-    of every code slot are cached, so ``E`` costs ``O(L n)`` quaternion products per sample.
+    the rank-1 SVD ``ln E = w u^T`` gives the new atom ``exp(u)`` and weights ``w``. ``E`` costs
+    ``O(L n)`` powers and quaternion products per sample.
 
     Parameters
     ----------
@@ -340,32 +375,51 @@ def update_dictionary(
     -------
     DictionaryUpdateResult
     """
-    Dlog = np.array(dictionary_log, dtype=np.float64, order="C", copy=True)
+    Dlog = _check_dictionary_log(dictionary_log, Y.shape[1])
+    result = _update_dictionary(
+        _to_soa(Y), _to_soa(Dlog), codes, safeguard=safeguard, objective=objective, robust=robust
+    )
+    return replace(result, dictionary_log=_from_soa(result.dictionary_log))
+
+
+def _update_dictionary(
+    YT: NDArray[np.float64],
+    DlogT: NDArray[np.float64],
+    codes: Codes,
+    *,
+    safeguard: bool,
+    objective: NDArray[np.float64] | None,
+    robust: bool,
+) -> DictionaryUpdateResult:
+    """:func:`update_dictionary` on ``YT`` ``(N, 4, n)`` and ``DlogT`` ``(K, 3, n)``; the
+    result's ``dictionary_log`` is ``(K, 3, n)`` too."""
+    DlogT = DlogT.copy()
     codes = Codes(codes.idx.copy(), codes.coef.copy(), codes.count.copy())
-    N, n, _ = Y.shape
-    K = Dlog.shape[0]
-    L = codes.idx.shape[1]
+    n = YT.shape[2]
+    K = DlogT.shape[0]
     if objective is None:
-        objective = _objective_rows(Y, _combine_codes(Dlog, codes))
+        objective = _objective_rows(YT, _combine_codes(DlogT, codes))
     objective = objective.copy()
     groups = group_by_atom(codes, K)
-    n_reseeded = _reseed_unused(Y, Dlog, codes, objective, groups)
-    A = np.zeros((N, L, n, 4))
-    kern.slot_powers(Dlog, codes.idx, codes.coef, codes.count, A)
+    n_reseeded = _reseed_unused(YT, DlogT, codes, objective, groups)
+    Dnorm, DaxisT = _atom_geometry(DlogT)
     n_accepted = n_rejected = 0
     for k in range(K):
         samples = groups[k]
         if samples.size == 0:
             continue
         positions = np.argmax(codes.idx[samples] == k, axis=1).astype(np.int64)
-        lnE = np.empty((samples.size, n, 3))
-        kern.atom_residual_logs(Y, A, codes.count, samples, positions, lnE)
+        lnE = np.empty((samples.size, 3, n))
+        kern.atom_residual_logs(
+            YT, Dnorm, DaxisT, codes.idx, codes.coef, codes.count, samples, positions, lnE
+        )
         lnE_flat = lnE.reshape(samples.size, 3 * n)
-        u, w = rank1(lnE_flat, Dlog[k].ravel())
+        u, w = rank1(lnE_flat, DlogT[k].ravel())
         if robust and samples.size >= 8:
             # Samples coded with a wrong atom set leave large, unrelated residuals in ln E that
             # pull the least-squares atom away from the true one: refit once without them.
-            misfit = np.linalg.norm(lnE_flat - np.outer(w, u), axis=1)
+            # |row - w u|^2 = |row|^2 - w^2 for unit u and w = row . u: no (M, 3n) temporary.
+            misfit = np.sqrt(np.maximum(np.einsum("ij,ij->i", lnE_flat, lnE_flat) - w * w, 0.0))
             keep = misfit <= 3.0 * np.median(misfit) + 1e-12
             if 4 <= np.count_nonzero(keep) < samples.size:
                 u, _ = rank1(lnE_flat[keep], u)
@@ -373,19 +427,19 @@ def update_dictionary(
         if not np.all(np.isfinite(u)) or not np.any(u):
             n_rejected += 1
             continue
-        atom_log = np.ascontiguousarray(u.reshape(n, 3))
+        atom_logT = np.ascontiguousarray(u.reshape(3, n))
         if safeguard:
             candidate = np.empty(samples.size)
             kern.candidate_objective(
-                Y,
-                Dlog,
-                A,
+                YT,
+                Dnorm,
+                DaxisT,
                 codes.idx,
                 codes.coef,
                 codes.count,
                 samples,
                 positions,
-                atom_log,
+                atom_logT,
                 w,
                 candidate,
             )
@@ -393,38 +447,35 @@ def update_dictionary(
             if float(np.sum(candidate)) > current + 1e-12 * max(current, 1.0):
                 n_rejected += 1
                 continue
-        Dlog[k] = atom_log
-        kern.commit_atom(Dlog, A, codes.idx, codes.coef, codes.count, samples, positions, k, w)
+        DlogT[k] = atom_logT
+        Dnorm[k], DaxisT[k] = _atom_geometry(atom_logT)
+        kern.commit_atom(codes.idx, codes.coef, codes.count, samples, positions, w)
         if safeguard:
             objective[samples] = candidate
         n_accepted += 1
     if not safeguard:
-        # The cached powers are up to date (commit_atom refreshes every touched sample).
-        kern.objective_from_powers(Y, A, codes.count, objective)
-    return DictionaryUpdateResult(Dlog, codes, objective, n_accepted, n_rejected, n_reseeded)
+        kern.objectives(YT, Dnorm, DaxisT, codes.idx, codes.coef, codes.count, objective)
+    return DictionaryUpdateResult(DlogT, codes, objective, n_accepted, n_rejected, n_reseeded)
 
 
 def _reseed_unused(
-    Y: NDArray[np.float64],
-    Dlog: NDArray[np.float64],
+    YT: NDArray[np.float64],
+    DlogT: NDArray[np.float64],
     codes: Codes,
     objective: NDArray[np.float64],
     groups: list[NDArray[np.int64]],
 ) -> int:
-    unused = [k for k in range(Dlog.shape[0]) if groups[k].size == 0]
+    unused = [k for k in range(DlogT.shape[0]) if groups[k].size == 0]
     if not unused:
         return 0
     worst = np.argsort(-objective, kind="stable")[: len(unused)]
     sub = Codes(codes.idx[worst], codes.coef[worst], codes.count[worst])
-    Rlog = np.empty((worst.size, Y.shape[1], 3))
-    kern.residual_logs(
-        np.ascontiguousarray(Y[worst]), Dlog, sub.idx, sub.coef, sub.count, True, Rlog
-    )
+    Rlog = _residual_logs(np.ascontiguousarray(YT[worst]), DlogT, sub)
     done = 0
     for k, r in zip(unused, Rlog, strict=False):
         norm = np.linalg.norm(r)
         if norm > _CODE_TOL:
-            Dlog[k] = r / norm
+            DlogT[k] = r / norm
             done += 1
     return done
 
@@ -579,14 +630,15 @@ class QSSD(TransformerMixin, BaseEstimator):
         self._check_params()
         Yc = check_quaternion_samples(Y)
         rng = check_random_state(self.random_state)
-        Dlog = self._initial_dictionary(Yc, rng)
+        YT = _to_soa(Yc)
+        DlogT = _to_soa(self._initial_dictionary(Yc, rng))
         errors: list[float] = []
         objectives: list[float] = []
         seconds: list[float] = []
         cpu_seconds: list[float] = []
         previous = np.inf
         best_total = np.inf
-        best_Dlog: NDArray[np.float64] | None = None
+        best_DlogT: NDArray[np.float64] | None = None
         work = float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)
         for it in range(self.max_iter):
             t0 = time.perf_counter()
@@ -595,8 +647,8 @@ class QSSD(TransformerMixin, BaseEstimator):
             # BLAS threads spinning after each one take the cores from Numba's threads.
             with compute_threads(work, blas_single=True):
                 codes, objective, Rlog = _sparse_code(
-                    Yc,
-                    Dlog,
+                    YT,
+                    DlogT,
                     self.sparsity,
                     residual=self.residual,
                     coef_solver=self.coef_solver,
@@ -606,20 +658,20 @@ class QSSD(TransformerMixin, BaseEstimator):
                 total = float(np.sum(objective))
                 # The rotation angle between sample and reconstruction is twice the norm of
                 # the residual log (left or right residual alike): no second combination.
-                errors.append(float(np.degrees(2.0 * np.mean(np.linalg.norm(Rlog, axis=-1)))))
+                errors.append(float(np.degrees(2.0 * np.mean(np.linalg.norm(Rlog, axis=1)))))
             objectives.append(total)
             if total < best_total:
-                best_total, best_Dlog = total, Dlog
+                best_total, best_DlogT = total, DlogT
             with compute_threads(work, blas_single=True):
-                result = update_dictionary(
-                    Yc,
-                    Dlog,
+                result = _update_dictionary(
+                    YT,
+                    DlogT,
                     codes,
                     safeguard=self.safeguard,
                     objective=objective,
                     robust=self.robust,
                 )
-            Dlog = result.dictionary_log
+            DlogT = result.dictionary_log
             seconds.append(time.perf_counter() - t0)
             cpu_seconds.append(time.process_time() - c0)
             if self.verbose:
@@ -631,12 +683,12 @@ class QSSD(TransformerMixin, BaseEstimator):
             if self.tol > 0 and it > 0 and abs(previous - total) <= self.tol * previous:
                 break
             previous = total
-        if self.keep_best and best_Dlog is not None:
+        if self.keep_best and best_DlogT is not None:
             # Greedy coding and the log-space dictionary update are not monotone in the
             # objective; keep the dictionary that coded the training set best.
-            Dlog = best_Dlog
-        self.dictionary_log_ = Dlog
-        self.dictionary_ = quat.exp(Dlog)
+            DlogT = best_DlogT
+        self.dictionary_log_ = _from_soa(DlogT)
+        self.dictionary_ = quat.exp(self.dictionary_log_)
         self.n_iter_ = len(errors)
         self.errors_ = np.asarray(errors)
         self.objective_ = np.asarray(objectives)
