@@ -60,9 +60,9 @@ _FM_SUM = {"contract", "reassoc"}
 # sin and cos together, written by hand because glibc's cost about 20 ns each here, Numba
 # calls them one at a time and LLVM cannot vectorise a loop that calls them; they were most of
 # the Gauss-Newton refit. Reduction by pi/2 in two parts (Cody-Waite: exact for |x| < 1.6e6,
-# beyond which the error is of the order of ulp(x), the precision the argument itself has),
-# then fdlibm's kernel polynomials on [-pi/4, pi/4]; within 2 ulp of libm. No branches: the
-# quadrant is selected arithmetically.
+# beyond which the error is of the order of ulp(x), the precision the argument itself has;
+# meaningless past 2^62, where the quadrant overflows), then fdlibm's kernel polynomials on
+# [-pi/4, pi/4]; within 2 ulp of libm. No branches: the quadrant is selected with masks.
 _PIO2_HI = 1.57079632673412561417e00
 _PIO2_LO = 6.07710050650619224932e-11
 _TWO_OVER_PI = 0.63661977236758134308
@@ -97,12 +97,11 @@ def _sincos(x):  # type: ignore[no-untyped-def]
     z = r * r
     sp = r + r * z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))
     cp = 1.0 - 0.5 * z + z * z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
-    quadrant = k - 4.0 * np.floor(0.25 * k)  # 0, 1, 2 or 3
-    odd = quadrant == 1.0 or quadrant == 3.0
-    s = cp if odd else sp
-    c = sp if odd else cp
-    s = -s if quadrant >= 2.0 else s
-    c = -c if (quadrant == 1.0 or quadrant == 2.0) else c
+    quadrant = np.int64(k)  # only its last two bits matter
+    s = cp if quadrant & 1 else sp
+    c = sp if quadrant & 1 else cp
+    s = -s if quadrant & 2 else s
+    c = -c if (quadrant + 1) & 2 else c
     return s, c
 
 
@@ -477,11 +476,16 @@ def _bcd(YTi, Dnorm, DaxisT, idx_row, coef_row, m, n_sweeps, weighted, A, suf, L
 
 
 # Relative size of the predicted Gauss-Newton decrease of |r|^2 below which a refit stops:
-# the remaining steps could only change the objective in its tenth significant digit, and each
-# costs a full residual evaluation.
-GN_STEP_TOL = 1e-10
-# Relative gap between adjacent weight magnitudes below which the swapped order is tried.
+# each step costs a full residual evaluation. On exact data the decrease stays large until the
+# residual vanishes (quadratic convergence), so this only cuts the last steps on noisy and real
+# data, where they move |r|^2 by under 0.1 %. Measured against 1e-10: 10-15 % less time per
+# iteration at N=5000, n=100, K=L=10; simulation restoration unchanged and final error 1.43 vs
+# 1.42 deg; CMU training error 5.518 vs 5.516 deg (K=100, L=10, 6 iterations).
+GN_STEP_TOL = 1e-3
+# Relative gap between adjacent weight magnitudes below which the swapped order is tried, and
+# how many such pairs (the closest first) are tried.
 SWAP_GAP = 0.05
+SWAP_PAIRS = 2
 
 
 @njit(cache=True)
@@ -726,7 +730,7 @@ def _refit_with_swaps(  # type: ignore[no-untyped-def]
             first, gap_first = s, gap
         elif gap < gap_second:
             second, gap_second = s, gap
-    for c in range(2):
+    for c in range(min(SWAP_PAIRS, 2)):
         s = first if c == 0 else second
         gap = gap_first if c == 0 else gap_second
         if s < 0 or gap > SWAP_GAP:
