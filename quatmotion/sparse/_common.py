@@ -147,33 +147,54 @@ def rank1(
     """Best rank-1 approximation ``A ~ w u^T`` with ``|u| = 1``: ``(M, d) -> (u (d,), w (M,))``.
 
     ``w = sigma_1 v_1`` and ``u`` the first right singular vector (the atom in K-SVD, Algorithm 1
-    line 13; ``ln`` of the atom in Algorithm 3 line 9). Small problems use LAPACK's SVD; large
-    ones power iteration on ``A^T A`` warm-started from the current atom ``warm``, which is
-    already close, so a few passes over ``A`` (:func:`gram_matvec`, one pass per step) replace
-    an ``O(d^2 M)`` factorisation. The sign
-    is chosen so that ``u . warm >= 0`` (the atom does not flip between iterations).
+    line 13; ``ln`` of the atom in Algorithm 3 line 9). Power iteration on ``A^T A`` warm-started
+    from the current atom ``warm``, which is already close, so a few passes over ``A`` replace a
+    factorisation (a LAPACK SVD of each atom's small residual matrix was most of a K = 2000
+    iteration); large ``A`` are passed over once per step (:func:`gram_matvec`). Where it has not
+    converged to 1e-8 in 30 steps (two nearly equal singular values), a small ``A`` goes to
+    LAPACK's SVD and a large one keeps the last iterate (an SVD of a 5000 x 300 matrix costs as
+    much as a whole coding pass, and either vector fits nearly as well). The sign is chosen so
+    that ``u . warm >= 0`` (the atom does not flip between iterations).
     """
     M, d = A.shape
-    if M * d <= 40_000 or M < 3:
+    large = M * d > 40_000
+    u, converged = _power_iteration(A, warm, large) if M >= 3 else (warm, False)
+    if not converged and not large:
         _, _, vt = np.linalg.svd(A, full_matrices=False)
         u = vt[0].copy()
-    else:
-        u = warm / max(np.linalg.norm(warm), 1e-300)
-        if not np.any(u):
-            u = A[np.argmax(np.einsum("ij,ij->i", A, A))].copy()
-            u /= max(np.linalg.norm(u), 1e-300)
-        A = np.ascontiguousarray(A)
-        z = np.empty(d)
-        for _ in range(30):
-            gram_matvec(A, u, z)
-            norm = np.linalg.norm(z)
-            if norm == 0.0:
-                break
-            z /= norm
-            change = np.linalg.norm(z - u)
-            u = z.copy()
-            if change < 1e-8:
-                break
     if np.dot(u, warm) < 0.0:
         u = -u
     return u, A @ u
+
+
+def _power_iteration(
+    A: NDArray[np.float64],
+    warm: NDArray[np.float64],
+    large: bool,
+    steps: int = 30,
+    tol: float = 1e-8,
+) -> tuple[NDArray[np.float64], bool]:
+    """Leading right singular vector of ``A`` by power iteration; whether it converged."""
+    d = A.shape[1]
+    if large:
+        A = np.ascontiguousarray(A)
+    u = warm / max(np.linalg.norm(warm), 1e-300)
+    if not np.any(u):
+        u = A[np.argmax(np.einsum("ij,ij->i", A, A))].copy()
+        u /= max(np.linalg.norm(u), 1e-300)
+    z = np.empty(d)
+    for _ in range(steps):
+        if large:
+            gram_matvec(A, u, z)
+        else:
+            z = A.T @ (A @ u)
+        norm = np.linalg.norm(z)
+        if norm == 0.0:
+            return u, False
+        # A new array: z is the output buffer of the next step.
+        updated = z / norm
+        change = np.linalg.norm(updated - u)
+        u = updated
+        if change < tol:
+            return u, True
+    return u, False

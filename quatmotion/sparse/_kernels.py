@@ -1049,6 +1049,34 @@ def commit_atom(idx, coef, count, samples, positions, new_weights):  # type: ign
         _sort_slots(idx[i], coef[i], count[i])
 
 
+@njit(parallel=True, cache=True)
+def best_atoms(proj, idx, count, start, out):  # type: ignore[no-untyped-def]
+    """Atom selection of Algorithm 2: ``out[start + r]`` = the atom of largest ``|proj[r]|``
+    among those not yet in sample ``start + r``'s code (``idx[., :count[.]]``).
+
+    ``proj`` ``(M, K)`` are the projections of ``M`` consecutive samples' residual logs on the
+    atom logs. One pass, where ``abs``, masking and ``argmax`` in NumPy took three.
+    """
+    M, K = proj.shape
+    n_chunks = (M + _CHUNK - 1) // _CHUNK
+    for c in prange(n_chunks):
+        used = np.zeros(K, dtype=np.bool_)
+        for r in range(c * _CHUNK, min(M, (c + 1) * _CHUNK)):
+            i = start + r
+            for t in range(count[i]):
+                used[idx[i, t]] = True
+            best = 0
+            best_value = -1.0
+            for k in range(K):
+                v = abs(proj[r, k])
+                if v > best_value and not used[k]:
+                    best_value = v
+                    best = k
+            out[i] = best
+            for t in range(count[i]):
+                used[idx[i, t]] = False
+
+
 @njit(parallel=True, cache=True, fastmath=_FM_SUM)
 def gram_matvec(A, u, out):  # type: ignore[no-untyped-def]
     """``out = A^T (A u)`` for ``A`` ``(M, d)`` in one pass over ``A`` (BLAS takes two).
@@ -1113,9 +1141,9 @@ def batch_omp(G, Xy, sparsity, tol, idx, coef, count):  # type: ignore[no-untype
             if m == 0:
                 Lc[0, 0] = math.sqrt(G[best, best])
             else:
-                # Solve Lc[:m, :m] w = G[sel, best].
+                # Solve Lc[:m, :m] w = G[sel, best] (read as row ``best``: G is symmetric).
                 for r in range(m):
-                    acc = G[sel[r], best]
+                    acc = G[best, sel[r]]
                     for t in range(r):
                         acc -= Lc[r, t] * w[t]
                     w[r] = acc / Lc[r, r]
@@ -1140,11 +1168,15 @@ def batch_omp(G, Xy, sparsity, tol, idx, coef, count):  # type: ignore[no-untype
                 for t in range(r + 1, m):
                     acc -= Lc[t, r] * c[t]
                 c[r] = acc / Lc[r, r]
+            # alpha = Xy - G[:, sel] c, by rows of G (symmetric): contiguous reads, where its
+            # columns are K strided ones per selected atom.
             for k in range(K):
-                acc = Xy[i, k]
-                for t in range(m):
-                    acc -= G[k, sel[t]] * c[t]
-                alpha[k] = acc
+                alpha[k] = Xy[i, k]
+            for t in range(m):
+                row = G[sel[t]]
+                ct = c[t]
+                for k in range(K):
+                    alpha[k] -= row[k] * ct
         for t in range(m):
             idx[i, t] = sel[t]
             coef[i, t] = c[t]

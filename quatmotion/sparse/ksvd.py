@@ -50,7 +50,8 @@ def omp(
     N = Yf.shape[0]
     K = D.shape[0]
     L = min(sparsity, K)
-    G = np.ascontiguousarray(D @ D.T)
+    G = D @ D.T
+    G = np.ascontiguousarray(0.5 * (G + G.T))  # exactly symmetric: batch_omp reads its rows
     codes = Codes(np.zeros((N, L), dtype=np.int64), np.zeros((N, L)), np.zeros(N, dtype=np.int64))
     for start in range(0, N, _CHUNK):
         sl = slice(start, min(start + _CHUNK, N))

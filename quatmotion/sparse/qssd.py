@@ -102,7 +102,8 @@ __all__ = [
     "update_dictionary",
 ]
 
-_PROJECTION_CHUNK = 8192
+# Samples per projection block: (block, K) projections stay in cache at K = 2000.
+_PROJECTION_CHUNK = 1024
 _CODE_TOL = 1e-10
 _SOLVERS = {"paper": 0, "weighted": 1, "gauss-newton": 2}
 
@@ -284,14 +285,11 @@ def _sparse_code(
         if not np.any(active):
             break
         # Projections of every row (inactive ones are ignored): slicing, unlike selecting the
-        # active rows, copies nothing.
+        # active rows, copies nothing. An atom appears once per code: its weight is refit,
+        # never duplicated.
         for start in range(0, N, _PROJECTION_CHUNK):
-            rows = slice(start, start + _PROJECTION_CHUNK)
-            proj = np.abs(Rflat[rows] @ Dflat.T)
-            if step:
-                # An atom appears once per code: its weight is refit, never duplicated.
-                np.put_along_axis(proj, codes.idx[rows, :step], -1.0, axis=1)
-            new_atom[rows] = np.argmax(proj, axis=1)
+            proj = Rflat[start : start + _PROJECTION_CHUNK] @ Dflat.T
+            kern.best_atoms(proj, codes.idx, codes.count, start, new_atom)
         do_refit = refit == "every" or step == L - 1
         kern.add_atom_and_refit(
             YT,
