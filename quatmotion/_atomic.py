@@ -31,10 +31,22 @@ def atomic_output(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
     os.close(handle)
     try:
         yield Path(temp)
+        # mkstemp creates the file readable by its owner only; give it the permissions a plain
+        # open() would (the umask's), or those of the file it replaces.
+        os.chmod(temp, _permissions(path))
         os.replace(temp, path)
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(temp)
+
+
+def _permissions(path: Path) -> int:
+    try:
+        return path.stat().st_mode & 0o7777
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
