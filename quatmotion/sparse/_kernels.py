@@ -242,35 +242,21 @@ def _exp_into(v, x, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=_FM, error_model="numpy")
-def _times(a, b, out):  # type: ignore[no-untyped-def]
-    """``out = a b`` per joint (``out`` distinct from both; see :func:`_rmul`)."""
-    for j in range(a.shape[1]):
-        w, x, y, z = _qmul(a[0, j], a[1, j], a[2, j], a[3, j], b[0, j], b[1, j], b[2, j], b[3, j])
-        out[0, j] = w
-        out[1, j] = x
-        out[2, j] = y
-        out[3, j] = z
-
-
-@njit(cache=True, fastmath=_FM, error_model="numpy")
-def _conj_times(a, b, out):  # type: ignore[no-untyped-def]
-    """``out = a^-1 b`` per joint for unit ``a`` (``out`` distinct from both)."""
+def _times(a, b, out, conj_a=False, conj_b=False):  # type: ignore[no-untyped-def]
+    """``out = a' b'`` per joint, where ``a' = a^-1`` if ``conj_a`` (unit ``a``), else ``a``,
+    and likewise ``b'``; ``out`` distinct from both (see :func:`_rmul`)."""
+    sa = -1.0 if conj_a else 1.0
+    sb = -1.0 if conj_b else 1.0
     for j in range(a.shape[1]):
         w, x, y, z = _qmul(
-            a[0, j], -a[1, j], -a[2, j], -a[3, j], b[0, j], b[1, j], b[2, j], b[3, j]
-        )
-        out[0, j] = w
-        out[1, j] = x
-        out[2, j] = y
-        out[3, j] = z
-
-
-@njit(cache=True, fastmath=_FM, error_model="numpy")
-def _times_conj(a, b, out):  # type: ignore[no-untyped-def]
-    """``out = a b^-1`` per joint for unit ``b`` (``out`` distinct from both)."""
-    for j in range(a.shape[1]):
-        w, x, y, z = _qmul(
-            a[0, j], a[1, j], a[2, j], a[3, j], b[0, j], -b[1, j], -b[2, j], -b[3, j]
+            a[0, j],
+            sa * a[1, j],
+            sa * a[2, j],
+            sa * a[3, j],
+            b[0, j],
+            sb * b[1, j],
+            sb * b[2, j],
+            sb * b[3, j],
         )
         out[0, j] = w
         out[1, j] = x
@@ -283,11 +269,19 @@ def _times_conj(a, b, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=_FM, error_model="numpy")
-def _rmul(io, b):  # type: ignore[no-untyped-def]
-    """``io <- io b`` per joint."""
+def _rmul(io, b, conj_b=False):  # type: ignore[no-untyped-def]
+    """``io <- io b'`` per joint, ``b' = b^-1`` if ``conj_b`` (unit ``b``), else ``b``."""
+    sb = -1.0 if conj_b else 1.0
     for j in range(io.shape[1]):
         w, x, y, z = _qmul(
-            io[0, j], io[1, j], io[2, j], io[3, j], b[0, j], b[1, j], b[2, j], b[3, j]
+            io[0, j],
+            io[1, j],
+            io[2, j],
+            io[3, j],
+            b[0, j],
+            sb * b[1, j],
+            sb * b[2, j],
+            sb * b[3, j],
         )
         io[0, j] = w
         io[1, j] = x
@@ -296,24 +290,19 @@ def _rmul(io, b):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, fastmath=_FM, error_model="numpy")
-def _rmul_conj(io, b):  # type: ignore[no-untyped-def]
-    """``io <- io b^-1`` per joint for unit ``b``."""
+def _lmul(a, io, conj_a=False):  # type: ignore[no-untyped-def]
+    """``io <- a' io`` per joint, ``a' = a^-1`` if ``conj_a`` (unit ``a``), else ``a``."""
+    sa = -1.0 if conj_a else 1.0
     for j in range(io.shape[1]):
         w, x, y, z = _qmul(
-            io[0, j], io[1, j], io[2, j], io[3, j], b[0, j], -b[1, j], -b[2, j], -b[3, j]
-        )
-        io[0, j] = w
-        io[1, j] = x
-        io[2, j] = y
-        io[3, j] = z
-
-
-@njit(cache=True, fastmath=_FM, error_model="numpy")
-def _lmul_conj(a, io):  # type: ignore[no-untyped-def]
-    """``io <- a^-1 io`` per joint for unit ``a``."""
-    for j in range(io.shape[1]):
-        w, x, y, z = _qmul(
-            a[0, j], -a[1, j], -a[2, j], -a[3, j], io[0, j], io[1, j], io[2, j], io[3, j]
+            a[0, j],
+            sa * a[1, j],
+            sa * a[2, j],
+            sa * a[3, j],
+            io[0, j],
+            io[1, j],
+            io[2, j],
+            io[3, j],
         )
         io[0, j] = w
         io[1, j] = x
@@ -433,9 +422,9 @@ def _residual_into(C, YTi, left, out):  # type: ignore[no-untyped-def]
     """One sample's residual against its combination ``C``: ``C^-1 Y`` if ``left`` (what the
     next, smaller atom must explain), else ``Y C^-1`` (Algorithm 2 line 8 as printed)."""
     if left:
-        _conj_times(C, YTi, out)
+        _times(C, YTi, out, True, False)
     else:
-        _times_conj(YTi, C, out)
+        _times(YTi, C, out, False, True)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -463,12 +452,12 @@ def _bcd(YTi, Dnorm, DaxisT, idx_row, coef_row, m, n_sweeps, weighted, A, suf, L
             _times(A[s], suf[s + 1], suf[s])
         _copy(YTi, Lq)
         for s in range(m):
-            _times_conj(Lq, suf[s + 1], E)
+            _times(Lq, suf[s + 1], E, False, True)
             k = idx_row[s]
             x = _solve_coef(E, Dnorm[k], DaxisT[k], weighted, scratch)
             coef_row[s] = x
             _power_into(Dnorm[k], DaxisT[k], x, A[s])
-            _lmul_conj(A[s], Lq)
+            _lmul(A[s], Lq, True)
         if _sort_slots(idx_row, coef_row, m):
             for s in range(m):
                 k = idx_row[s]
@@ -949,7 +938,7 @@ def add_atom_and_refit(
                     )
                 if left and not moved and not refit:
                     _power_into(Dnorm[k], DaxisT[k], x, tmp)
-                    _lmul_conj(tmp, R)
+                    _lmul(tmp, R, True)
                 else:
                     _combine_row(Dnorm, DaxisT, idx[i], coef[i], m, C, tmp)
                     _residual_into(C, YT[i], left, R)
@@ -995,11 +984,11 @@ def atom_residual_logs(YT, Dnorm, DaxisT, idx, coef, count, samples, positions, 
             for s in range(p - 1, -1, -1):
                 k = idx[i, s]
                 _power_into(Dnorm[k], DaxisT[k], coef[i, s], tmp)
-                _lmul_conj(tmp, E)
+                _lmul(tmp, E, True)
             for s in range(count[i] - 1, p, -1):
                 k = idx[i, s]
                 _power_into(Dnorm[k], DaxisT[k], coef[i, s], tmp)
-                _rmul_conj(E, tmp)
+                _rmul(E, tmp, True)
             _log_into(E, out[r])
 
 

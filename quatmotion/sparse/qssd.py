@@ -45,6 +45,9 @@ Measured on the paper's simulation (``quatmotion bench qssd``); the defaults are
   the Jacobian columns are the atom logs rotated by the suffix products) is exact on exact
   data. The descending-order constraint makes the objective discontinuous where two weights are
   nearly tied; a fit that stays poor also tries the swapped order of the two closest pairs.
+  A refit stops early once a step's predicted gain is below 0.1 % of ``|r|^2``
+  (``_kernels.GN_STEP_TOL``; exact data converge before that, so only noisy and real data
+  are cut short).
 * ``refit="final"``: the paper refits all weights after every added atom; refitting only after
   the last one (the others get their Eq. 6 weight against the residual, and the residual
   advances by one product per joint) costs O(L) instead of O(L^2) refits for the same support
