@@ -8,7 +8,7 @@ import pytest
 
 from quatmotion import quat
 from quatmotion.sparse import QSSD, make_sparse_quaternion_data, quaternion_combination
-from quatmotion.sparse._common import Codes, check_quaternion_samples
+from quatmotion.sparse._common import Codes, check_quaternion_samples, matrix_to_codes
 from quatmotion.sparse.qssd import sparse_code, update_dictionary
 
 
@@ -92,6 +92,21 @@ def _to_matrix(codes: Codes, K: int):  # noqa: ANN202
     from quatmotion.sparse._common import codes_to_matrix
 
     return codes_to_matrix(codes, K)
+
+
+@pytest.mark.parametrize("robust", [True, False])
+def test_true_model_is_a_fixed_point_of_the_dictionary_update(robust: bool) -> None:
+    # Exact data with their true codes: for every slot, E = P^-1 Y S^-1 is exactly that slot's
+    # power, so Algorithm 3 must return every atom and weight unchanged. Five atoms per
+    # sample at weight scale 1 do not commute, so the order of the inverse factors matters.
+    data = make_sparse_quaternion_data(80, 6, 7, 5, random_state=11)
+    codes = matrix_to_codes(data.weights, 7)
+    assert np.all(codes.count == 5)
+    result = update_dictionary(data.Y, data.dictionary_log, codes, safeguard=False, robust=robust)
+    np.testing.assert_allclose(result.dictionary_log, data.dictionary_log, atol=1e-10)
+    np.testing.assert_allclose(result.codes.coef, codes.coef, atol=1e-10)
+    np.testing.assert_array_equal(result.codes.idx, codes.idx)
+    assert np.max(result.objective) < 1e-12
 
 
 def test_unused_atoms_are_reseeded_from_worst_fit_samples() -> None:

@@ -981,10 +981,12 @@ def atom_residual_logs(YT, Dnorm, DaxisT, idx, coef, count, samples, positions, 
             i = samples[r]
             p = positions[r]
             _copy(YT[i], E)
-            for s in range(p - 1, -1, -1):
+            # P^-1 Y = A_{p-1}^-1 ... A_1^-1 A_0^-1 Y: the first slot's inverse goes next to Y.
+            for s in range(p):
                 k = idx[i, s]
                 _power_into(Dnorm[k], DaxisT[k], coef[i, s], tmp)
                 _lmul(tmp, E, True)
+            # Y S^-1 = Y A_{m-1}^-1 ... A_{p+1}^-1: the last slot's inverse goes next to Y.
             for s in range(count[i] - 1, p, -1):
                 k = idx[i, s]
                 _power_into(Dnorm[k], DaxisT[k], coef[i, s], tmp)
