@@ -64,11 +64,12 @@ Measured on the paper's simulation (``quatmotion bench qssd``); the defaults are
   surrogate and new weights may reorder the product; with the safeguard an atom update is kept
   only if the objective over its samples (with the re-sorted order) does not increase, so the
   dictionary stage is monotone. It slowed recovery (updates that first increase the objective
-  are needed to leave poor starting atoms), hence off.
-* ``keep_best=True``: neither greedy coding nor the log-space dictionary update is monotone in
-  the objective. On real motion data without the safeguard the training error rose from 2.2 to
-  4.3 deg over 20 iterations (CMU, K=500, L=15); the estimator returns the dictionary whose
-  coding had the lowest training objective. For real data use ``safeguard=True`` as well.
+  are needed to leave poor starting atoms), hence off. On real data it makes no difference
+  (CMU, K=500, L=15, 15 iterations: training error 1.90 deg with it and without, test error
+  2.14 and 2.12).
+* ``keep_best=True``: neither greedy coding nor the log-space dictionary update is guaranteed
+  to lower the objective; the estimator returns the dictionary whose coding had the lowest
+  training objective (a guard: in the runs above the error fell at nearly every iteration).
 * ``n_sweeps``: Gauss-Newton steps (or coordinate-descent sweeps) per refit.
 """
 
