@@ -2,6 +2,6 @@
 
 from quatmotion.errors import FormatError
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = ["FormatError", "__version__"]

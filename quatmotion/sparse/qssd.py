@@ -30,6 +30,10 @@ Conventions and what the paper leaves open
 Changes to the algorithm as printed (each switchable, to measure its effect)
 ----------------------------------------------------------------------------
 Measured on the paper's simulation (``quatmotion bench qssd``); the defaults are the changes.
+Together they matter more than apart: noiseless, N=500, 100 iterations, 3 seeds, the printed
+algorithm ends at 0.33 deg, with all the changes 0.17 deg; the left residual or Gauss-Newton
+alone end at 1.5 and 1.4 deg (each misses an atom on one seed), the log-space start alone at
+0.33 deg, reached by iteration 10 instead of 40.
 
 * ``residual="left"``: Algorithm 2 line 8 prints ``R = Y (D_P (x) X_P)^-1``. The next atom is
   appended on the right of the combination (its weight is smaller), so what it must explain is
@@ -53,13 +57,15 @@ Measured on the paper's simulation (``quatmotion bench qssd``); the defaults are
   advances by one product per joint) costs O(L) instead of O(L^2) refits for the same support
   recovery at weight scales up to 1. ``refit="every"`` is the printed schedule.
 * ``init="log-ksvd"``: random samples (Algorithm 4 line 1, ``init="samples"``) are mixtures of
-  atoms, and QSSD learns slowly from them (N=200: restoration 0.5-0.8 after 20 iterations).
+  atoms, and QSSD learns slowly from them (about 40 iterations to its final error above).
   To first order ``ln(A^a B^b) = a ln A + b ln B``, so ``init_iter`` iterations of linear K-SVD
   on the sample logs, started from the random samples, give atoms that QSSD then refines
-  (restoration 1.0 on 2 of 3 seeds after 20 iterations).
-* ``robust=True``: samples coded with a wrong atom set leave large unrelated residuals in
-  ``ln E``; each atom is refit once without the samples whose rank-1 misfit exceeds three
-  times the median (a small gain in the simulation).
+  (final error by iteration 10).
+* ``robust=True``: samples coded with a wrong atom set (greedy coding misses the true set of
+  about 2 % of the simulated samples even with the true dictionary) leave large unrelated
+  residuals in ``ln E``; each atom is refit once without the samples whose rank-1 misfit
+  exceeds three times the median. With it the true dictionary is a fixed point of the update
+  (started from it, the error stays at 0.09 deg); without, it drifts to 0.33 deg.
 * ``safeguard=True`` (off by default): the rank-1 SVD of ``ln E`` minimises a log-space
   surrogate and new weights may reorder the product; with the safeguard an atom update is kept
   only if the objective over its samples (with the re-sorted order) does not increase, so the
