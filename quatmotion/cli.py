@@ -33,8 +33,9 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_show_locals=False,
 )
-datasets_app = typer.Typer(help="The motion-capture data folder: list clips, fetch CMU subjects.",
-                           no_args_is_help=True)
+datasets_app = typer.Typer(
+    help="The motion-capture data folder: list clips, fetch CMU subjects.", no_args_is_help=True
+)
 app.add_typer(datasets_app, name="datasets")
 
 console = Console()
@@ -85,8 +86,10 @@ def _read(path: Path, skeleton: Path | None):  # -> Motion
 
     _require_file(path)
     if path.suffix.lower() not in MOTION_SUFFIXES:
-        raise CliInputError(f"{path}: unknown motion file type {path.suffix!r} "
-                           f"(expected {', '.join(MOTION_SUFFIXES)})")
+        raise CliInputError(
+            f"{path}: unknown motion file type {path.suffix!r} "
+            f"(expected {', '.join(MOTION_SUFFIXES)})"
+        )
     if skeleton is not None:
         _require_file(skeleton)
         if path.suffix.lower() != ".amc":
@@ -110,11 +113,14 @@ def _write(motion, out: Path) -> list[Path]:  # noqa: ANN001 (Motion, imported l
 
     suffix = out.suffix.lower()
     if suffix not in MOTION_SUFFIXES:
-        raise CliInputError(f"{out}: unknown output type {out.suffix!r} "
-                           f"(expected {', '.join(MOTION_SUFFIXES)})")
+        raise CliInputError(
+            f"{out}: unknown output type {out.suffix!r} (expected {', '.join(MOTION_SUFFIXES)})"
+        )
     if suffix == ".amc" and motion.skeleton.extras.get("format") != "asf":
-        raise CliInputError(f"{out}: AMC output needs an ASF skeleton; this clip's skeleton "
-                           f"({motion.skeleton.name!r}) comes from a BVH, write .bvh instead")
+        raise CliInputError(
+            f"{out}: AMC output needs an ASF skeleton; this clip's skeleton "
+            f"({motion.skeleton.name!r}) comes from a BVH, write .bvh instead"
+        )
     out.parent.mkdir(parents=True, exist_ok=True)
     written = [out]
     write_motion(motion, out)
@@ -144,8 +150,9 @@ def _motion_summary(motion, path: str) -> Table:  # noqa: ANN001
     if motion.n_frames:
         step = max(1, motion.n_frames // 200)
         rows.append(("standing height (cm)", f"{standing_height(motion, step):.1f}"))
-        rows.append(("root at frame 0 (cm)",
-                     " ".join(f"{v:.1f}" for v in motion.root_translation[0])))
+        rows.append(
+            ("root at frame 0 (cm)", " ".join(f"{v:.1f}" for v in motion.root_translation[0]))
+        )
     for field, value in rows:
         table.add_row(field, value)
     return table
@@ -154,9 +161,9 @@ def _motion_summary(motion, path: str) -> Table:  # noqa: ANN001
 @app.command()
 def info(
     file: Annotated[Path, typer.Argument(help="A .amc, .bvh or .asf file.")],
-    skeleton: Annotated[Path | None, typer.Option("--skeleton", "-s",
-                                                  help="ASF of an AMC (else found by name).")
-                        ] = None,
+    skeleton: Annotated[
+        Path | None, typer.Option("--skeleton", "-s", help="ASF of an AMC (else found by name).")
+    ] = None,
 ) -> None:
     """Print a clip's skeleton name, joints, frames, fps, duration and height (cm)."""
     with _user_errors():
@@ -165,9 +172,12 @@ def info(
 
             sk = read_asf(_require_file(file))
             table = Table(title=str(file), show_header=False, title_justify="left")
-            for field, value in (("skeleton", sk.name), ("joints", str(sk.n_joints)),
-                                 ("end sites", str(sk.n_sites)),
-                                 ("rest height (cm)", f"{sk.height():.1f}")):
+            for field, value in (
+                ("skeleton", sk.name),
+                ("joints", str(sk.n_joints)),
+                ("end sites", str(sk.n_sites)),
+                ("rest height (cm)", f"{sk.height():.1f}"),
+            ):
                 table.add_row(field, value)
             console.print(table)
             return
@@ -177,11 +187,15 @@ def info(
 
 @app.command()
 def convert(
-    paths: Annotated[list[Path], typer.Argument(
-        help="Input clip(s) then the output: a .amc/.bvh file for one input, else a folder.")],
-    skeleton: Annotated[Path | None, typer.Option("--skeleton", "-s",
-                                                  help="ASF of AMC input (else found by name).")
-                        ] = None,
+    paths: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Input clip(s) then the output: a .amc/.bvh file for one input, else a folder."
+        ),
+    ],
+    skeleton: Annotated[
+        Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC input (else found by name).")
+    ] = None,
     to: Annotated[str, typer.Option(help="Output format when writing into a folder.")] = "bvh",
 ) -> None:
     """Convert AMC <-> BVH by extension (ASF+AMC -> BVH too); many inputs into a folder."""
@@ -204,8 +218,12 @@ def convert(
         for path in inputs:  # fail before writing anything when an input is missing
             _require_file(path)
         out.mkdir(parents=True, exist_ok=True)
-        columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                   TimeElapsedColumn())
+        columns = (
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+        )
         with Progress(*columns, console=console) as progress:
             task = progress.add_task("converting", total=len(inputs))
             for path in inputs:
@@ -229,14 +247,15 @@ def generate(
     with _user_errors():
         motion = generate_clip(kind, seed, n_frames=frames, fps=fps)
         written = _write(motion, out)
-        console.print(f"wrote {', '.join(str(w) for w in written)} "
-                      f"({motion.n_frames} frames at {motion.fps:g} fps)")
+        console.print(
+            f"wrote {', '.join(str(w) for w in written)} "
+            f"({motion.n_frames} frames at {motion.fps:g} fps)"
+        )
 
 
 @datasets_app.command("list")
 def datasets_list(
-    collection: Annotated[str | None, typer.Option(help="cmu, cmu_bvh, hdm05 or bandai1.")
-                          ] = None,
+    collection: Annotated[str | None, typer.Option(help="cmu, cmu_bvh, hdm05 or bandai1.")] = None,
     match: Annotated[str | None, typer.Option(help="Text in a label or file name.")] = None,
     limit: Annotated[int, typer.Option(help="Show at most this many rows (0: all).")] = 0,
 ) -> None:
@@ -263,12 +282,15 @@ def datasets_list(
 def datasets_fetch(
     collection: Annotated[str, typer.Argument(help="Only 'cmu' can be fetched.")],
     subjects: Annotated[str, typer.Option(help="Comma-separated subject numbers, e.g. 1,2.")],
-    dest: Annotated[Path | None, typer.Option(help="Folder (default: cmu/ in the data folder).")
-                    ] = None,
-    base_url: Annotated[str | None, typer.Option(help="Server with the CMU subjects/ layout.")
-                        ] = None,
-    trials: Annotated[str | None, typer.Option(help="Comma-separated trials (default: all).")
-                      ] = None,
+    dest: Annotated[
+        Path | None, typer.Option(help="Folder (default: cmu/ in the data folder).")
+    ] = None,
+    base_url: Annotated[
+        str | None, typer.Option(help="Server with the CMU subjects/ layout.")
+    ] = None,
+    trials: Annotated[
+        str | None, typer.Option(help="Comma-separated trials (default: all).")
+    ] = None,
     overwrite: Annotated[bool, typer.Option(help="Download files that already exist.")] = False,
 ) -> None:
     """Download CMU subjects' ASF and AMC files, each written atomically."""
@@ -279,12 +301,19 @@ def datasets_fetch(
             raise CliInputError(f"only the 'cmu' collection can be fetched, not {collection!r}")
         try:
             subject_list = [int(s) for s in subjects.split(",") if s.strip()]
-            trial_list = None if trials is None else [int(t) for t in trials.split(",")
-                                                      if t.strip()]
+            trial_list = (
+                None if trials is None else [int(t) for t in trials.split(",") if t.strip()]
+            )
         except ValueError:
             raise CliInputError("--subjects and --trials take comma-separated numbers") from None
-        files = fetch_cmu(subject_list, dest=dest, base_url=base_url or DEFAULT_CMU_BASE_URL,
-                          trials=trial_list, overwrite=overwrite, console=console)
+        files = fetch_cmu(
+            subject_list,
+            dest=dest,
+            base_url=base_url or DEFAULT_CMU_BASE_URL,
+            trials=trial_list,
+            overwrite=overwrite,
+            console=console,
+        )
         console.print(f"{len(files)} file(s) in {dest or 'the data folder'}")
 
 
@@ -292,8 +321,9 @@ def bench_names() -> list[str]:
     """Benchmarks present in :mod:`quatmotion.bench` (modules with a ``run`` function)."""
     import quatmotion.bench as bench_package
 
-    return sorted(m.name for m in pkgutil.iter_modules(bench_package.__path__)
-                  if not m.name.startswith("_"))
+    return sorted(
+        m.name for m in pkgutil.iter_modules(bench_package.__path__) if not m.name.startswith("_")
+    )
 
 
 @app.command()
@@ -319,20 +349,21 @@ def bench(
         table = Table(show_header=False)
         for key, value in result.items():
             if isinstance(value, int | float | str | bool):
-                table.add_row(str(key), f"{value:.4g}" if isinstance(value, float)
-                              else str(value))
+                table.add_row(str(key), f"{value:.4g}" if isinstance(value, float) else str(value))
         if table.row_count:
             console.print(table)
 
 
 @app.command()
 def demo(
-    paths: Annotated[list[Path] | None, typer.Argument(
-        help="Clips or folders to use instead of the built-in generated library.")] = None,
+    paths: Annotated[
+        list[Path] | None,
+        typer.Argument(help="Clips or folders to use instead of the built-in generated library."),
+    ] = None,
     out: Annotated[Path, typer.Option(help="Folder for the figure and summary.")] = Path(
-        "demo-out"),
-    seed: Annotated[int, typer.Option(help="Seed of the generated library and the learners.")
-                    ] = 0,
+        "demo-out"
+    ),
+    seed: Annotated[int, typer.Option(help="Seed of the generated library and the learners.")] = 0,
     quick: Annotated[bool, typer.Option(help="Fewer clips and iterations.")] = False,
 ) -> None:
     """Generate (or load) clips, show them, and compress them with QSSD vs K-SVD."""
@@ -358,7 +389,7 @@ def _mount_pose() -> None:
     @app.command(
         "pose",
         help="Index a motion library's poses and search it under a learned pose distance "
-             "('quatmotion pose --help' for its commands).",
+        "('quatmotion pose --help' for its commands).",
         context_settings={"allow_extra_args": True, "ignore_unknown_options": True},
         add_help_option=False,
     )

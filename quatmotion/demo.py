@@ -125,15 +125,21 @@ def plot_stick_figure(motion: Motion, path: str | Path, n_poses: int = 8) -> Pat
         for j in range(1, len(parents)):
             p = parents[j]
             axes[0].plot(along[f, [p, j]] + shift_side, height[f, [p, j]], color=colour, lw=1.6)
-            axes[1].plot(across[f, [p, j]] - across[f, 0] + shift_front, height[f, [p, j]],
-                         color=colour, lw=1.6)
+            axes[1].plot(
+                across[f, [p, j]] - across[f, 0] + shift_front,
+                height[f, [p, j]],
+                color=colour,
+                lw=1.6,
+            )
         axes[0].plot(along[f, 0] + shift_side, height[f, 0], "o", color=colour, ms=3)
     for ax, title in zip(axes, ("side view (cm)", "front view (cm, poses spread)"), strict=True):
         ax.axhline(0.0, color="0.6", lw=0.8)
         ax.set_aspect("equal")
         ax.set_title(title)
-    fig.suptitle(f"{motion.name}: {motion.n_frames} frames at {motion.fps:g} fps, "
-                 f"{len(frames)} poses (dark = early)")
+    fig.suptitle(
+        f"{motion.name}: {motion.n_frames} frames at {motion.fps:g} fps, "
+        f"{len(frames)} poses (dark = early)"
+    )
     fig.tight_layout()
     try:
         with atomic_output(path, suffix=".png") as temp:
@@ -153,16 +159,23 @@ def _load(paths: Sequence[Path], seed: int, quick: bool) -> list[tuple[Motion, s
     return generate_library(1 if quick else 2, seed=seed)
 
 
-def _compare(train: NDArray[np.float64], test: NDArray[np.float64], seed: int, quick: bool,
-             console: Console) -> list[dict[str, Any]] | None:
+def _compare(
+    train: NDArray[np.float64], test: NDArray[np.float64], seed: int, quick: bool, console: Console
+) -> list[dict[str, Any]] | None:
     try:
         from quatmotion.sparse import KSVD, QSSD, angular_error_deg
     except ImportError as error:
-        console.print(f"[yellow]quatmotion.sparse is not available ({error}); "
-                      "skipping the QSSD / K-SVD comparison.[/yellow]")
+        console.print(
+            f"[yellow]quatmotion.sparse is not available ({error}); "
+            "skipping the QSSD / K-SVD comparison.[/yellow]"
+        )
         return None
-    params = {"n_atoms": 16 if quick else 32, "sparsity": 3,
-              "max_iter": 3 if quick else 5, "random_state": seed}
+    params = {
+        "n_atoms": 16 if quick else 32,
+        "sparsity": 3,
+        "max_iter": 3 if quick else 5,
+        "random_state": seed,
+    }
     rows = []
     for name, cls in (("QSSD", QSSD), ("K-SVD", KSVD)):
         start = time.perf_counter()
@@ -172,17 +185,26 @@ def _compare(train: NDArray[np.float64], test: NDArray[np.float64], seed: int, q
         test_hat = model.inverse_transform(model.transform(test))
         code_s = time.perf_counter() - start
         train_hat = model.inverse_transform(model.transform(train))
-        rows.append({
-            "method": name, **{k: v for k, v in params.items() if k != "random_state"},
-            "train_error_deg": angular_error_deg(train, train_hat),
-            "test_error_deg": angular_error_deg(test, test_hat),
-            "fit_seconds": fit_s, "test_coding_seconds": code_s,
-        })
+        rows.append(
+            {
+                "method": name,
+                **{k: v for k, v in params.items() if k != "random_state"},
+                "train_error_deg": angular_error_deg(train, train_hat),
+                "test_error_deg": angular_error_deg(test, test_hat),
+                "fit_seconds": fit_s,
+                "test_coding_seconds": code_s,
+            }
+        )
     return rows
 
 
-def run_demo(paths: Sequence[Path] = (), out_dir: str | Path = "demo-out", seed: int = 0,
-             quick: bool = False, console: Console | None = None) -> dict[str, Any]:
+def run_demo(
+    paths: Sequence[Path] = (),
+    out_dir: str | Path = "demo-out",
+    seed: int = 0,
+    quick: bool = False,
+    console: Console | None = None,
+) -> dict[str, Any]:
     """Run the demo and print a Rich summary; returns what it wrote to ``summary.json``.
 
     Parameters
@@ -212,9 +234,15 @@ def run_demo(paths: Sequence[Path] = (), out_dir: str | Path = "demo-out", seed:
     for column in ("clip", "label", "frames", "fps", "seconds", "joints", "standing cm"):
         table.add_column(column, justify="left" if column in ("clip", "label") else "right")
     for motion, label in clips:
-        table.add_row(motion.name, label, str(motion.n_frames), f"{motion.fps:g}",
-                      f"{motion.duration:.2f}", str(motion.n_joints),
-                      f"{standing_height(motion, max(1, motion.n_frames // 100)):.0f}")
+        table.add_row(
+            motion.name,
+            label,
+            str(motion.n_frames),
+            f"{motion.fps:g}",
+            f"{motion.duration:.2f}",
+            str(motion.n_joints),
+            f"{standing_height(motion, max(1, motion.n_frames // 100)):.0f}",
+        )
     console.print(table)
 
     figure = plot_stick_figure(clips[0][0], out_dir / f"stick_{clips[0][0].name}.png")
@@ -223,36 +251,63 @@ def run_demo(paths: Sequence[Path] = (), out_dir: str | Path = "demo-out", seed:
     samples = [angular_displacements(m) for m, _ in clips]
     shapes = {s.shape[1] for s in samples}
     summary: dict[str, Any] = {
-        "source": source, "seed": seed, "quick": quick,
-        "clips": [{"name": m.name, "label": lab, "frames": m.n_frames, "fps": m.fps}
-                  for m, lab in clips],
+        "source": source,
+        "seed": seed,
+        "quick": quick,
+        "clips": [
+            {"name": m.name, "label": lab, "frames": m.n_frames, "fps": m.fps} for m, lab in clips
+        ],
         "figure": str(figure),
     }
     if len(shapes) != 1:
-        console.print("[yellow]the clips have different skeletons; the dictionary comparison "
-                      "needs one skeleton, so it is skipped.[/yellow]")
+        console.print(
+            "[yellow]the clips have different skeletons; the dictionary comparison "
+            "needs one skeleton, so it is skipped.[/yellow]"
+        )
         rows = None
     else:
         Y = np.concatenate(samples)
         order = np.random.default_rng(seed).permutation(len(Y))
         n_test = max(1, int(round(_TEST_FRACTION * len(Y))))
         train, test = Y[order[n_test:]], Y[order[:n_test]]
-        summary.update({"n_train": int(len(train)), "n_test": int(len(test)),
-                        "quaternions_per_sample": int(Y.shape[1])})
-        console.print(f"angular displacements: {len(train)} training and {len(test)} test "
-                      f"frames of {Y.shape[1]} joint quaternions; learning dictionaries...")
+        summary.update(
+            {
+                "n_train": int(len(train)),
+                "n_test": int(len(test)),
+                "quaternions_per_sample": int(Y.shape[1]),
+            }
+        )
+        console.print(
+            f"angular displacements: {len(train)} training and {len(test)} test "
+            f"frames of {Y.shape[1]} joint quaternions; learning dictionaries..."
+        )
         rows = _compare(train, test, seed, quick, console)
     if rows:
-        result = Table(title="reconstruction of angular displacements "
-                             "(mean rotation error, degrees per joint per frame)",
-                       title_justify="left")
-        for column in ("method", "atoms K", "sparsity L", "iterations", "train error",
-                       "test error", "fit s"):
+        result = Table(
+            title="reconstruction of angular displacements "
+            "(mean rotation error, degrees per joint per frame)",
+            title_justify="left",
+        )
+        for column in (
+            "method",
+            "atoms K",
+            "sparsity L",
+            "iterations",
+            "train error",
+            "test error",
+            "fit s",
+        ):
             result.add_column(column, justify="left" if column == "method" else "right")
         for row in rows:
-            result.add_row(row["method"], str(row["n_atoms"]), str(row["sparsity"]),
-                           str(row["max_iter"]), f"{row['train_error_deg']:.3f}",
-                           f"{row['test_error_deg']:.3f}", f"{row['fit_seconds']:.1f}")
+            result.add_row(
+                row["method"],
+                str(row["n_atoms"]),
+                str(row["sparsity"]),
+                str(row["max_iter"]),
+                f"{row['train_error_deg']:.3f}",
+                f"{row['test_error_deg']:.3f}",
+                f"{row['fit_seconds']:.1f}",
+            )
         console.print(result)
     summary["methods"] = rows or []
     summary["seconds"] = time.perf_counter() - start

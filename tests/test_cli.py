@@ -22,7 +22,10 @@ io = pytest.importorskip("quatmotion.io")
 PROJECT = Path(__file__).resolve().parents[1]
 CLIPS = {
     "cmu_amc": DATA / "cmu" / "02" / "02_01.amc",
-    "hdm05_amc": DATA / "hdm05" / "clips" / "kickLFront1Reps"
+    "hdm05_amc": DATA
+    / "hdm05"
+    / "clips"
+    / "kickLFront1Reps"
     / "HDM_bd_kickLFront1Reps_001_120.amc",
     "bandai_bvh": DATA / "bandai1" / "clips" / "dataset-1_walk_normal_001.bvh",
     "cmu_bvh": DATA / "cmu_bvh" / "07" / "07_01.bvh",
@@ -68,9 +71,11 @@ def test_info_reports_the_clip(key):
     assert int(_field(result.stdout, "joints")) == motion.n_joints
     assert float(_field(result.stdout, "fps")) == pytest.approx(motion.fps)
     assert float(_field(result.stdout, "duration (s)")) == pytest.approx(
-        motion.n_frames / motion.fps, abs=1e-3)
+        motion.n_frames / motion.fps, abs=1e-3
+    )
     assert float(_field(result.stdout, "rest height (cm)")) == pytest.approx(
-        motion.skeleton.height(), abs=0.05)
+        motion.skeleton.height(), abs=0.05
+    )
 
 
 @needs_data
@@ -174,8 +179,6 @@ def test_broken_amc_exits_2(tmp_path):
     _assert_bad_input(_invoke("info", tmp_path / "s_01.amc"), "s_01.amc")
 
 
-
-
 # --- bench, datasets, demo -----------------------------------------------------------------------
 
 
@@ -213,7 +216,8 @@ def test_datasets_list_counts_the_collection():
     result = _invoke("datasets", "list", "--collection", "hdm05", "--limit", "3")
     assert result.exit_code == 0, result.output
     assert int(re.search(r"(\d+) clips", result.stdout).group(1)) == len(
-        catalogue(collection="hdm05"))
+        catalogue(collection="hdm05")
+    )
     _assert_bad_input(_invoke("datasets", "list", "--collection", "nope"), "nope")
 
 
@@ -224,11 +228,21 @@ def test_datasets_fetch_against_a_local_server(tmp_path, serve_directory):
     (site / "03").symlink_to(DATA / "cmu" / "03", target_is_directory=True)
     dest = tmp_path / "dest"
     url = serve_directory(tmp_path / "site")
-    result = _invoke("datasets", "fetch", "cmu", "--subjects", "3", "--trials", "1,2",
-                     "--dest", dest, "--base-url", url)
+    result = _invoke(
+        "datasets",
+        "fetch",
+        "cmu",
+        "--subjects",
+        "3",
+        "--trials",
+        "1,2",
+        "--dest",
+        dest,
+        "--base-url",
+        url,
+    )
     assert result.exit_code == 0, result.output
-    bad = _invoke("datasets", "fetch", "cmu", "--subjects", "4", "--dest", dest,
-                  "--base-url", url)
+    bad = _invoke("datasets", "fetch", "cmu", "--subjects", "4", "--dest", dest, "--base-url", url)
     for name in ("03.asf", "03_01.amc", "03_02.amc"):
         assert (dest / "03" / name).read_bytes() == (DATA / "cmu" / "03" / name).read_bytes()
     _assert_bad_input(bad, "404")
@@ -249,8 +263,7 @@ def test_demo_quick_writes_figure_and_beats_the_identity(tmp_path):
     from quatmotion.demo import angular_displacements
     from quatmotion.motion.synthetic import generate_library
 
-    samples = np.concatenate([angular_displacements(m) for m, _ in
-                              generate_library(1, seed=1)])
+    samples = np.concatenate([angular_displacements(m) for m, _ in generate_library(1, seed=1)])
     identity_error = np.degrees(2 * np.arccos(np.clip(np.abs(samples[..., 0]), 0, 1))).mean()
     for row in methods.values():
         assert 0 <= row["test_error_deg"] < identity_error

@@ -64,8 +64,10 @@ def fake_root(tmp_path: Path) -> Path:
     _touch(root / "cmu" / "05" / "05_01.amc")
     _touch(root / "cmu" / "05" / "05_02.amc")
     _touch(root / "cmu_bvh" / "05" / "05_01.bvh")
-    _touch(root / "cmu_bvh" / "cmu-mocap-index-text.txt",
-           "Subject #5 (modern dance)\n\n05_01\twalk\n05_02\tdance - pirouette\n")
+    _touch(
+        root / "cmu_bvh" / "cmu-mocap-index-text.txt",
+        "Subject #5 (modern dance)\n\n05_01\twalk\n05_02\tdance - pirouette\n",
+    )
     _touch(root / "hdm05" / "skeletons" / "HDM_xy.asf")
     _touch(root / "hdm05" / "clips" / "hopBothLegs" / "HDM_xy_hopBothLegs_003_120.amc")
     _touch(root / "hdm05" / "clips" / "squat1Reps" / "HDM_zz_squat1Reps_010_120.amc")
@@ -106,9 +108,13 @@ def test_catalogue_filters(fake_root):
     assert {e.collection for e in catalogue(fake_root, collection="hdm05")} == {"hdm05"}
     assert len(catalogue(fake_root, collection=["cmu", "bandai1"])) == 4
     assert [e.name for e in catalogue(fake_root, labels={"actor": "XY"})] == [
-        "HDM_xy_hopBothLegs_003_120"]
+        "HDM_xy_hopBothLegs_003_120"
+    ]
     assert {(e.collection, e.name) for e in catalogue(fake_root, match="walk")} == {
-        ("cmu", "05_01"), ("cmu_bvh", "05_01"), ("bandai1", "dataset-1_walk_normal_001")}
+        ("cmu", "05_01"),
+        ("cmu_bvh", "05_01"),
+        ("bandai1", "dataset-1_walk_normal_001"),
+    }
     with pytest.raises(ValueError, match="unknown collection"):
         catalogue(fake_root, collection="mocapx")
     with pytest.raises(DataNotFoundError):
@@ -134,8 +140,9 @@ def test_cmu_index_and_trials(fake_root, tmp_path):
 @needs_data
 def test_catalogue_of_the_real_data_matches_its_files():
     entries = catalogue(DATA)
-    by = {c: [e for e in entries if e.collection == c] for c in ("cmu", "cmu_bvh", "hdm05",
-                                                                 "bandai1")}
+    by = {
+        c: [e for e in entries if e.collection == c] for c in ("cmu", "cmu_bvh", "hdm05", "bandai1")
+    }
     assert len(by["cmu"]) == len(list((DATA / "cmu").glob("*/*.amc")))
     assert len(by["cmu_bvh"]) == len(list((DATA / "cmu_bvh").glob("*/*.bvh")))
     assert len(by["hdm05"]) == len(list((DATA / "hdm05" / "clips").glob("*/*.amc")))

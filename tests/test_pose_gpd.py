@@ -271,8 +271,6 @@ def test_orientations_from_positions() -> None:
     assert np.linalg.norm(np.delete(w, J["LElbow"], axis=0)) < 1e-9
 
 
-
-
 @pytest.mark.skipif(not (DATA / "cmu").is_dir(), reason=f"no mocap data folder at {DATA}")
 def test_real_clip_features_are_finite_and_stable() -> None:
     skeleton16 = pytest.importorskip("quatmotion.pose.skeleton16")

@@ -58,6 +58,7 @@ def test_trace_ratio_solvers_agree_and_respect_the_bounds() -> None:
     assert (info_n["eta_lower"], info_n["eta_upper"]) == (lower, upper)
     np.testing.assert_allclose(W_n.T @ W_n, np.eye(r), atol=1e-10)
     assert trace_ratio_objective(W_n, A, B) == pytest.approx(eta_n)
+
     # Eq. 33: f(eta) = max_W Tr(W^T (A - eta B) W) changes sign at eta*.
     def f(eta: float) -> float:
         return float(np.sum(np.linalg.eigvalsh(A - eta * B)[-r:]))

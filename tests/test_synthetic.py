@@ -17,10 +17,37 @@ from quatmotion.motion.synthetic import (
 )
 
 CMU_JOINTS = (
-    "root", "lhipjoint", "lfemur", "ltibia", "lfoot", "ltoes", "rhipjoint", "rfemur", "rtibia",
-    "rfoot", "rtoes", "lowerback", "upperback", "thorax", "lowerneck", "upperneck", "head",
-    "lclavicle", "lhumerus", "lradius", "lwrist", "lhand", "lfingers", "lthumb", "rclavicle",
-    "rhumerus", "rradius", "rwrist", "rhand", "rfingers", "rthumb",
+    "root",
+    "lhipjoint",
+    "lfemur",
+    "ltibia",
+    "lfoot",
+    "ltoes",
+    "rhipjoint",
+    "rfemur",
+    "rtibia",
+    "rfoot",
+    "rtoes",
+    "lowerback",
+    "upperback",
+    "thorax",
+    "lowerneck",
+    "upperneck",
+    "head",
+    "lclavicle",
+    "lhumerus",
+    "lradius",
+    "lwrist",
+    "lhand",
+    "lfingers",
+    "lthumb",
+    "rclavicle",
+    "rhumerus",
+    "rradius",
+    "rwrist",
+    "rhand",
+    "rfingers",
+    "rthumb",
 )
 
 
@@ -245,8 +272,9 @@ def test_knees_and_elbows_bend_the_human_way_in_a_run():
     heading = m.root_translation[-1, [0, 2]] - m.root_translation[0, [0, 2]]
     forward = heading / np.linalg.norm(heading)
     for side in "lr":
-        hip, knee, ankle = (pos[:, sk.index(side + n), [0, 2]] @ forward
-                            for n in ("femur", "tibia", "foot"))
+        hip, knee, ankle = (
+            pos[:, sk.index(side + n), [0, 2]] @ forward for n in ("femur", "tibia", "foot")
+        )
         # Knee in front of the hip-ankle line most of the time (it never hyperextends backwards).
         t = 0.5
         assert np.mean(knee >= hip + t * (ankle - hip) - 1.0) > 0.9

@@ -280,8 +280,11 @@ def catalogue(
     base = data_root() if root is None else Path(root).resolve()
     if not base.is_dir():
         raise DataNotFoundError(f"motion-capture data not found: {base} is not a folder")
-    wanted = COLLECTIONS if collection is None else (
-        (collection,) if isinstance(collection, str) else tuple(collection))
+    wanted = (
+        COLLECTIONS
+        if collection is None
+        else ((collection,) if isinstance(collection, str) else tuple(collection))
+    )
     unknown = [c for c in wanted if c not in COLLECTIONS]
     if unknown:
         raise ValueError(f"unknown collection(s) {unknown}; choose from {', '.join(COLLECTIONS)}")
@@ -297,10 +300,14 @@ def catalogue(
             entries += _bandai_entries(base)
     if labels:
         want = {k: str(v).lower() for k, v in labels.items()}
-        entries = [e for e in entries
-                   if all(e.labels.get(k, "").lower() == v for k, v in want.items())]
+        entries = [
+            e for e in entries if all(e.labels.get(k, "").lower() == v for k, v in want.items())
+        ]
     if match:
         needle = match.lower()
-        entries = [e for e in entries if needle in e.name.lower()
-                   or any(needle in v.lower() for v in e.labels.values())]
+        entries = [
+            e
+            for e in entries
+            if needle in e.name.lower() or any(needle in v.lower() for v in e.labels.values())
+        ]
     return entries

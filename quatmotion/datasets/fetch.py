@@ -58,8 +58,9 @@ def _subject_id(subject: int | str) -> str:
     return f"{number:02d}"
 
 
-def cmu_url(subject: int | str, trial: int | None = None,
-            base_url: str = DEFAULT_CMU_BASE_URL) -> str:
+def cmu_url(
+    subject: int | str, trial: int | None = None, base_url: str = DEFAULT_CMU_BASE_URL
+) -> str:
     """URL of a subject's ASF (``trial=None``) or of one trial's AMC.
 
     Parameters
@@ -196,9 +197,13 @@ def fetch_cmu(
     progress = None
     if show_progress:
         progress = Progress(
-            TextColumn("{task.description}"), BarColumn(), DownloadColumn(),
-            TransferSpeedColumn(), TimeRemainingColumn(),
-            console=console or Console(stderr=True), transient=False,
+            TextColumn("{task.description}"),
+            BarColumn(),
+            DownloadColumn(),
+            TransferSpeedColumn(),
+            TimeRemainingColumn(),
+            console=console or Console(stderr=True),
+            transient=False,
         )
     files: list[Path] = []
 

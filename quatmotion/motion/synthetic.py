@@ -74,14 +74,38 @@ _REST_LEG_SPLAY_DEG = 20.0  # CMU's femur axis: the T-pose legs point 20 deg awa
 
 # CMU subject 02's bones, left side (the right side mirrors them): name, parent, direction,
 # length in ASF units, axis (degrees, XYZ), dofs, limits in degrees per dof.
-_LEFT_BONES: tuple[tuple[str, str, tuple[float, float, float], float, tuple[float, float, float],
-                         tuple[str, ...], tuple[tuple[float, float], ...]], ...] = (
+_LEFT_BONES: tuple[
+    tuple[
+        str,
+        str,
+        tuple[float, float, float],
+        float,
+        tuple[float, float, float],
+        tuple[str, ...],
+        tuple[tuple[float, float], ...],
+    ],
+    ...,
+] = (
     ("lhipjoint", "root", (0.655637, -0.713449, 0.247245), 2.52691, (0, 0, 0), (), ()),
-    ("lfemur", "lhipjoint", (0.34202, -0.939693, 0), 7.59371, (0, 0, 20), ("rx", "ry", "rz"),
-     ((-160, 20), (-70, 70), (-60, 70))),
+    (
+        "lfemur",
+        "lhipjoint",
+        (0.34202, -0.939693, 0),
+        7.59371,
+        (0, 0, 20),
+        ("rx", "ry", "rz"),
+        ((-160, 20), (-70, 70), (-60, 70)),
+    ),
     ("ltibia", "lfemur", (0.34202, -0.939693, 0), 7.28717, (0, 0, 20), ("rx",), ((-10, 170),)),
-    ("lfoot", "ltibia", (0.0886837, -0.243657, 0.965798), 2.2218, (-90, 0, 20), ("rx", "rz"),
-     ((-45, 90), (-70, 20))),
+    (
+        "lfoot",
+        "ltibia",
+        (0.0886837, -0.243657, 0.965798),
+        2.2218,
+        (-90, 0, 20),
+        ("rx", "rz"),
+        ((-45, 90), (-70, 20)),
+    ),
     ("ltoes", "lfoot", (0, 0, 1), 1.11249, (-90, 0, 20), ("rx",), ((-90, 20),)),
 )
 _SPINE_BONES: tuple[tuple[str, str, tuple[float, float, float], float], ...] = (
@@ -93,18 +117,49 @@ _SPINE_BONES: tuple[tuple[str, str, tuple[float, float, float], float], ...] = (
     ("head", "upperneck", (0.008024, 0.999444, -0.0323691), 1.6265),
 )
 _SPINE_LIMITS = ((-20, 45), (-30, 30), (-30, 30))
-_LEFT_ARM: tuple[tuple[str, str, tuple[float, float, float], float, tuple[float, float, float],
-                       tuple[str, ...], tuple[tuple[float, float], ...]], ...] = (
-    ("lclavicle", "thorax", (0.967826, 0.247107, -0.0474446), 3.6598, (0, 0, 0), ("ry", "rz"),
-     ((-20, 10), (0, 20))),
-    ("lhumerus", "lclavicle", (1, 0, 0), 4.86513, (180, -30, -90), ("rx", "ry", "rz"),
-     ((-60, 90), (-90, 90), (-90, 90))),
+_LEFT_ARM: tuple[
+    tuple[
+        str,
+        str,
+        tuple[float, float, float],
+        float,
+        tuple[float, float, float],
+        tuple[str, ...],
+        tuple[tuple[float, float], ...],
+    ],
+    ...,
+] = (
+    (
+        "lclavicle",
+        "thorax",
+        (0.967826, 0.247107, -0.0474446),
+        3.6598,
+        (0, 0, 0),
+        ("ry", "rz"),
+        ((-20, 10), (0, 20)),
+    ),
+    (
+        "lhumerus",
+        "lclavicle",
+        (1, 0, 0),
+        4.86513,
+        (180, -30, -90),
+        ("rx", "ry", "rz"),
+        ((-60, 90), (-90, 90), (-90, 90)),
+    ),
     ("lradius", "lhumerus", (1, 0, 0), 3.35554, (180, -30, -90), ("rx",), ((-10, 170),)),
     ("lwrist", "lradius", (1, 0, 0), 1.67777, (0, 90, 90), ("ry",), ((-180, 0),)),
     ("lhand", "lwrist", (1, 0, 0), 0.661175, (0, 90, 90), ("rx", "rz"), ((-90, 90), (-45, 45))),
     ("lfingers", "lhand", (1, 0, 0), 0.533057, (0, 90, 90), ("rx",), ((0, 90),)),
-    ("lthumb", "lwrist", (0.707107, 0, 0.707107), 0.765366, (-90, 45, 0), ("rx", "rz"),
-     ((-45, 45), (-45, 45))),
+    (
+        "lthumb",
+        "lwrist",
+        (0.707107, 0, 0.707107),
+        0.765366,
+        (-90, 45, 0),
+        ("rx", "rz"),
+        ((-45, 45), (-45, 45)),
+    ),
 )
 # CMU's right-side limits are not an exact mirror of the left ones; these are subject 02's.
 _RIGHT_LIMITS: dict[str, tuple[tuple[float, float], ...]] = {
@@ -122,15 +177,20 @@ _RIGHT_LIMITS: dict[str, tuple[tuple[float, float], ...]] = {
 }
 
 
-def _mirror(name: str, parent: str, direction: tuple[float, float, float],
-            axis: tuple[float, float, float]) -> tuple[str, str, tuple[float, float, float],
-                                                       tuple[float, float, float]]:
+def _mirror(
+    name: str, parent: str, direction: tuple[float, float, float], axis: tuple[float, float, float]
+) -> tuple[str, str, tuple[float, float, float], tuple[float, float, float]]:
     """Right-side counterpart of a left bone: names swap l->r, X flips, the axis mirrors."""
+
     def swap(n: str) -> str:
         return "r" + n[1:] if n.startswith("l") and n not in ("lowerback", "lowerneck") else n
 
-    return (swap(name), swap(parent), (-direction[0], direction[1], direction[2]),
-            (axis[0], -axis[1], -axis[2]))
+    return (
+        swap(name),
+        swap(parent),
+        (-direction[0], direction[1], direction[2]),
+        (axis[0], -axis[1], -axis[2]),
+    )
 
 
 @dataclass(frozen=True)
@@ -153,8 +213,9 @@ def _cmu_bones() -> list[_Bone]:
                 limits = _RIGHT_LIMITS.get(name, limits)
             bones.append(_Bone(name, parent, direction, length, axis, dofs, limits))
     for name, parent, direction, length in _SPINE_BONES:
-        bones.append(_Bone(name, parent, direction, length, (0, 0, 0), ("rx", "ry", "rz"),
-                           _SPINE_LIMITS))
+        bones.append(
+            _Bone(name, parent, direction, length, (0, 0, 0), ("rx", "ry", "rz"), _SPINE_LIMITS)
+        )
     for side in ("l", "r"):
         for name, parent, direction, length, axis, dofs, limits in _LEFT_ARM:
             if side == "r":
@@ -191,30 +252,43 @@ def cmu_skeleton(height_cm: float = DEFAULT_HEIGHT_CM) -> Skeleton:
     bones = _cmu_bones()
     names = ["root"] + [b.name for b in bones]
     index = {n: i for i, n in enumerate(names)}
-    vectors = {b.name: np.asarray(b.direction) / np.linalg.norm(b.direction) * b.length
-               for b in bones}
+    vectors = {
+        b.name: np.asarray(b.direction) / np.linalg.norm(b.direction) * b.length for b in bones
+    }
     vectors["root"] = np.zeros(3)
     parents = [-1] + [index[b.parent] for b in bones]
     # A joint sits at its bone's start, i.e. at the end of its parent bone.
     offsets = np.stack([np.zeros(3)] + [vectors[b.parent] for b in bones])
     leaves = [b for b in bones if not any(c.parent == b.name for c in bones)]
     site_offsets = np.stack([vectors[b.name] for b in leaves])
-    axes = np.stack([quat.identity()] + [
-        quat.from_euler(np.asarray(b.axis, dtype=float), "xyz", degrees=True) for b in bones
-    ])
+    axes = np.stack(
+        [quat.identity()]
+        + [quat.from_euler(np.asarray(b.axis, dtype=float), "xyz", degrees=True) for b in bones]
+    )
     channels = [("tx", "ty", "tz", "rx", "ry", "rz")] + [b.dofs for b in bones]
     unit = Skeleton(
-        joint_names=tuple(names), parents=np.asarray(parents), offsets=offsets,
-        channels=tuple(channels), euler="extrinsic", axes=axes,
+        joint_names=tuple(names),
+        parents=np.asarray(parents),
+        offsets=offsets,
+        channels=tuple(channels),
+        euler="extrinsic",
+        axes=axes,
         site_names=tuple(f"{b.name}_end" for b in leaves),
-        site_parents=np.asarray([index[b.name] for b in leaves]), site_offsets=site_offsets,
+        site_parents=np.asarray([index[b.name] for b in leaves]),
+        site_offsets=site_offsets,
     )
     limits = {"root": ((-180.0, 180.0),) * 3}
     limits.update({b.name: tuple((float(lo), float(hi)) for lo, hi in b.limits) for b in bones})
     unit = Skeleton(
-        joint_names=unit.joint_names, parents=unit.parents, offsets=unit.offsets,
-        channels=unit.channels, euler="extrinsic", axes=unit.axes, site_names=unit.site_names,
-        site_parents=unit.site_parents, site_offsets=unit.site_offsets,
+        joint_names=unit.joint_names,
+        parents=unit.parents,
+        offsets=unit.offsets,
+        channels=unit.channels,
+        euler="extrinsic",
+        axes=unit.axes,
+        site_names=unit.site_names,
+        site_parents=unit.site_parents,
+        site_offsets=unit.site_offsets,
         extras={"dof_limits_deg": limits},
     )
     # The T-pose splays the legs, so "standing height" is measured in the neutral standing pose.
@@ -230,19 +304,30 @@ def cmu_skeleton(height_cm: float = DEFAULT_HEIGHT_CM) -> Skeleton:
     bone_vectors.setflags(write=False)
     asf_bones = tuple(
         {
-            "id": k + 1, "name": b.name,
-            "direction": tuple(float(v) for v in np.asarray(b.direction) / np.linalg.norm(
-                b.direction)),
-            "length": float(b.length), "axis": tuple(float(v) for v in b.axis),
-            "axis_order": "xyz", "dof": b.dofs,
-            "limits": tuple((f"{lo:g}", f"{hi:g}") for lo, hi in b.limits), "other": (),
+            "id": k + 1,
+            "name": b.name,
+            "direction": tuple(
+                float(v) for v in np.asarray(b.direction) / np.linalg.norm(b.direction)
+            ),
+            "length": float(b.length),
+            "axis": tuple(float(v) for v in b.axis),
+            "axis_order": "xyz",
+            "dof": b.dofs,
+            "limits": tuple((f"{lo:g}", f"{hi:g}") for lo, hi in b.limits),
+            "other": (),
         }
         for k, b in enumerate(bones)
     )
     return Skeleton(
-        joint_names=unit.joint_names, parents=unit.parents, offsets=unit.offsets * scale,
-        channels=unit.channels, euler="extrinsic", axes=unit.axes, site_names=unit.site_names,
-        site_parents=unit.site_parents, site_offsets=unit.site_offsets * scale,
+        joint_names=unit.joint_names,
+        parents=unit.parents,
+        offsets=unit.offsets * scale,
+        channels=unit.channels,
+        euler="extrinsic",
+        axes=unit.axes,
+        site_names=unit.site_names,
+        site_parents=unit.site_parents,
+        site_offsets=unit.site_offsets * scale,
         name=f"synthetic_cmu_{height_cm:g}cm",
         extras={
             "dof_limits_deg": limits,
@@ -251,10 +336,17 @@ def cmu_skeleton(height_cm: float = DEFAULT_HEIGHT_CM) -> Skeleton:
             "asf_version": "1.10",
             "asf_name": f"synthetic_cmu_{height_cm:g}cm",
             "asf_documentation": ("generated by quatmotion.motion.synthetic (CMU-like layout)",),
-            "asf_units": (("mass", "1.0"), ("length", f"{2.54 / length_scale:.10g}"),
-                          ("angle", "deg")),
-            "asf_root": {"order": ("TX", "TY", "TZ", "RX", "RY", "RZ"), "axis": "xyz",
-                         "position": (0.0, 0.0, 0.0), "orientation": (0.0, 0.0, 0.0)},
+            "asf_units": (
+                ("mass", "1.0"),
+                ("length", f"{2.54 / length_scale:.10g}"),
+                ("angle", "deg"),
+            ),
+            "asf_root": {
+                "order": ("TX", "TY", "TZ", "RX", "RY", "RZ"),
+                "axis": "xyz",
+                "position": (0.0, 0.0, 0.0),
+                "orientation": (0.0, 0.0, 0.0),
+            },
             "asf_bones": asf_bones,
             "asf_hierarchy": hierarchy,
             "length_scale": length_scale,
@@ -314,8 +406,9 @@ def foot_positions(motion: Motion) -> dict[str, FloatArray]:
     for side in ("l", "r"):
         ankle, ball = sk.index(f"{side}foot"), sk.index(f"{side}toes")
         tip = sk.n_joints + sk.site_names.index(f"{side}toes_end")
-        heel_offset = np.array([0.0, rest[ball, 1] - rest[ankle, 1],
-                                -_HEEL_BACK_FRACTION * _standing_height(sk)])
+        heel_offset = np.array(
+            [0.0, rest[ball, 1] - rest[ankle, 1], -_HEEL_BACK_FRACTION * _standing_height(sk)]
+        )
         heel = points[:, ankle] + quat.rotate(pose.rotations[:, ankle], heel_offset)
         out[side] = np.stack((heel, points[:, ankle], points[:, ball], points[:, tip]), axis=1)
     return out
@@ -380,44 +473,56 @@ def _local_rotations(sk: Skeleton, angles: dict[str, FloatArray], T: int) -> Flo
         c = sk.axes[j]
         rot[:, j] = quat.multiply(quat.multiply(c, m), quat.conjugate(c))
 
-    pelvis_tilt = _chain(_axis_rotation("x", a("pelvis_pitch")),
-                         _axis_rotation("z", -a("pelvis_roll")))
-    set_world("root", quat.multiply(_axis_rotation("y", a("heading") + a("pelvis_yaw")),
-                                    pelvis_tilt))
+    pelvis_tilt = _chain(
+        _axis_rotation("x", a("pelvis_pitch")), _axis_rotation("z", -a("pelvis_roll"))
+    )
+    set_world(
+        "root", quat.multiply(_axis_rotation("y", a("heading") + a("pelvis_yaw")), pelvis_tilt)
+    )
     # The legs are designed in the heading frame (what balance and foot placement see), so the
     # pelvis tilt is undone at the hips; the pelvis yaw still carries them, as it does in gait.
     untilt = quat.conjugate(pelvis_tilt)
     for name in ("lowerback", "upperback", "thorax"):
-        set_world(name, _chain(
-            _axis_rotation("y", a("spine_twist") / 3),
-            _axis_rotation("x", a("spine_flex") / 3),
-            _axis_rotation("z", -a("spine_side") / 3),
-        ))
+        set_world(
+            name,
+            _chain(
+                _axis_rotation("y", a("spine_twist") / 3),
+                _axis_rotation("x", a("spine_flex") / 3),
+                _axis_rotation("z", -a("spine_side") / 3),
+            ),
+        )
     for name in ("lowerneck", "upperneck"):
         set_world(name, _axis_rotation("x", a("neck_flex") / 2))
     set_world("head", _axis_rotation("y", a("head_turn")))
     for side, s in (("l", 1.0), ("r", -1.0)):
         # Hip: CMU's rest legs splay 20 deg outward (the femur axis); adduct them to vertical
         # first, then twist about the thigh, abduct outward and flex forward (-x).
-        set_world(f"{side}femur", _chain(
-            untilt,
-            _axis_rotation("x", -a(f"{side}_hip_flex")),
-            _axis_rotation("z", s * a(f"{side}_hip_abd")),
-            _axis_rotation("y", -s * a(f"{side}_hip_twist")),
-            _axis_rotation("z", np.full(T, -s * _REST_LEG_SPLAY_DEG)),
-        ))
+        set_world(
+            f"{side}femur",
+            _chain(
+                untilt,
+                _axis_rotation("x", -a(f"{side}_hip_flex")),
+                _axis_rotation("z", s * a(f"{side}_hip_abd")),
+                _axis_rotation("y", -s * a(f"{side}_hip_twist")),
+                _axis_rotation("z", np.full(T, -s * _REST_LEG_SPLAY_DEG)),
+            ),
+        )
         set_dofs(f"{side}tibia", {"rx": a(f"{side}_knee", 2.0)})
         set_dofs(f"{side}foot", {"rx": -a(f"{side}_ankle"), "rz": s * a(f"{side}_foot_turn")})
         set_dofs(f"{side}toes", {"rx": -a(f"{side}_toe")})
-        set_dofs(f"{side}clavicle", {"rz": s * a(f"{side}_clav_elev"),
-                                     "ry": -s * a(f"{side}_clav_fwd")})
+        set_dofs(
+            f"{side}clavicle", {"rz": s * a(f"{side}_clav_elev"), "ry": -s * a(f"{side}_clav_fwd")}
+        )
         # Shoulder from CMU's T-pose: twist 30 deg about the arm so the elbow hinges forward when
         # the arm hangs, abduction 0 = arm down, 90 = sideways, 180 = overhead, then flexion.
-        set_world(f"{side}humerus", _chain(
-            _axis_rotation("x", -a(f"{side}_sh_flex")),
-            _axis_rotation("z", s * (a(f"{side}_sh_abd", 8.0) - 90.0)),
-            _axis_rotation("x", 30.0 + a(f"{side}_sh_twist")),
-        ))
+        set_world(
+            f"{side}humerus",
+            _chain(
+                _axis_rotation("x", -a(f"{side}_sh_flex")),
+                _axis_rotation("z", s * (a(f"{side}_sh_abd", 8.0) - 90.0)),
+                _axis_rotation("x", 30.0 + a(f"{side}_sh_twist")),
+            ),
+        )
         set_dofs(f"{side}radius", {"rx": a(f"{side}_elbow", 12.0)})
         set_dofs(f"{side}wrist", {"ry": -np.abs(a(f"{side}_wrist", 5.0))})
         set_dofs(f"{side}hand", {"rx": a(f"{side}_hand", 0.0), "rz": 0.0})
@@ -437,8 +542,9 @@ def _timeline(t: FloatArray, keys: Sequence[tuple[float, float]]) -> FloatArray:
     return PchipInterpolator(x, y, extrapolate=False)(np.clip(t, x[0], x[-1]))
 
 
-def _smooth_noise(rng: np.random.Generator, t: FloatArray, amplitude: float,
-                  max_hz: float = 0.7, n_waves: int = 3) -> FloatArray:
+def _smooth_noise(
+    rng: np.random.Generator, t: FloatArray, amplitude: float, max_hz: float = 0.7, n_waves: int = 3
+) -> FloatArray:
     """A smooth random signal of RMS about ``amplitude``: a sum of slow random sinusoids."""
     freqs = rng.uniform(0.1, max_hz, n_waves)
     phases = rng.uniform(0.0, 2 * np.pi, n_waves)
@@ -480,24 +586,30 @@ def _phase(rng: np.random.Generator, t: FloatArray, hz: float, style: _Style) ->
 
 def _standing(T: int) -> dict[str, FloatArray]:
     return {
-        "l_knee": np.full(T, 3.0), "r_knee": np.full(T, 3.0),
-        "l_hip_abd": np.full(T, 3.0), "r_hip_abd": np.full(T, 3.0),
-        "l_sh_abd": np.full(T, 8.0), "r_sh_abd": np.full(T, 8.0),
+        "l_knee": np.full(T, 3.0),
+        "r_knee": np.full(T, 3.0),
+        "l_hip_abd": np.full(T, 3.0),
+        "r_hip_abd": np.full(T, 3.0),
+        "l_sh_abd": np.full(T, 8.0),
+        "r_sh_abd": np.full(T, 8.0),
     }
 
 
 def _flat_feet(angles: dict[str, FloatArray], T: int) -> None:
     """Ankle dorsiflexion that keeps each sole level: knee flexion minus hip flexion."""
     for side in ("l", "r"):
-        angles[f"{side}_ankle"] = (_get(angles, f"{side}_knee", T, 2.0)
-                                   - _get(angles, f"{side}_hip_flex", T))
+        angles[f"{side}_ankle"] = _get(angles, f"{side}_knee", T, 2.0) - _get(
+            angles, f"{side}_hip_flex", T
+        )
 
 
 # --------------------------------------------------------------------------------------------
 # The kinds. Each returns the pose angles over ``t`` (seconds) and the feet in stance.
 
-def _leg_ik(z: FloatArray, y: FloatArray, thigh: float, shin: float) -> tuple[FloatArray,
-                                                                             FloatArray]:
+
+def _leg_ik(
+    z: FloatArray, y: FloatArray, thigh: float, shin: float
+) -> tuple[FloatArray, FloatArray]:
     """Hip and knee flexion (degrees) that put the ankle at ``(z, y)`` cm from the hip.
 
     Sagittal two-link inverse kinematics in the heading frame (``z`` forward, ``y`` up, the leg
@@ -510,8 +622,11 @@ def _leg_ik(z: FloatArray, y: FloatArray, thigh: float, shin: float) -> tuple[Fl
     return np.rad2deg(line + spread), np.rad2deg(np.pi - inner)
 
 
-_LEG_KEYS = tuple(f"{side}_{name}" for side in "lr" for name in (
-    "hip_flex", "hip_abd", "hip_twist", "knee", "ankle", "toe", "foot_turn"))
+_LEG_KEYS = tuple(
+    f"{side}_{name}"
+    for side in "lr"
+    for name in ("hip_flex", "hip_abd", "hip_twist", "knee", "ankle", "toe", "foot_turn")
+)
 """Leg angles: kinds that plant both feet keep them exact, so no foot lifts or slides."""
 
 
@@ -539,8 +654,11 @@ def _locomotion(t: FloatArray, rng: np.random.Generator, style: _Style, run: boo
         in_stance = p < duty
         s_stance = p / duty
         s_swing = (p - duty) / (1.0 - duty)
-        z = np.where(in_stance, stride * (0.5 - s_stance),
-                     stride * (-0.5 + 0.5 * (1.0 - np.cos(np.pi * np.clip(s_swing, 0.0, 1.0)))))
+        z = np.where(
+            in_stance,
+            stride * (0.5 - s_stance),
+            stride * (-0.5 + 0.5 * (1.0 - np.cos(np.pi * np.clip(s_swing, 0.0, 1.0)))),
+        )
         if run:
             level = np.sqrt((0.99 * leg) ** 2 - (stride / 2) ** 2)
             y_stance = -(level - 4.0 * np.sin(np.pi * s_stance) ** 2)
@@ -553,8 +671,15 @@ def _locomotion(t: FloatArray, rng: np.random.Generator, style: _Style, run: boo
         angles[f"{side}_hip_flex"] = hip
         angles[f"{side}_knee"] = knee
         # Sole level in stance; in swing the toes drop a little after push-off.
-        angles[f"{side}_ankle"] = knee - hip - np.where(in_stance, 0.0, 12.0 * np.sin(
-            np.pi * np.clip(s_swing, 0.0, 1.0)) * (1.0 if run else 0.5))
+        angles[f"{side}_ankle"] = (
+            knee
+            - hip
+            - np.where(
+                in_stance,
+                0.0,
+                12.0 * np.sin(np.pi * np.clip(s_swing, 0.0, 1.0)) * (1.0 if run else 0.5),
+            )
+        )
         angles[f"{side}_hip_abd"] = np.full(T, 2.0)
         # The arm swings against the leg on its side.
         swing = (z / (stride / 2)) * (30.0 if run else 18.0) * g
@@ -569,8 +694,9 @@ def _locomotion(t: FloatArray, rng: np.random.Generator, style: _Style, run: boo
     angles["spine_twist"] = 8.0 * style.amplitude * np.cos(cycle)
     angles["spine_flex"] = np.full(T, lean * 0.5)
     angles["neck_flex"] = np.full(T, -lean * 0.8)
-    return _Plan(angles, stance if run else np.ones((T, 2)), contact_from_height=True,
-                 no_jitter=_LEG_KEYS)
+    return _Plan(
+        angles, stance if run else np.ones((T, 2)), contact_from_height=True, no_jitter=_LEG_KEYS
+    )
 
 
 def _walk(t: FloatArray, rng: np.random.Generator, style: _Style) -> _Plan:
@@ -599,13 +725,29 @@ def _jump(t: FloatArray, rng: np.random.Generator, style: _Style) -> _Plan:
         t0 = start + n * period
         takeoff = t0 + 0.75
         land = takeoff + flight
-        keys_c = [(t0, 0), (t0 + 0.45, depth), (t0 + 0.55, depth), (takeoff, 0.0), (land, 0.0),
-                  (land + 0.18, 0.6 * depth), (land + 0.7, 0.0)]
+        keys_c = [
+            (t0, 0),
+            (t0 + 0.45, depth),
+            (t0 + 0.55, depth),
+            (takeoff, 0.0),
+            (land, 0.0),
+            (land + 0.18, 0.6 * depth),
+            (land + 0.7, 0.0),
+        ]
         crouch += _timeline(t, keys_c)
-        extend += _timeline(t, [(t0 + 0.5, 0), (takeoff - 0.02, 1.0), (takeoff + 0.1, 0.6),
-                                (land, 0.4), (land + 0.1, 0.0)])
-        arms += _timeline(t, [(t0, 0.0), (t0 + 0.45, -1.0), (takeoff, 1.0), (land, 0.6),
-                              (land + 0.7, 0.0)])
+        extend += _timeline(
+            t,
+            [
+                (t0 + 0.5, 0),
+                (takeoff - 0.02, 1.0),
+                (takeoff + 0.1, 0.6),
+                (land, 0.4),
+                (land + 0.1, 0.0),
+            ],
+        )
+        arms += _timeline(
+            t, [(t0, 0.0), (t0 + 0.45, -1.0), (takeoff, 1.0), (land, 0.6), (land + 0.7, 0.0)]
+        )
         airborne = (t >= takeoff) & (t < land)
         stance[airborne] = 0.0
         drift[airborne] += forward / max(1, int(np.sum(airborne)))
@@ -707,12 +849,30 @@ def _kick(t: FloatArray, rng: np.random.Generator, style: _Style) -> _Plan:
     for n in range(n_kicks):
         t0 = start + n * period
         d = 0.9 / style.tempo
-        hip += _timeline(t, [(t0, 0), (t0 + 0.25 * d, 55), (t0 + 0.42 * d, height),
-                             (t0 + 0.6 * d, 55), (t0 + d, 0)])
-        knee += _timeline(t, [(t0, 0), (t0 + 0.25 * d, 100), (t0 + 0.42 * d, 5),
-                              (t0 + 0.6 * d, 95), (t0 + d, 0)])
-        ankle += _timeline(t, [(t0, 0), (t0 + 0.15 * d, 0), (t0 + 0.25 * d, -15),
-                               (t0 + 0.42 * d, -35), (t0 + 0.6 * d, -15), (t0 + 0.8 * d, 0)])
+        hip += _timeline(
+            t,
+            [
+                (t0, 0),
+                (t0 + 0.25 * d, 55),
+                (t0 + 0.42 * d, height),
+                (t0 + 0.6 * d, 55),
+                (t0 + d, 0),
+            ],
+        )
+        knee += _timeline(
+            t, [(t0, 0), (t0 + 0.25 * d, 100), (t0 + 0.42 * d, 5), (t0 + 0.6 * d, 95), (t0 + d, 0)]
+        )
+        ankle += _timeline(
+            t,
+            [
+                (t0, 0),
+                (t0 + 0.15 * d, 0),
+                (t0 + 0.25 * d, -15),
+                (t0 + 0.42 * d, -35),
+                (t0 + 0.6 * d, -15),
+                (t0 + 0.8 * d, 0),
+            ],
+        )
         lifted += ((t > t0 + 0.05 * d) & (t < t0 + 0.95 * d)).astype(float)
     angles = _standing(T)
     angles[f"{kick}_hip_flex"] = hip
@@ -746,8 +906,9 @@ def _wave(t: FloatArray, rng: np.random.Generator, style: _Style) -> _Plan:
     angles[f"{side}_sh_abd"] = 8.0 + raise_ * (95.0 + rng.uniform(-10.0, 20.0))
     angles[f"{side}_sh_flex"] = raise_ * 20.0
     # External rotation turns the hinge so the bent forearm points up, then rocks it.
-    angles[f"{side}_sh_twist"] = raise_ * (-90.0 + 25.0 * style.amplitude
-                                           * np.sin(2 * np.pi * phase))
+    angles[f"{side}_sh_twist"] = raise_ * (
+        -90.0 + 25.0 * style.amplitude * np.sin(2 * np.pi * phase)
+    )
     angles[f"{side}_elbow"] = 12.0 + raise_ * 85.0
     angles[f"{side}_clav_elev"] = raise_ * 10.0
     angles["spine_side"] = raise_ * (-3.0 if side == "l" else 3.0)
@@ -806,8 +967,9 @@ _NO_JITTER = ("heading",)
 # Root placement
 
 
-def _place_root(sk: Skeleton, rotations: FloatArray, plan: _Plan, fps: float,
-                start_xz: FloatArray) -> FloatArray:
+def _place_root(
+    sk: Skeleton, rotations: FloatArray, plan: _Plan, fps: float, start_xz: FloatArray
+) -> FloatArray:
     """Root translation ``(T, 3)`` cm that grounds the feet and keeps planted feet still."""
     T = rotations.shape[0]
     floating = foot_positions(Motion(sk, fps, np.zeros((T, 3)), rotations))
@@ -821,13 +983,15 @@ def _place_root(sk: Skeleton, rotations: FloatArray, plan: _Plan, fps: float,
         # kind's stance pattern still says when the body is airborne.
         above = lowest - np.min(lowest, axis=1, keepdims=True)
         stance = np.clip(1.0 - above / _CONTACT_BAND_CM, 0.0, 1.0) * (
-            np.sum(stance, axis=1, keepdims=True) > 1e-6)
+            np.sum(stance, axis=1, keepdims=True) > 1e-6
+        )
     airborne = np.sum(stance, axis=1) < 1e-6
     # Ballistic arcs over each airborne stretch: h(s) = g/2 s (tau - s).
     if np.any(airborne):
         edges = np.diff(np.concatenate(([0], airborne.astype(int), [0])))
-        for first, stop in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1),
-                               strict=True):
+        for first, stop in zip(
+            np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True
+        ):
             s = (np.arange(first, stop) - first + 1.0) / fps
             tau = (stop - first + 1.0) / fps
             height[first:stop] += 0.5 * GRAVITY_CM_S2 * s * (tau - s)
@@ -845,13 +1009,15 @@ def _place_root(sk: Skeleton, rotations: FloatArray, plan: _Plan, fps: float,
         total = w.sum(axis=1)
         grounded = total > 1e-6
         root_v = np.zeros((T - 1, 2))
-        root_v[grounded] = -np.einsum("tf,tfc->tc", w[grounded], velocity[grounded]) / total[
-            grounded, None]
+        root_v[grounded] = (
+            -np.einsum("tf,tfc->tc", w[grounded], velocity[grounded]) / total[grounded, None]
+        )
         if np.any(grounded) and not np.all(grounded):
             frames = np.arange(T - 1)
             for c in range(2):
-                root_v[~grounded, c] = np.interp(frames[~grounded], frames[grounded],
-                                                 root_v[grounded, c])
+                root_v[~grounded, c] = np.interp(
+                    frames[~grounded], frames[grounded], root_v[grounded, c]
+                )
         if plan.flight_drift is not None:
             heading = np.deg2rad(_get(plan.angles, "heading", T)[1:])
             forward = np.stack((np.sin(heading), np.cos(heading)), axis=1)
@@ -866,8 +1032,13 @@ def _place_root(sk: Skeleton, rotations: FloatArray, plan: _Plan, fps: float,
 # Public API
 
 
-def generate_clip(kind: str, seed: int, n_frames: int | None = None, fps: float = 120.0,
-                  skeleton: Skeleton | None = None) -> Motion:
+def generate_clip(
+    kind: str,
+    seed: int,
+    n_frames: int | None = None,
+    fps: float = 120.0,
+    skeleton: Skeleton | None = None,
+) -> Motion:
     """One procedural clip of ``kind``, a pure function of its arguments.
 
     The style is drawn from ``seed``: tempo (x0.8-1.25), amplitude (x0.8-1.2), left-right
@@ -925,12 +1096,14 @@ def generate_clip(kind: str, seed: int, n_frames: int | None = None, fps: float 
     rotations = _local_rotations(sk, plan.angles, T)
     start_xz = rng.uniform(-100.0, 100.0, 2)
     root = _place_root(sk, rotations, plan, fps, start_xz)
-    return Motion(skeleton=sk, fps=fps, root_translation=root, rotations=rotations,
-                  name=f"{kind}_{int(seed)}")
+    return Motion(
+        skeleton=sk, fps=fps, root_translation=root, rotations=rotations, name=f"{kind}_{int(seed)}"
+    )
 
 
-def generate_library(n_per_kind: int, kinds: Sequence[str] | None = None, seed: int = 0,
-                     fps: float = 120.0) -> list[tuple[Motion, str]]:
+def generate_library(
+    n_per_kind: int, kinds: Sequence[str] | None = None, seed: int = 0, fps: float = 120.0
+) -> list[tuple[Motion, str]]:
     """``n_per_kind`` labelled clips of every kind, seeds derived from ``seed``.
 
     Parameters
