@@ -72,20 +72,20 @@ _CONTACT_BAND_CM = 2.0  # a foot this close to the floor bears weight (contact f
 _ROOT_SMOOTHING_S = 0.08  # std of the Gaussian that smooths the root's horizontal velocity
 _REST_LEG_SPLAY_DEG = 20.0  # CMU's femur axis: the T-pose legs point 20 deg away from vertical
 
+# One bone: name, parent, direction, length, axis, dofs, limits.
+_BoneRow = tuple[
+    str,
+    str,
+    tuple[float, float, float],
+    float,
+    tuple[float, float, float],
+    tuple[str, ...],
+    tuple[tuple[float, float], ...],
+]
+
 # CMU subject 02's bones, left side (the right side mirrors them): name, parent, direction,
 # length in ASF units, axis (degrees, XYZ), dofs, limits in degrees per dof.
-_LEFT_BONES: tuple[
-    tuple[
-        str,
-        str,
-        tuple[float, float, float],
-        float,
-        tuple[float, float, float],
-        tuple[str, ...],
-        tuple[tuple[float, float], ...],
-    ],
-    ...,
-] = (
+_LEFT_BONES: tuple[_BoneRow, ...] = (
     ("lhipjoint", "root", (0.655637, -0.713449, 0.247245), 2.52691, (0, 0, 0), (), ()),
     (
         "lfemur",
@@ -117,18 +117,7 @@ _SPINE_BONES: tuple[tuple[str, str, tuple[float, float, float], float], ...] = (
     ("head", "upperneck", (0.008024, 0.999444, -0.0323691), 1.6265),
 )
 _SPINE_LIMITS = ((-20, 45), (-30, 30), (-30, 30))
-_LEFT_ARM: tuple[
-    tuple[
-        str,
-        str,
-        tuple[float, float, float],
-        float,
-        tuple[float, float, float],
-        tuple[str, ...],
-        tuple[tuple[float, float], ...],
-    ],
-    ...,
-] = (
+_LEFT_ARM: tuple[_BoneRow, ...] = (
     (
         "lclavicle",
         "thorax",
