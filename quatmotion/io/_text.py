@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from quatmotion import quat
 from quatmotion._atomic import atomic_write_bytes
 from quatmotion.errors import FormatError
+from quatmotion.quat.jit import about_axis, multiply
 
 # Bytes that never occur in a text file: C0 controls except tab, LF, VT, FF, CR; and DEL.
 _BINARY = re.compile(rb"[\x00-\x08\x0e-\x1f\x7f]")
@@ -104,14 +105,6 @@ def atomic_write(path: str | Path, text: str) -> None:
 _AXIS_INDEX = {"x": 1, "y": 2, "z": 3}
 
 
-def _elementary(angles: NDArray[np.float64], axis: str) -> NDArray[np.float64]:
-    """Rotations about one coordinate axis: ``(...,)`` radians -> ``(..., 4)``."""
-    q = np.zeros((*angles.shape, 4))
-    q[..., 0] = np.cos(angles / 2)
-    q[..., _AXIS_INDEX[axis]] = np.sin(angles / 2)
-    return q
-
-
 def compose_channels(
     angles: NDArray[np.float64], axes: str, intrinsic: bool
 ) -> NDArray[np.float64]:
@@ -135,16 +128,14 @@ def compose_channels(
         return quat.from_euler(angles, axes.upper() if intrinsic else axes.lower())
     out = quat.identity(angles.shape[:-1])
     for i, axis in enumerate(axes):
-        e = _elementary(angles[..., i], axis)
+        e = quat.about_axis(angles[..., i], axis)
         out = e if i == 0 else (quat.multiply(out, e) if intrinsic else quat.multiply(e, out))
     return out
 
 
 def _sign_of_product(later: str, first: str) -> tuple[int, float]:
     """Index and sign of ``e_later * e_first = sign * e_third`` for unit quaternion axes."""
-    product = quat.multiply(
-        _elementary(np.array(np.pi), later), _elementary(np.array(np.pi), first)
-    )
+    product = quat.multiply(quat.about_axis(np.pi, later), quat.about_axis(np.pi, first))
     third = int(np.argmax(np.abs(product[1:]))) + 1
     return third, float(np.sign(product[third]))
 
@@ -351,26 +342,12 @@ def _compose_axis_angles(angles, axis_vectors, n_axes, intrinsic):  # pragma: no
         for j in range(J):
             w, x, y, z = 1.0, 0.0, 0.0, 0.0
             for i in range(n_axes[j]):
-                half = 0.5 * angles[t, j, i]
-                s = np.sin(half)
-                ew = np.cos(half)
-                ex = s * axis_vectors[j, i, 0]
-                ey = s * axis_vectors[j, i, 1]
-                ez = s * axis_vectors[j, i, 2]
+                u = axis_vectors[j, i]
+                ew, ex, ey, ez = about_axis(angles[t, j, i], u[0], u[1], u[2])
                 if intrinsic:  # q <- q e
-                    w, x, y, z = (
-                        w * ew - x * ex - y * ey - z * ez,
-                        w * ex + x * ew + y * ez - z * ey,
-                        w * ey - x * ez + y * ew + z * ex,
-                        w * ez + x * ey - y * ex + z * ew,
-                    )
+                    w, x, y, z = multiply(w, x, y, z, ew, ex, ey, ez)
                 else:  # q <- e q
-                    w, x, y, z = (
-                        ew * w - ex * x - ey * y - ez * z,
-                        ew * x + ex * w + ey * z - ez * y,
-                        ew * y - ex * z + ey * w + ez * x,
-                        ew * z + ex * y - ey * x + ez * w,
-                    )
+                    w, x, y, z = multiply(ew, ex, ey, ez, w, x, y, z)
             out[t, j, 0] = w
             out[t, j, 1] = x
             out[t, j, 2] = y

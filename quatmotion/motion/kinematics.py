@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion.motion.clip import Motion
+from quatmotion.quat.jit import multiply, rotate
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,18 +42,6 @@ class Pose:
         return np.concatenate((self.positions, self.site_positions), axis=1)
 
 
-@numba.njit(inline="always")
-def _rotate_into(q: np.ndarray, v0: float, v1: float, v2: float, out: np.ndarray) -> None:
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    # v + 2 w (u x v) + 2 u x (u x v), u = (x, y, z)
-    c0 = y * v2 - z * v1
-    c1 = z * v0 - x * v2
-    c2 = x * v1 - y * v0
-    out[0] += v0 + 2.0 * (w * c0 + y * c2 - z * c1)
-    out[1] += v1 + 2.0 * (w * c1 + z * c0 - x * c2)
-    out[2] += v2 + 2.0 * (w * c2 + x * c1 - y * c0)
-
-
 @numba.njit(cache=True)
 def _fk_kernel(
     local: np.ndarray,
@@ -76,18 +65,24 @@ def _fk_kernel(
             p = parents[j]
             a = glob[t, p]
             b = local[t, j]
-            glob[t, j, 0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
-            glob[t, j, 1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
-            glob[t, j, 2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
-            glob[t, j, 3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
-            pos[t, j] = pos[t, p]
+            w, x, y, z = multiply(a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3])
+            glob[t, j, 0] = w
+            glob[t, j, 1] = x
+            glob[t, j, 2] = y
+            glob[t, j, 3] = z
             o = translations[t, j] if use_translations else offsets[j]
-            _rotate_into(a, o[0], o[1], o[2], pos[t, j])
+            dx, dy, dz = rotate(a[0], a[1], a[2], a[3], o[0], o[1], o[2])
+            pos[t, j, 0] = pos[t, p, 0] + dx
+            pos[t, j, 1] = pos[t, p, 1] + dy
+            pos[t, j, 2] = pos[t, p, 2] + dz
         for s in range(S):
             p = site_parents[s]
-            sites[t, s] = pos[t, p]
+            a = glob[t, p]
             o = site_offsets[s]
-            _rotate_into(glob[t, p], o[0], o[1], o[2], sites[t, s])
+            dx, dy, dz = rotate(a[0], a[1], a[2], a[3], o[0], o[1], o[2])
+            sites[t, s, 0] = pos[t, p, 0] + dx
+            sites[t, s, 1] = pos[t, p, 1] + dy
+            sites[t, s, 2] = pos[t, p, 2] + dz
     return pos, glob, sites
 
 

@@ -407,15 +407,6 @@ def foot_positions(motion: Motion) -> dict[str, FloatArray]:
 # Pose parameters -> local rotations
 
 
-def _axis_rotation(axis: str, degrees: FloatArray) -> FloatArray:
-    """Rotations about a world axis ``'x'|'y'|'z'`` by ``degrees``: ``(T,) -> (T, 4)``."""
-    half = np.deg2rad(np.asarray(degrees, dtype=float)) / 2.0
-    q = np.zeros((*half.shape, 4))
-    q[..., 0] = np.cos(half)
-    q[..., "xyz".index(axis) + 1] = np.sin(half)
-    return q
-
-
 def _chain(*rotations: FloatArray) -> FloatArray:
     """Product ``r0 r1 ... rn``: the last one is applied first."""
     out = rotations[0]
@@ -463,10 +454,14 @@ def _local_rotations(sk: Skeleton, angles: dict[str, FloatArray], T: int) -> Flo
         rot[:, j] = quat.multiply(quat.multiply(c, m), quat.conjugate(c))
 
     pelvis_tilt = _chain(
-        _axis_rotation("x", a("pelvis_pitch")), _axis_rotation("z", -a("pelvis_roll"))
+        quat.about_axis(a("pelvis_pitch"), "x", degrees=True),
+        quat.about_axis(-a("pelvis_roll"), "z", degrees=True),
     )
     set_world(
-        "root", quat.multiply(_axis_rotation("y", a("heading") + a("pelvis_yaw")), pelvis_tilt)
+        "root",
+        quat.multiply(
+            quat.about_axis(a("heading") + a("pelvis_yaw"), "y", degrees=True), pelvis_tilt
+        ),
     )
     # The legs are designed in the heading frame (what balance and foot placement see), so the
     # pelvis tilt is undone at the hips; the pelvis yaw still carries them, as it does in gait.
@@ -475,14 +470,14 @@ def _local_rotations(sk: Skeleton, angles: dict[str, FloatArray], T: int) -> Flo
         set_world(
             name,
             _chain(
-                _axis_rotation("y", a("spine_twist") / 3),
-                _axis_rotation("x", a("spine_flex") / 3),
-                _axis_rotation("z", -a("spine_side") / 3),
+                quat.about_axis(a("spine_twist") / 3, "y", degrees=True),
+                quat.about_axis(a("spine_flex") / 3, "x", degrees=True),
+                quat.about_axis(-a("spine_side") / 3, "z", degrees=True),
             ),
         )
     for name in ("lowerneck", "upperneck"):
-        set_world(name, _axis_rotation("x", a("neck_flex") / 2))
-    set_world("head", _axis_rotation("y", a("head_turn")))
+        set_world(name, quat.about_axis(a("neck_flex") / 2, "x", degrees=True))
+    set_world("head", quat.about_axis(a("head_turn"), "y", degrees=True))
     for side, s in (("l", 1.0), ("r", -1.0)):
         # Hip: CMU's rest legs splay 20 deg outward (the femur axis); adduct them to vertical
         # first, then twist about the thigh, abduct outward and flex forward (-x).
@@ -490,10 +485,10 @@ def _local_rotations(sk: Skeleton, angles: dict[str, FloatArray], T: int) -> Flo
             f"{side}femur",
             _chain(
                 untilt,
-                _axis_rotation("x", -a(f"{side}_hip_flex")),
-                _axis_rotation("z", s * a(f"{side}_hip_abd")),
-                _axis_rotation("y", -s * a(f"{side}_hip_twist")),
-                _axis_rotation("z", np.full(T, -s * _REST_LEG_SPLAY_DEG)),
+                quat.about_axis(-a(f"{side}_hip_flex"), "x", degrees=True),
+                quat.about_axis(s * a(f"{side}_hip_abd"), "z", degrees=True),
+                quat.about_axis(-s * a(f"{side}_hip_twist"), "y", degrees=True),
+                quat.about_axis(np.full(T, -s * _REST_LEG_SPLAY_DEG), "z", degrees=True),
             ),
         )
         set_dofs(f"{side}tibia", {"rx": a(f"{side}_knee", 2.0)})
@@ -507,9 +502,9 @@ def _local_rotations(sk: Skeleton, angles: dict[str, FloatArray], T: int) -> Flo
         set_world(
             f"{side}humerus",
             _chain(
-                _axis_rotation("x", -a(f"{side}_sh_flex")),
-                _axis_rotation("z", s * (a(f"{side}_sh_abd", 8.0) - 90.0)),
-                _axis_rotation("x", 30.0 + a(f"{side}_sh_twist")),
+                quat.about_axis(-a(f"{side}_sh_flex"), "x", degrees=True),
+                quat.about_axis(s * (a(f"{side}_sh_abd", 8.0) - 90.0), "z", degrees=True),
+                quat.about_axis(30.0 + a(f"{side}_sh_twist"), "x", degrees=True),
             ),
         )
         set_dofs(f"{side}radius", {"rx": a(f"{side}_elbow", 12.0)})

@@ -51,6 +51,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from quatmotion.quat.jit import multiply as _qmul
+from quatmotion.quat.jit import rotate as _rotate
+
 # Samples per work unit of the parallel kernels that need scratch buffers: the buffers are
 # allocated once per unit instead of once per sample.
 _CHUNK = 16
@@ -125,16 +128,6 @@ def _atan_ratio(num, den):  # type: ignore[no-untyped-def]
 
 
 @njit(inline="always", cache=True)
-def _qmul(aw, ax, ay, az, bw, bx, by, bz):  # type: ignore[no-untyped-def]
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-@njit(inline="always", cache=True)
 def _qlog(w, x, y, z):  # type: ignore[no-untyped-def]
     """Shortest-arc log (the sign of ``q`` is chosen so that ``w >= 0``)."""
     sign = -1.0 if w < 0.0 else 1.0
@@ -145,21 +138,6 @@ def _qlog(w, x, y, z):  # type: ignore[no-untyped-def]
     tiny = vn < 1e-12
     s = sign * (1.0 if tiny else half_angle) / max(w if tiny else vn, 1e-300)
     return x * s, y * s, z * s
-
-
-@njit(inline="always", cache=True)
-def _rotate_by_conj(sw, sx, sy, sz, vx, vy, vz):  # type: ignore[no-untyped-def]
-    """``S^* v S`` for unit ``S`` and the pure quaternion ``v`` (a rotation by ``S^*``)."""
-    # v' = v + w t + u x t, t = 2 u x v, with (w, u) = S^* = (sw, -sx, -sy, -sz).
-    ux, uy, uz = -sx, -sy, -sz
-    tx = 2.0 * (uy * vz - uz * vy)
-    ty = 2.0 * (uz * vx - ux * vz)
-    tz = 2.0 * (ux * vy - uy * vx)
-    return (
-        vx + sw * tx + (uy * tz - uz * ty),
-        vy + sw * ty + (uz * tx - ux * tz),
-        vz + sw * tz + (ux * ty - uy * tx),
-    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -509,7 +487,8 @@ def _gn_eval_powers(YTi, Apow, m, suf, r):  # type: ignore[no-untyped-def]
 def _jacobian_row(S, v, out):  # type: ignore[no-untyped-def]
     """``out`` ``(3, n)`` = the logs ``v`` ``(3, n)`` rotated by ``S^*`` (``S^* v S``)."""
     for j in range(v.shape[1]):
-        wx, wy, wz = _rotate_by_conj(S[0, j], S[1, j], S[2, j], S[3, j], v[0, j], v[1, j], v[2, j])
+        # A rotation by S^*: the conjugate negates the vector part.
+        wx, wy, wz = _rotate(S[0, j], -S[1, j], -S[2, j], -S[3, j], v[0, j], v[1, j], v[2, j])
         out[0, j] = wx
         out[1, j] = wy
         out[2, j] = wz

@@ -21,6 +21,9 @@ Conventions (every function in this module follows them):
 
 Near the identity the log and the power use ``sinc`` so that no NaN appears; at 180 degrees
 (``w == 0``) the log is ``pi/2 * u``, finite as well.
+
+Numba kernels elsewhere in the package do not call these array functions per element: they
+share the scalar, inlined versions of the same algebra in :mod:`quatmotion.quat.jit`.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from scipy.spatial.transform import Rotation
 FloatArray = NDArray[np.float64]
 
 __all__ = [
+    "about_axis",
     "angle",
     "canonicalize",
     "conjugate",
@@ -66,6 +70,25 @@ def identity(shape: tuple[int, ...] = ()) -> FloatArray:
     """Identity quaternions of shape ``(*shape, 4)``."""
     q = np.zeros((*shape, 4))
     q[..., 0] = 1.0
+    return q
+
+
+_AXIS_COMPONENT = {"x": 1, "y": 2, "z": 3}
+
+
+def about_axis(angles: ArrayLike, axis: str, degrees: bool = False) -> FloatArray:
+    """Rotations about one coordinate axis ``"x"``, ``"y"`` or ``"z"``: ``(...) -> (..., 4)``.
+
+    ``(cos(a/2), sin(a/2) e_axis)``: the elementary rotation every Euler composition is built
+    from. Angles in radians unless ``degrees=True``.
+    """
+    if axis not in _AXIS_COMPONENT:
+        raise ValueError(f"axis must be 'x', 'y' or 'z', got {axis!r}")
+    a = np.asarray(angles, dtype=np.float64)
+    half = (np.deg2rad(a) if degrees else a) / 2.0
+    q = np.zeros((*half.shape, 4))
+    q[..., 0] = np.cos(half)
+    q[..., _AXIS_COMPONENT[axis]] = np.sin(half)
     return q
 
 
@@ -272,12 +295,9 @@ def from_euler(angles: ArrayLike, order: str, degrees: bool = False) -> FloatArr
     if degrees:
         a = np.deg2rad(a)
     # Built from elementary half-angle quaternions: exact, and faster than a round trip via SciPy.
-    basis = {"x": 1, "y": 2, "z": 3}
     out = None
     for i, axis_name in enumerate(order):
-        e = np.zeros((*a.shape[:-1], 4))
-        e[..., 0] = np.cos(a[..., i] / 2)
-        e[..., basis[axis_name.lower()]] = np.sin(a[..., i] / 2)
+        e = about_axis(a[..., i], axis_name.lower())
         if out is None:
             out = e
         elif order.isupper():
