@@ -17,9 +17,9 @@ from quatmotion.pose.baselines import (
     joint_relative_features,
 )
 from quatmotion.pose.data import PoseData
-from quatmotion.pose.gpd import JOINTS
+from quatmotion.pose.skeleton16 import JOINTS_16
 
-J = {name: k for k, name in enumerate(JOINTS)}
+J = {name: k for k, name in enumerate(JOINTS_16)}
 T_POSE = np.array([
     (0, 0, 0), (0, 20, 0), (0, 45, 0), (0, 60, 0), (15, 40, 0), (45, 40, 0), (75, 40, 0),
     (-15, 40, 0), (-45, 40, 0), (-75, 40, 0), (10, 0, 0), (10, -45, 0), (10, -90, 0),

@@ -12,8 +12,9 @@ from conftest import DATA
 from quatmotion import quat
 from quatmotion.pose import gpd
 from quatmotion.pose.data import PoseData, angular_velocities, joint_orientations
+from quatmotion.pose.skeleton16 import JOINTS_16, PARENTS_16
 
-J = {name: k for k, name in enumerate(gpd.JOINTS)}
+J = {name: k for k, name in enumerate(JOINTS_16)}
 
 
 def t_pose(hip_height: float = 95.0) -> np.ndarray:
@@ -25,7 +26,7 @@ def t_pose(hip_height: float = 95.0) -> np.ndarray:
         "LHip": (10, 0, 0), "LKnee": (10, -45, 0), "LFoot": (10, -90, 30),
         "RHip": (-10, 0, 0), "RKnee": (-10, -45, 0), "RFoot": (-10, -90, 0),
     }  # fmt: skip
-    return np.array([p[name] for name in gpd.JOINTS], dtype=np.float64)[None]
+    return np.array([p[name] for name in JOINTS_16], dtype=np.float64)[None]
 
 
 def random_poses(n: int, seed: int) -> np.ndarray:
@@ -50,7 +51,7 @@ def test_feature_counts_and_names_follow_the_geometry() -> None:
         assert all(n.startswith(kind + "(") for n in gpd.FEATURE_NAMES[sl])
     # 30 lines: 15 limbs, 5 end site <- grandparent, 10 between end sites; no repeats.
     assert len(gpd.LINES) == 30 == len({frozenset(line) for line in gpd.LINES})
-    names = {(gpd.JOINTS[a], gpd.JOINTS[b]) for a, b in gpd.LINES}
+    names = {(JOINTS_16[a], JOINTS_16[b]) for a, b in gpd.LINES}
     wanted = {("Chest", "Head"), ("LShoulder", "LHand"), ("RHip", "RFoot"), ("LHand", "RFoot")}
     assert wanted <= names
     # Degenerate features are gone: no joint measured against a line or plane through it.
@@ -59,10 +60,10 @@ def test_feature_counts_and_names_follow_the_geometry() -> None:
         assert joint not in (a, b)
 
 
-def test_topology_matches_skeleton16() -> None:
-    skeleton16 = pytest.importorskip("quatmotion.pose.skeleton16")
-    assert gpd.JOINTS == skeleton16.JOINTS_16
-    assert gpd.PARENTS == skeleton16.PARENTS_16
+def test_limbs_are_the_bones_of_skeleton16() -> None:
+    # The GPD's first 15 lines are the limbs parent -> child of the one 16-joint skeleton.
+    limbs = {(PARENTS_16[k], k) for k in range(1, len(JOINTS_16))}
+    assert set(gpd.LINES[: len(limbs)]) == limbs
 
 
 def _reference_feature(name: str, pos: np.ndarray, vel: np.ndarray, acc: np.ndarray,

@@ -53,7 +53,7 @@ from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
 from quatmotion.pose.data import PoseData
-from quatmotion.pose.gpd import JOINTS
+from quatmotion.pose.skeleton16 import JOINTS_16
 
 __all__ = [
     "LEE_WEIGHTS",
@@ -68,7 +68,7 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-_JOINT_PAIRS = np.array(list(itertools.combinations(range(len(JOINTS)), 2)), dtype=np.intp)
+_JOINT_PAIRS = np.array(list(itertools.combinations(range(len(JOINTS_16)), 2)), dtype=np.intp)
 
 #: Seconds per "frame" of the velocity terms (see the module docstring).
 VELOCITY_TIME_UNIT = 1.0 / 30.0
@@ -78,7 +78,7 @@ LEE_WEIGHTS: FloatArray = np.array(
     [
         1.0 if name in {"Hip", "Chest", "LShoulder", "LElbow", "RShoulder", "RElbow",
                         "LHip", "LKnee", "RHip", "RKnee"} else 0.0
-        for name in JOINTS
+        for name in JOINTS_16
     ]
 )  # fmt: skip
 
@@ -195,7 +195,7 @@ class JointDistance:
         hb, pb, vb = self._parts(b)
         w = self.weights_
         out = w[0] * cdist(hq, hb, "sqeuclidean")
-        for k in range(len(JOINTS)):
+        for k in range(len(JOINTS_16)):
             if w[k + 1] == 0.0:
                 continue
             if self.kind == "orientation":
@@ -219,7 +219,7 @@ class JointDistance:
             labels = np.asarray(train_labels, dtype=bool)
             self.weights_ = _fit_nonnegative_weights(self._terms(train_a, train_b), labels)
         else:
-            joint = np.ones(len(JOINTS)) if self.weights == "uniform" else LEE_WEIGHTS
+            joint = np.ones(len(JOINTS_16)) if self.weights == "uniform" else LEE_WEIGHTS
             self.weights_ = np.concatenate(([1.0], joint))
         return self
 

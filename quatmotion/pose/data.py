@@ -27,15 +27,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quatmotion import quat
-from quatmotion.pose.gpd import JOINTS, PARENTS, gpd_features
+from quatmotion.pose.gpd import gpd_features
+from quatmotion.pose.skeleton16 import JOINTS_16, PARENTS_16
 
 if TYPE_CHECKING:
     from quatmotion.motion import Motion
 
 __all__ = ["PoseData", "angular_velocities", "joint_orientations"]
 
-_N_JOINTS = len(JOINTS)
-_J = {name: k for k, name in enumerate(JOINTS)}
+_N_JOINTS = len(JOINTS_16)
+_J = {name: k for k, name in enumerate(JOINTS_16)}
 # T-pose bone direction from a joint to its single child, body frame (x left, y up, z forward).
 _REST_CHILD: dict[str, tuple[str, tuple[float, float, float]]] = {
     "Neck": ("Head", (0.0, 1.0, 0.0)),
@@ -114,13 +115,13 @@ def joint_orientations(positions: ArrayLike) -> NDArray[np.float64]:
     local[:, _J["Hip"]] = quat.from_matrix(hip)
     local[:, _J["Chest"]] = quat.from_matrix(np.swapaxes(hip, -1, -2) @ chest)
     # Parents come first, so every parent frame exists before its children need it.
-    for k, name in enumerate(JOINTS):
+    for k, name in enumerate(JOINTS_16):
         if name not in _REST_CHILD:
             if k not in (_J["Hip"], _J["Chest"]):
-                frames[:, k] = frames[:, PARENTS[k]]
+                frames[:, k] = frames[:, PARENTS_16[k]]
             continue
         child, rest = _REST_CHILD[name]
-        parent_frame = frames[:, PARENTS[k]]
+        parent_frame = frames[:, PARENTS_16[k]]
         bone = pos[:, _J[child]] - pos[:, k]
         bone /= np.maximum(np.linalg.norm(bone, axis=-1, keepdims=True), 1e-12)
         bone_in_parent = np.einsum("nji,nj->ni", parent_frame, bone)

@@ -5,11 +5,11 @@ Descriptor" (TVCG 2010).
 
 Conventions
 -----------
-- Input positions are the 16 joints of :data:`JOINTS` (the order of
-  ``quatmotion.pose.skeleton16.JOINTS_16``) in the body's local frame: centimetres, Y up, the
-  Hip at the origin, yaw removed. Velocities are cm/s and accelerations cm/s^2 of those local
-  coordinates; row 0 (Hip) carries the *world* vertical velocity and acceleration of the hip in
-  its Y component (see :class:`quatmotion.pose.data.PoseData`).
+- Input positions are the 16 joints of ``quatmotion.pose.skeleton16.JOINTS_16``, in that
+  order, in the body's local frame: centimetres, Y up, the Hip at the origin, yaw removed.
+  Velocities are cm/s and accelerations cm/s^2 of those local coordinates; row 0 (Hip)
+  carries the *world* vertical velocity and acceleration of the hip in its Y component (see
+  :class:`quatmotion.pose.data.PoseData`).
 - The world height of the Hip (cm) is the one coordinate of the Hip kept (Eq. 1).
 - Angles are radians in ``[0, pi]``; distances are centimetres.
 - Geometry (section 3.1): 16 joints, 30 lines (15 limbs ``parent -> child``, 5 lines from an
@@ -44,39 +44,28 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
+from quatmotion.pose.skeleton16 import END_SITES_16, JOINTS_16, PARENTS_16
+
 __all__ = [
     "FEATURE_COUNTS",
     "FEATURE_NAMES",
     "FEATURE_SLICES",
     "FEATURE_TYPES",
     "GPD",
-    "JOINTS",
     "LINES",
     "N_DIMENSIONS",
     "N_FEATURES",
-    "PARENTS",
     "PLANES",
     "gpd_features",
 ]
 
-#: The 16-joint pose skeleton of Fig. 1(a), in the order of ``skeleton16.JOINTS_16``.
-JOINTS: tuple[str, ...] = (
-    "Hip", "Chest", "Neck", "Head",
-    "LShoulder", "LElbow", "LHand",
-    "RShoulder", "RElbow", "RHand",
-    "LHip", "LKnee", "LFoot",
-    "RHip", "RKnee", "RFoot",
-)  # fmt: skip
-#: Parent of every joint (-1 for the Hip); parents come first.
-PARENTS: tuple[int, ...] = (-1, 0, 1, 2, 1, 4, 5, 1, 7, 8, 0, 10, 11, 0, 13, 14)
-_J = {name: k for k, name in enumerate(JOINTS)}
-_END_SITES: tuple[int, ...] = tuple(_J[n] for n in ("Head", "LHand", "RHand", "LFoot", "RFoot"))
+_J = {name: k for k, name in enumerate(JOINTS_16)}
 
 
 def _build_lines() -> tuple[tuple[int, int], ...]:
-    limbs = [(PARENTS[k], k) for k in range(1, len(JOINTS))]
-    to_grandparent = [(PARENTS[PARENTS[e]], e) for e in _END_SITES]
-    between_ends = list(itertools.combinations(_END_SITES, 2))
+    limbs = [(PARENTS_16[k], k) for k in range(1, len(JOINTS_16))]
+    to_grandparent = [(PARENTS_16[PARENTS_16[e]], e) for e in END_SITES_16]
+    between_ends = list(itertools.combinations(END_SITES_16, 2))
     return tuple(limbs + to_grandparent + between_ends)
 
 
@@ -94,18 +83,18 @@ PLANES: tuple[tuple[int, int, int], ...] = tuple(
     )
 )
 
-_JOINT_PAIRS = np.array(list(itertools.combinations(range(len(JOINTS)), 2)), dtype=np.intp)
+_JOINT_PAIRS = np.array(list(itertools.combinations(range(len(JOINTS_16)), 2)), dtype=np.intp)
 _LINES = np.array(LINES, dtype=np.intp)
 _PLANES = np.array(PLANES, dtype=np.intp)
 _LINE_PAIRS = np.array(list(itertools.combinations(range(len(LINES)), 2)), dtype=np.intp)
 _PLANE_PAIRS = np.array(list(itertools.combinations(range(len(PLANES)), 2)), dtype=np.intp)
 # (joint, line) with the joint off the line: the distance to a line through it is always 0.
 _JOINT_LINE = np.array(
-    [(j, m) for m, line in enumerate(LINES) for j in range(len(JOINTS)) if j not in line],
+    [(j, m) for m, line in enumerate(LINES) for j in range(len(JOINTS_16)) if j not in line],
     dtype=np.intp,
 )
 _JOINT_PLANE = np.array(
-    [(j, p) for p, plane in enumerate(PLANES) for j in range(len(JOINTS)) if j not in plane],
+    [(j, p) for p, plane in enumerate(PLANES) for j in range(len(JOINTS_16)) if j not in plane],
     dtype=np.intp,
 )
 # A line with both ends on a plane's vertices lies in the plane: its angle to the normal is pi/2.
@@ -124,40 +113,40 @@ _EPS = 1e-9
 
 def _line_name(m: int) -> str:
     a, b = LINES[m]
-    return f"L({JOINTS[a]}->{JOINTS[b]})"
+    return f"L({JOINTS_16[a]}->{JOINTS_16[b]})"
 
 
 def _plane_name(p: int) -> str:
-    return "P(" + "->".join(JOINTS[k] for k in PLANES[p]) + ")"
+    return "P(" + "->".join(JOINTS_16[k] for k in PLANES[p]) + ")"
 
 
 def _build_names() -> tuple[dict[str, tuple[str, ...]], dict[str, int]]:
     names: dict[str, tuple[str, ...]] = {}
     counts: dict[str, int] = {}
     xyz = ("x", "y", "z")
-    jc = [f"J_c({JOINTS[j]}).{c}" for j in range(1, len(JOINTS)) for c in xyz]
+    jc = [f"J_c({JOINTS_16[j]}).{c}" for j in range(1, len(JOINTS_16)) for c in xyz]
     names["J_c"] = (*jc, "J_c(Hip).y_world")
-    counts["J_c"] = len(JOINTS)
-    names["JJ_d"] = tuple(f"JJ_d({JOINTS[a]},{JOINTS[b]})" for a, b in _JOINT_PAIRS)
+    counts["J_c"] = len(JOINTS_16)
+    names["JJ_d"] = tuple(f"JJ_d({JOINTS_16[a]},{JOINTS_16[b]})" for a, b in _JOINT_PAIRS)
     counts["JJ_d"] = len(_JOINT_PAIRS)
     names["JJ_o"] = tuple(
-        f"JJ_o({JOINTS[a]},{JOINTS[b]}).{c}" for a, b in _JOINT_PAIRS for c in xyz
+        f"JJ_o({JOINTS_16[a]},{JOINTS_16[b]}).{c}" for a, b in _JOINT_PAIRS for c in xyz
     )
     counts["JJ_o"] = len(_JOINT_PAIRS)
-    names["JL_d"] = tuple(f"JL_d({JOINTS[j]},{_line_name(m)})" for j, m in _JOINT_LINE)
+    names["JL_d"] = tuple(f"JL_d({JOINTS_16[j]},{_line_name(m)})" for j, m in _JOINT_LINE)
     counts["JL_d"] = len(_JOINT_LINE)
     names["LL_a"] = tuple(f"LL_a({_line_name(a)},{_line_name(b)})" for a, b in _LINE_PAIRS)
     counts["LL_a"] = len(_LINE_PAIRS)
-    names["JP_d"] = tuple(f"JP_d({JOINTS[j]},{_plane_name(p)})" for j, p in _JOINT_PLANE)
+    names["JP_d"] = tuple(f"JP_d({JOINTS_16[j]},{_plane_name(p)})" for j, p in _JOINT_PLANE)
     counts["JP_d"] = len(_JOINT_PLANE)
     names["LP_a"] = tuple(f"LP_a({_line_name(m)},{_plane_name(p)})" for m, p in _LINE_PLANE)
     counts["LP_a"] = len(_LINE_PLANE)
     names["PP_a"] = tuple(f"PP_a({_plane_name(a)},{_plane_name(b)})" for a, b in _PLANE_PAIRS)
     counts["PP_a"] = len(_PLANE_PAIRS)
     kinetic = ("vx", "vy", "vz", "ax", "ay", "az")
-    jk = [f"J_k({JOINTS[j]}).{c}" for j in range(1, len(JOINTS)) for c in kinetic]
+    jk = [f"J_k({JOINTS_16[j]}).{c}" for j in range(1, len(JOINTS_16)) for c in kinetic]
     names["J_k"] = (*jk, "J_k(Hip).vy_world", "J_k(Hip).ay_world")
-    counts["J_k"] = len(JOINTS)
+    counts["J_k"] = len(JOINTS_16)
     return names, counts
 
 
@@ -187,8 +176,8 @@ N_DIMENSIONS: int = len(FEATURE_NAMES)
 
 def _check_joint_array(name: str, a: ArrayLike, n: int | None) -> NDArray[np.float64]:
     arr = np.asarray(a, dtype=np.float64)
-    if arr.ndim != 3 or arr.shape[1:] != (len(JOINTS), 3):
-        raise ValueError(f"{name} has shape {arr.shape}, expected (N, {len(JOINTS)}, 3)")
+    if arr.ndim != 3 or arr.shape[1:] != (len(JOINTS_16), 3):
+        raise ValueError(f"{name} has shape {arr.shape}, expected (N, {len(JOINTS_16)}, 3)")
     if n is not None and arr.shape[0] != n:
         raise ValueError(f"{name} has {arr.shape[0]} poses, expected {n}")
     if not np.all(np.isfinite(arr)):
