@@ -6,9 +6,9 @@ on the clips' angular displacements and compare their reconstruction errors on h
 
 Conventions
 -----------
-* Angular displacement (QSSD paper, Sec. 4.2): for each clip and joint, ``d_t = q_0^-1 q_t``,
-  the local rotation at frame ``t`` relative to the reference (first) frame. A sample is one
-  frame's displacements of every joint with rotation channels: ``(n, 4)`` unit quaternions.
+* Samples are angular displacements (QSSD paper, Sec. 4.2; see
+  :func:`quatmotion.motion.angular_displacements`): one frame's rotations of every joint with
+  rotation channels relative to the clip's first frame, ``(n, 4)`` unit quaternions.
 * Clips are subsampled to at most 20 frames/s before sampling frames (neighbouring frames at
   120 frames/s are near-duplicates); 80 % of the frames train, 20 % test (random split).
 * Errors are the mean rotation angle between sample and reconstruction, degrees per joint per
@@ -29,53 +29,20 @@ from numpy.typing import NDArray
 from rich.console import Console
 from rich.table import Table
 
-from quatmotion import quat
-from quatmotion._atomic import atomic_output, atomic_write_text
-from quatmotion.motion import Motion, forward_kinematics, standing_height
+from quatmotion._atomic import atomic_write_text
+from quatmotion.motion import Motion, angular_displacements, forward_kinematics, standing_height
+from quatmotion.viz import pyplot, save_figure
 
-__all__ = ["angular_displacements", "plot_stick_figure", "run_demo"]
+__all__ = ["plot_stick_figure", "run_demo", "sample_step"]
 
 _MAX_SAMPLE_FPS = 20.0
 _MAX_USER_CLIPS = 60
 _TEST_FRACTION = 0.2
 
 
-def angular_displacements(motion: Motion, max_fps: float = _MAX_SAMPLE_FPS) -> NDArray[np.float64]:
-    """Rotation of every rotating joint relative to the clip's first frame.
-
-    Parameters
-    ----------
-    motion : Motion
-        ``T`` frames, ``J`` joints.
-    max_fps : float
-        Keep every ``ceil(fps / max_fps)``-th frame.
-
-    Returns
-    -------
-    ndarray, shape (T', n, 4)
-        ``q_0^-1 q_t`` for the kept frames and the ``n`` joints with rotation channels (the root
-        included), unit quaternions, w first.
-    """
-    sk = motion.skeleton
-    step = max(1, int(np.ceil(motion.fps / max_fps - 1e-9)))
-    keep = [j for j in range(sk.n_joints) if j == 0 or sk.rotation_dofs(j)]
-    rotations = motion.rotations[::step][:, keep]
-    return quat.multiply(quat.conjugate(rotations[:1]), rotations)
-
-
-def _find_clips(paths: Sequence[Path]) -> list[Path]:
-    found: list[Path] = []
-    for path in paths:
-        path = Path(path)
-        if path.is_dir():
-            found += sorted(p for p in path.rglob("*") if p.suffix.lower() in (".amc", ".bvh"))
-        elif path.exists():
-            found.append(path)
-        else:
-            raise FileNotFoundError(f"{path}: no such file or folder")
-    if not found:
-        raise ValueError("no .amc or .bvh clips in the given paths")
-    return list(dict.fromkeys(found))[:_MAX_USER_CLIPS]
+def sample_step(motion: Motion, max_fps: float = _MAX_SAMPLE_FPS) -> int:
+    """Frames to skip between samples so that at most ``max_fps`` samples a second remain."""
+    return max(1, int(np.ceil(motion.fps / max_fps - 1e-9)))
 
 
 def plot_stick_figure(motion: Motion, path: str | Path, n_poses: int = 8) -> Path:
@@ -98,11 +65,7 @@ def plot_stick_figure(motion: Motion, path: str | Path, n_poses: int = 8) -> Pat
     pathlib.Path
         ``path``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     path = Path(path)
     points = forward_kinematics(motion).positions  # (T, J, 3) cm
     parents = motion.skeleton.parents
@@ -140,20 +103,15 @@ def plot_stick_figure(motion: Motion, path: str | Path, n_poses: int = 8) -> Pat
         f"{motion.name}: {motion.n_frames} frames at {motion.fps:g} fps, "
         f"{len(frames)} poses (dark = early)"
     )
-    fig.tight_layout()
-    try:
-        with atomic_output(path, suffix=".png") as temp:
-            fig.savefig(temp, dpi=90)
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=90)
 
 
 def _load(paths: Sequence[Path], seed: int, quick: bool) -> list[tuple[Motion, str]]:
     if paths:
-        from quatmotion.io import read_motion
+        from quatmotion.io import find_motion_files, read_motion
 
-        return [(read_motion(p), p.parent.name) for p in _find_clips(paths)]
+        files = find_motion_files(paths)[:_MAX_USER_CLIPS]
+        return [(read_motion(p), p.parent.name) for p in files]
     from quatmotion.motion.synthetic import generate_library
 
     return generate_library(1 if quick else 2, seed=seed)
@@ -248,7 +206,7 @@ def run_demo(
     figure = plot_stick_figure(clips[0][0], out_dir / f"stick_{clips[0][0].name}.png")
     console.print(f"stick figure of {clips[0][0].name}: {figure}")
 
-    samples = [angular_displacements(m) for m, _ in clips]
+    samples = [angular_displacements(m, step=sample_step(m)) for m, _ in clips]
     shapes = {s.shape[1] for s in samples}
     summary: dict[str, Any] = {
         "source": source,

@@ -260,10 +260,12 @@ def test_demo_quick_writes_figure_and_beats_the_identity(tmp_path):
     methods = {row["method"]: row for row in summary["methods"]}
     assert set(methods) == {"QSSD", "K-SVD"}
     # Reference: reconstructing every displacement as the identity (no motion at all).
-    from quatmotion.demo import angular_displacements
+    from quatmotion.demo import sample_step
+    from quatmotion.motion import angular_displacements
     from quatmotion.motion.synthetic import generate_library
 
-    samples = np.concatenate([angular_displacements(m) for m, _ in generate_library(1, seed=1)])
+    clips = [m for m, _ in generate_library(1, seed=1)]
+    samples = np.concatenate([angular_displacements(m, step=sample_step(m)) for m in clips])
     identity_error = np.degrees(2 * np.arccos(np.clip(np.abs(samples[..., 0]), 0, 1))).mean()
     for row in methods.values():
         assert 0 <= row["test_error_deg"] < identity_error

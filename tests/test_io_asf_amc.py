@@ -443,3 +443,20 @@ def test_irregular_but_valid_amc_layouts_parse_the_same(tmp_path: Path, tiny):
     motion = read_amc(tiny[1], tiny[0])
     assert np.array_equal(motion.rotations, expected.rotations)
     assert np.array_equal(motion.root_translation, expected.root_translation)
+
+
+def test_find_motion_files_walks_folders_and_names_what_is_missing(tmp_path: Path):
+    from quatmotion.io import find_motion_files
+
+    (tmp_path / "lib" / "sub").mkdir(parents=True)
+    for name in ("lib/b.amc", "lib/a.BVH", "lib/sub/c.bvh", "lib/notes.txt", "single.txt"):
+        (tmp_path / name).write_text("x")
+    (tmp_path / "lib" / "folder.bvh").mkdir()  # a folder with a motion suffix is not a clip
+    found = find_motion_files([tmp_path / "lib", tmp_path / "single.txt", tmp_path / "lib"])
+    names = [p.relative_to(tmp_path).as_posix() for p in found]
+    assert names == ["lib/a.BVH", "lib/b.amc", "lib/sub/c.bvh", "single.txt"]
+    with pytest.raises(FileNotFoundError, match="nope"):
+        find_motion_files([tmp_path / "nope"])
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ValueError, match="no .amc or .bvh files"):
+        find_motion_files([tmp_path / "empty"])

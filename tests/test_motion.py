@@ -102,3 +102,29 @@ def test_standing_height_measures_the_posed_figure_not_the_rest_pose():
     motion = Motion(sk, 30.0, np.zeros((5, 3)), rot)
     assert sk.height() == 0.0
     assert standing_height(motion) == pytest.approx(40.0)
+
+
+def test_angular_displacements_recompose_the_rotations():
+    from quatmotion.motion import angular_displacements
+
+    sk = Skeleton(
+        joint_names=("root", "a", "still"),
+        parents=np.array([-1, 0, 1]),
+        offsets=np.zeros((3, 3)),
+        channels=(("tx", "ty", "tz", "rx", "ry", "rz"), ("rx", "ry"), ()),
+    )
+    rng = np.random.default_rng(0)
+    rot = quat.normalize(rng.standard_normal((9, 3, 4)))
+    rot[:, 2] = (1.0, 0.0, 0.0, 0.0)  # a joint without rotation channels never turns
+    motion = Motion(sk, 30.0, np.zeros((9, 3)), rot)
+    np.testing.assert_array_equal(sk.rotating_joints(), [0, 1])
+    d = angular_displacements(motion, reference_frame=2, step=2)
+    assert d.shape == (5, 2, 4)
+    # q_ref d_t = q_t for the kept frames 0, 2, 4, 6, 8; the reference frame maps to identity.
+    recomposed = quat.multiply(motion.rotations[2, :2], d)
+    np.testing.assert_allclose(quat.angle(recomposed, motion.rotations[::2, :2]), 0, atol=1e-7)
+    np.testing.assert_allclose(quat.angle(d[1], quat.identity((2,))), 0, atol=1e-7)
+    with pytest.raises(ValueError, match="frames 0..8"):
+        angular_displacements(motion, reference_frame=9)
+    with pytest.raises(ValueError, match="step"):
+        angular_displacements(motion, step=0)

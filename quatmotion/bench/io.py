@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from quatmotion._atomic import atomic_output, atomic_write_json
+from quatmotion._atomic import atomic_write_json
+from quatmotion.datasets import data_root
 from quatmotion.io import (
     asf_bone_end_positions,
     find_asf_for_amc,
@@ -39,16 +40,10 @@ from quatmotion.io import (
     write_bvh,
 )
 from quatmotion.motion import Motion, forward_kinematics
+from quatmotion.viz import pyplot, save_figure
 
 FK_FRAMES = 100_000
 REPEATS = 5
-
-
-def _data_root() -> pathlib.Path:
-    env = os.environ.get("QUATMOTION_DATA")
-    if env:
-        return pathlib.Path(env).resolve()
-    return (pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "data").resolve()
 
 
 def _subset(files: list[pathlib.Path], quick: bool, rng: np.random.Generator, n: int) -> list:
@@ -140,13 +135,7 @@ def _reference_errors(root: pathlib.Path) -> dict[str, float]:
 
 
 def _figure(out: pathlib.Path, result: dict[str, Any]) -> str | None:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:  # pragma: no cover - matplotlib is a dependency
-        return None
+    plt = pyplot()
     figure, axis = plt.subplots(figsize=(6, 3.5))
     for kind in ("amc", "bvh"):
         rates = list(result["parse"][kind]["per_file_mb_per_s"].values())
@@ -156,12 +145,7 @@ def _figure(out: pathlib.Path, result: dict[str, Any]) -> str | None:
     axis.set_xlabel("parse throughput per file (MB/s)")
     axis.set_ylabel("files")
     axis.legend()
-    figure.tight_layout()
-    path = out.with_name(f"{out.stem}_parse.png")
-    with atomic_output(path, suffix=".png") as temp:
-        figure.savefig(temp, dpi=120)
-    plt.close(figure)
-    return path.name
+    return save_figure(figure, out.with_name(f"{out.stem}_parse.png"), dpi=120).name
 
 
 def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
@@ -184,9 +168,7 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     """
     out = pathlib.Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    root = _data_root()
-    if not root.is_dir():
-        raise FileNotFoundError(f"data folder {root} not found (set QUATMOTION_DATA)")
+    root = data_root()
     rng = np.random.default_rng(seed)
     amcs = sorted(root.glob("cmu/*/*.amc")) + sorted(root.glob("hdm05/clips/*/*.amc"))
     bvhs = sorted(root.glob("bandai1/clips/*.bvh")) + sorted(root.glob("cmu_bvh/*/*.bvh"))

@@ -34,7 +34,6 @@ or reader is missing is skipped and listed in ``skipped``.
 from __future__ import annotations
 
 import json
-import os
 import pathlib
 import time
 import traceback
@@ -45,10 +44,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion._atomic import atomic_output, atomic_write_json
+from quatmotion._atomic import atomic_write_json
+from quatmotion.datasets import data_root
 from quatmotion.pose import evaluate, labels, skeleton16
 from quatmotion.pose.data import PoseData
 from quatmotion.pose.index import PoseIndex, exact_knn, recall_at_k
+from quatmotion.viz import pyplot, save_figure
 
 TARGET_FPS = 30.0
 BODY_HEIGHT = 170.0  # cm: every subject is scaled to this standing height
@@ -57,14 +58,6 @@ UNLABELED_COUNTS = (0, 1000, 2000, 5000)
 ALPHAS = (0.1, 1.0, 10.0, 100.0)
 FEATURES = ("JO", "JC", "JRF", "GPD")
 LEARNERS = ("L2", "LMS", "Xing", "SDA", "RDSR")
-
-
-def data_root() -> pathlib.Path:
-    """The data folder: ``$QUATMOTION_DATA`` or ``../shared/data`` from the project root."""
-    env = os.environ.get("QUATMOTION_DATA")
-    if env:
-        return pathlib.Path(env)
-    return pathlib.Path(__file__).resolve().parents[2].parent / "shared" / "data"
 
 
 @dataclass
@@ -460,20 +453,11 @@ def _ann_benchmark(quick: bool, seed: int, log: Callable[[str], None]) -> dict[s
 
 
 def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     written: list[str] = []
 
     def save(fig: Any, suffix: str) -> None:
-        path = out.with_name(f"{out.stem}_{suffix}.png")
-        fig.tight_layout()
-        with atomic_output(path, suffix=".png") as temp:
-            fig.savefig(temp, dpi=110)
-        plt.close(fig)
-        written.append(str(path))
+        written.append(str(save_figure(fig, out.with_name(f"{out.stem}_{suffix}.png"))))
 
     for ds, res in results["datasets"].items():
         tr = res.get("transition")

@@ -25,7 +25,9 @@ from typing import Any
 import numpy as np
 
 from quatmotion import quat
-from quatmotion._atomic import atomic_output, atomic_write_json
+from quatmotion._atomic import atomic_write_json
+from quatmotion.datasets import data_root
+from quatmotion.motion import angular_displacements
 from quatmotion.sparse import (
     KSVD,
     QSSD,
@@ -33,6 +35,7 @@ from quatmotion.sparse import (
     make_sparse_quaternion_data,
     restoration_ratio,
 )
+from quatmotion.viz import pyplot, save_figure
 
 PAPER_TABLE2 = {
     # (N, n, K, L): (K-SVD s/iter, QSSD s/iter), 2.8 GHz Core i7 (2012)
@@ -179,18 +182,12 @@ def simulation(
     return result
 
 
-def _data_root() -> pathlib.Path:
-    env = os.environ.get("QUATMOTION_DATA")
-    if env:
-        return pathlib.Path(env)
-    return pathlib.Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
+def moving_displacements(paths: list[pathlib.Path], frame_step: int) -> np.ndarray:
+    """Angular displacements of the clips (section 4.2), without the joints that never move.
 
-
-def angular_displacements(paths: list[pathlib.Path], frame_step: int) -> np.ndarray:
-    """Per-joint rotations relative to each clip's first frame, ``q_0^-1 q_t`` (section 4.2).
-
-    Joints whose displacement is the identity in every frame (no rotational channel) are
-    dropped: both methods reproduce them exactly and they would only dilute the mean error.
+    A joint whose displacement is the identity in every frame of every clip (CMU's clavicles
+    and fingers have rotation channels that stay constant) is dropped: both methods reproduce
+    it exactly, so it would only dilute the mean error.
 
     Returns
     -------
@@ -198,17 +195,14 @@ def angular_displacements(paths: list[pathlib.Path], frame_step: int) -> np.ndar
     """
     from quatmotion.io import read_amc
 
-    blocks = []
-    for path in paths:
-        rotations = read_amc(path).rotations[::frame_step]
-        blocks.append(quat.multiply(quat.conjugate(rotations[:1]), rotations))
+    blocks = [angular_displacements(read_amc(path), step=frame_step) for path in paths]
     Y = quat.canonicalize(np.concatenate(blocks, axis=0))
     moving = np.any(np.abs(Y[..., 1:]) > 1e-9, axis=(0, 2))
     return np.ascontiguousarray(Y[:, moving])
 
 
 def table1(quick: bool, seed: int) -> dict[str, Any]:
-    root = _data_root()
+    root = data_root()
     datasets = {
         "cmu_mixed": sorted((root / "cmu").glob("*/*.amc")),
         "hdm05": sorted((root / "hdm05" / "clips").glob("*/*.amc")),
@@ -235,7 +229,7 @@ def table1(quick: bool, seed: int) -> dict[str, Any]:
             continue
         if quick:
             paths = paths[:: max(1, len(paths) // 12)]
-        Y = angular_displacements(paths, frame_step)
+        Y = moving_displacements(paths, frame_step)
         rng = np.random.default_rng(seed)
         order = rng.permutation(len(Y))
         cut = int(0.8 * len(Y))
@@ -319,21 +313,8 @@ def table2(quick: bool, seed: int) -> dict[str, Any]:
     }
 
 
-def _save(fig: Any, path: pathlib.Path) -> None:
-    import matplotlib.pyplot as plt
-
-    fig.tight_layout()
-    with atomic_output(path, suffix=".png") as temp:
-        fig.savefig(temp, dpi=110)
-    plt.close(fig)
-
-
 def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     written = []
     sim = results.get("simulation")
     if sim:
@@ -358,7 +339,7 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
         ax.set_title("QSSD simulation (Fig. 1)")
         ax.legend(fontsize=8)
         path = out.with_name(out.stem + "_fig1_error.png")
-        _save(fig, path)
+        save_figure(fig, path)
         written.append(path.name)
         sweep = sim["weight_scale_sweep"]
         fig, ax = plt.subplots(figsize=(6, 4))
@@ -377,7 +358,7 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
         ax.set_ylim(-0.02, 1.02)
         ax.legend(fontsize=8)
         path = out.with_name(out.stem + "_fig1_scale.png")
-        _save(fig, path)
+        save_figure(fig, path)
         written.append(path.name)
     t2 = results.get("table2")
     if t2:
@@ -396,7 +377,7 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
         ax.set_ylabel("seconds per iteration")
         ax.legend(fontsize=8)
         path = out.with_name(out.stem + "_table2.png")
-        _save(fig, path)
+        save_figure(fig, path)
         written.append(path.name)
     return written
 

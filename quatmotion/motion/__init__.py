@@ -1,7 +1,15 @@
 """Skeletons, clips and forward kinematics (the bottom layer, with :mod:`quatmotion.quat`)."""
 
 from quatmotion.motion.clip import Motion
+from quatmotion.motion.displacement import angular_displacements
 from quatmotion.motion.kinematics import Pose, forward_kinematics, standing_height
 from quatmotion.motion.skeleton import Skeleton
 
-__all__ = ["Motion", "Pose", "Skeleton", "forward_kinematics", "standing_height"]
+__all__ = [
+    "Motion",
+    "Pose",
+    "Skeleton",
+    "angular_displacements",
+    "forward_kinematics",
+    "standing_height",
+]

@@ -159,6 +159,11 @@ class Skeleton:
         y = self.rest_positions()[:, 1]
         return float(y.max() - y.min())
 
+    def rotating_joints(self) -> NDArray[np.int64]:
+        """Indices of the root and of every joint with rotation channels, in joint order."""
+        turns = [j for j in range(self.n_joints) if j == 0 or self.rotation_dofs(j)]
+        return np.asarray(turns, dtype=np.int64)
+
     def rotation_dofs(self, j: int) -> tuple[str, ...]:
         """Joint ``j``'s rotation channels in file order (subset of ``rx ry rz``)."""
         return tuple(c for c in self.channels[j] if c in ROTATION_CHANNELS)
