@@ -1,7 +1,12 @@
 """quatmotion: compress and search human motion-capture libraries."""
 
+from importlib.metadata import PackageNotFoundError, version
+
 from quatmotion.errors import FormatError
 
-__version__ = "0.2.0"
+try:
+    __version__ = version("quatmotion")
+except PackageNotFoundError:  # a source tree on sys.path without an install
+    __version__ = "0+unknown"
 
 __all__ = ["FormatError", "__version__"]

@@ -118,16 +118,10 @@ def _load(paths: Sequence[Path], seed: int, quick: bool) -> list[tuple[Motion, s
 
 
 def _compare(
-    train: NDArray[np.float64], test: NDArray[np.float64], seed: int, quick: bool, console: Console
-) -> list[dict[str, Any]] | None:
-    try:
-        from quatmotion.sparse import KSVD, QSSD, angular_error_deg
-    except ImportError as error:
-        console.print(
-            f"[yellow]quatmotion.sparse is not available ({error}); "
-            "skipping the QSSD / K-SVD comparison.[/yellow]"
-        )
-        return None
+    train: NDArray[np.float64], test: NDArray[np.float64], seed: int, quick: bool
+) -> list[dict[str, Any]]:
+    from quatmotion.sparse import KSVD, QSSD, angular_error_deg
+
     params = {
         "n_atoms": 16 if quick else 32,
         "sparsity": 3,
@@ -239,7 +233,7 @@ def run_demo(
             f"angular displacements: {len(train)} training and {len(test)} test "
             f"frames of {Y.shape[1]} joint quaternions; learning dictionaries..."
         )
-        rows = _compare(train, test, seed, quick, console)
+        rows = _compare(train, test, seed, quick)
     if rows:
         result = Table(
             title="reconstruction of angular displacements "

@@ -13,11 +13,10 @@ import pytest
 from conftest import DATA, needs_data
 from typer.testing import CliRunner
 
-from quatmotion import cli
+from quatmotion import bench as bench_package
+from quatmotion import io
 from quatmotion.cli import app
 from quatmotion.motion import forward_kinematics
-
-io = pytest.importorskip("quatmotion.io")
 
 PROJECT = Path(__file__).resolve().parents[1]
 CLIPS = {
@@ -193,7 +192,7 @@ def test_bench_calls_run_with_the_options(tmp_path, monkeypatch):
     fake = types.ModuleType("quatmotion.bench.fakebench")
     fake.run = run
     monkeypatch.setitem(sys.modules, "quatmotion.bench.fakebench", fake)
-    monkeypatch.setattr(cli, "bench_names", lambda: ["fakebench"])
+    monkeypatch.setattr(bench_package, "names", lambda: ["fakebench"])
     out = tmp_path / "sub" / "bench.json"
     result = _invoke("bench", "fakebench", "--out", out, "--quick", "--seed", "7")
     assert result.exit_code == 0, result.output
@@ -203,7 +202,7 @@ def test_bench_calls_run_with_the_options(tmp_path, monkeypatch):
 
 
 def test_bench_lists_the_real_benchmarks():
-    names = cli.bench_names()
+    names = bench_package.names()
     assert all((PROJECT / "quatmotion" / "bench" / f"{n}.py").is_file() for n in names)
     result = _invoke("bench", "definitely_not_a_bench", "--out", "x.json")
     _assert_bad_input(result, *names)
@@ -250,7 +249,6 @@ def test_datasets_fetch_against_a_local_server(tmp_path, serve_directory):
 
 
 def test_demo_quick_writes_figure_and_beats_the_identity(tmp_path):
-    pytest.importorskip("quatmotion.sparse")
     out = tmp_path / "demo"
     result = _invoke("demo", "--quick", "--out", out, "--seed", "1")
     assert result.exit_code == 0, result.output
@@ -272,11 +270,7 @@ def test_demo_quick_writes_figure_and_beats_the_identity(tmp_path):
     assert summary["n_train"] + summary["n_test"] == len(samples)
 
 
-def test_pose_commands_are_forwarded_when_available():
-    import importlib.util
-
-    if importlib.util.find_spec("quatmotion.pose.cli") is None:
-        pytest.skip("quatmotion.pose.cli is not installed")
+def test_pose_commands_are_mounted():
     result = _invoke("pose", "--help")
     assert result.exit_code == 0, result.output
     assert "quatmotion pose" in result.stdout and "search" in result.stdout

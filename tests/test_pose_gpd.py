@@ -10,8 +10,9 @@ import pytest
 from conftest import DATA
 
 from quatmotion import quat
-from quatmotion.pose import gpd
-from quatmotion.pose.data import PoseData, angular_velocities, joint_orientations
+from quatmotion.pose import gpd, skeleton16
+from quatmotion.pose.data import PoseClip, PoseData, angular_velocities, joint_orientations
+from quatmotion.pose.scaler import MinMaxUnitScaler
 from quatmotion.pose.skeleton16 import JOINTS_16, PARENTS_16
 
 J = {name: k for k, name in enumerate(JOINTS_16)}
@@ -156,7 +157,6 @@ def test_known_geometry_of_a_t_pose() -> None:
 
 
 def test_invariant_to_horizontal_translation_and_yaw() -> None:
-    skeleton16 = pytest.importorskip("quatmotion.pose.skeleton16")
     rng = np.random.default_rng(0)
     world = random_poses(40, seed=1) + np.array([3.0, 95.0, -7.0])
     world += np.cumsum(rng.normal(size=(40, 1, 3)), axis=0)  # a moving clip
@@ -191,7 +191,7 @@ def test_speed_at_least_5000_poses_per_second() -> None:
 # ------------------------------------------------------------------------------------------
 def test_normaliser_is_min_max_then_unit_length() -> None:
     features = gpd.gpd_features(random_poses(50, seed=5))
-    model = gpd.GPD().fit(features)
+    model = MinMaxUnitScaler().fit(features)
     out = model.transform(features)
     np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0)
     scaled = features * model.scale_ + model.offset_
@@ -204,8 +204,8 @@ def test_normaliser_is_min_max_then_unit_length() -> None:
     assert not live[gpd.FEATURE_SLICES["J_k"]].any()  # static poses: kinetics are constant
     assert list(model.get_feature_names_out()) == list(gpd.FEATURE_NAMES)
     data = PoseData.from_clip(random_poses(50, seed=5), 30.0)
-    np.testing.assert_allclose(gpd.GPD().fit(data).transform(data),
-                               gpd.GPD().fit(data.gpd).transform(data.gpd))  # fmt: skip
+    np.testing.assert_allclose(MinMaxUnitScaler().fit(data).transform(data),
+                               MinMaxUnitScaler().fit(data.gpd).transform(data.gpd))  # fmt: skip
     with pytest.raises(ValueError, match="features"):
         model.transform(features[:, :100])
     with pytest.raises(ValueError, match="shape"):
@@ -274,11 +274,10 @@ def test_orientations_from_positions() -> None:
 
 @pytest.mark.skipif(not (DATA / "cmu").is_dir(), reason=f"no mocap data folder at {DATA}")
 def test_real_clip_features_are_finite_and_stable() -> None:
-    skeleton16 = pytest.importorskip("quatmotion.pose.skeleton16")
     from quatmotion.io import read_amc
 
     motion = read_amc(DATA / "cmu" / "02" / "02_01.amc", DATA / "cmu" / "02" / "02.asf")
-    data = PoseData.from_motion(motion)
+    data = PoseClip.from_motion(motion).poses
     assert len(data) == motion.n_frames
     features = data.gpd
     assert np.all(np.isfinite(features))

@@ -10,7 +10,8 @@ import pytest
 from conftest import DATA
 from scipy.spatial.distance import cdist
 
-from quatmotion.pose.index import PoseIndex, PoseLibrary, exact_knn, recall_at_k
+from quatmotion.pose.index import HNSWIndex, exact_knn, recall_at_k
+from quatmotion.pose.library import PoseLibrary
 
 
 def _pose_like(n: int, dim: int = 50, seed: int = 0) -> np.ndarray:
@@ -24,7 +25,7 @@ def _pose_like(n: int, dim: int = 50, seed: int = 0) -> np.ndarray:
 
 def test_indexed_pose_finds_itself_first() -> None:
     X = _pose_like(3000)
-    index = PoseIndex(M=16, ef_construction=100, ef_search=32, random_state=0).fit(X)
+    index = HNSWIndex(M=16, ef_construction=100, ef_search=32, random_state=0).fit(X)
     ids, dist = index.query(X, k=3)
     np.testing.assert_array_equal(ids[:, 0], np.arange(len(X)))
     np.testing.assert_allclose(dist[:, 0], 0.0, atol=1e-3)
@@ -40,7 +41,7 @@ def test_exact_knn_matches_brute_force_and_hnsw_recall_is_high() -> None:
     full = cdist(Q, X)
     np.testing.assert_array_equal(idx, np.argsort(full, axis=1, kind="stable")[:, :10])
     np.testing.assert_allclose(dist, np.sort(full, axis=1)[:, :10], rtol=1e-4)
-    approx, _ = PoseIndex(ef_search=64).fit(X).query(Q, k=10)
+    approx, _ = HNSWIndex(ef_search=64).fit(X).query(Q, k=10)
     assert recall_at_k(approx, idx) >= 0.95
     assert recall_at_k(idx, idx) == 1.0
     shifted = np.roll(idx, 5, axis=0)
@@ -48,13 +49,13 @@ def test_exact_knn_matches_brute_force_and_hnsw_recall_is_high() -> None:
 
 
 def test_query_validation() -> None:
-    index = PoseIndex().fit(_pose_like(50, dim=4))
+    index = HNSWIndex().fit(_pose_like(50, dim=4))
     with pytest.raises(ValueError, match="dimensions"):
         index.query(np.zeros((1, 5)))
     with pytest.raises(ValueError, match="k must"):
         index.query(np.zeros((1, 4)), k=51)
     with pytest.raises(ValueError, match="not built"):
-        PoseIndex().query(np.zeros((1, 4)))
+        HNSWIndex().query(np.zeros((1, 4)))
 
 
 def test_library_round_trip_and_projection(tmp_path: pathlib.Path) -> None:
@@ -67,7 +68,7 @@ def test_library_round_trip_and_projection(tmp_path: pathlib.Path) -> None:
         "W": rng.normal(size=(D, r)),
     }
     lib = PoseLibrary(
-        index=PoseIndex(random_state=0),
+        index=HNSWIndex(random_state=0),
         clip_names=["a/one.amc", "b/two.bvh"],
         clip_of=np.repeat([0, 1], n // 2),
         frame_of=np.tile(np.arange(0, n // 2) * 4, 2),
@@ -105,7 +106,8 @@ def test_cli_index_then_search_returns_the_query_pose(
 ) -> None:
     from typer.testing import CliRunner
 
-    from quatmotion.pose import cli
+    from quatmotion.cli import app
+    from quatmotion.pose import library
 
     # RDSR's fit (1683 x 1683 eigenproblems) is tested in test_pose_rdsr.py and takes minutes on
     # a shared machine; here the plumbing is under test, so a linear projection of the same
@@ -119,14 +121,14 @@ def test_cli_index_then_search_returns_the_query_pose(
             self.components_ = vt[: self.n_components]
             return self
 
-    monkeypatch.setattr(cli, "RDSR", _Projection)
-    app = cli.app
+    monkeypatch.setattr(library, "RDSR", _Projection)
     runner = CliRunner()
     out = tmp_path / "poses.idx"
     files = [str(DATA / "cmu" / "02" / f) for f in ("02_01.amc", "02_02.amc", "02_03.amc")]
     res = runner.invoke(
         app,
         [
+            "pose",
             "index",
             *files,
             "-o",
@@ -143,7 +145,7 @@ def test_cli_index_then_search_returns_the_query_pose(
     )
     assert res.exit_code == 0, res.output
     res = runner.invoke(
-        app, ["search", str(out), "--clip", "02_01", "--frame", "120", "-k", "5", "--json"]
+        app, ["pose", "search", str(out), "--clip", "02_01", "--frame", "120", "-k", "5", "--json"]
     )
     assert res.exit_code == 0, res.output
     found = json.loads(res.stdout[res.stdout.index("{") :])
@@ -155,6 +157,7 @@ def test_cli_index_then_search_returns_the_query_pose(
     res = runner.invoke(
         app,
         [
+            "pose",
             "search",
             str(out),
             "--clip",
@@ -171,10 +174,10 @@ def test_cli_index_then_search_returns_the_query_pose(
     assert all(not r["clip"].endswith("02_01.amc") for r in others)
     # a query read from a file goes through the same features and projection as the index
     res = runner.invoke(
-        app, ["search", str(out), "--file", files[1], "--frame", "40", "-k", "1", "--json"]
+        app, ["pose", "search", str(out), "--file", files[1], "--frame", "40", "-k", "1", "--json"]
     )
     assert res.exit_code == 0, res.output
     hit = json.loads(res.stdout[res.stdout.index("{") :])["results"][0]
     assert hit["clip"].endswith("02_02.amc") and hit["frame"] == 40 and hit["distance"] < 1e-4
-    res = runner.invoke(app, ["search", str(out), "--clip", "nope", "--frame", "1"])
+    res = runner.invoke(app, ["pose", "search", str(out), "--clip", "nope", "--frame", "1"])
     assert res.exit_code == 2

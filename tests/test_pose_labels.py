@@ -176,8 +176,8 @@ def test_transition_labels_follow_thresholds_and_balance() -> None:
     assert np.all(again.cloud_distance[again.labels] < low)
 
 
-def test_pose_indexer_round_trip() -> None:
-    ix = lab.PoseIndexer(np.array([3, 0, 5]))
+def test_clip_offsets_round_trip() -> None:
+    ix = lab.ClipOffsets(np.array([3, 0, 5]))
     np.testing.assert_array_equal(ix([0, 2, 2], [2, 0, 4]), [2, 3, 7])
     np.testing.assert_array_equal(ix.clip_of(), [0, 0, 0, 2, 2, 2, 2, 2])
     np.testing.assert_array_equal(ix.frame_of(), [0, 1, 2, 0, 1, 2, 3, 4])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from quatmotion import quat
+from quatmotion import io, quat
 from quatmotion.motion import forward_kinematics
 from quatmotion.motion.synthetic import (
     KINDS,
@@ -284,7 +284,6 @@ def test_knees_and_elbows_bend_the_human_way_in_a_run():
 
 
 def test_generated_clip_round_trips_through_asf_amc_and_bvh(tmp_path):
-    io = pytest.importorskip("quatmotion.io")
     m = generate_clip("wave", 11, n_frames=60)
     io.write_asf(m.skeleton, tmp_path / "gen.asf")
     io.write_amc(m, tmp_path / "gen_01.amc")

@@ -6,3 +6,14 @@ writes the result as JSON to ``out`` (figures as PNG beside it) and returns the 
 ``run``. Benchmarks are not tests: they report numbers (see METRICS.md for their names), they
 do not assert them.
 """
+
+from __future__ import annotations
+
+import pkgutil
+
+__all__ = ["names"]
+
+
+def names() -> list[str]:
+    """The benchmarks of this package: its public modules, sorted (each has a ``run``)."""
+    return sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))

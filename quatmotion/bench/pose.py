@@ -33,7 +33,6 @@ or reader is missing is skipped and listed in ``skipped``.
 
 from __future__ import annotations
 
-import json
 import pathlib
 import time
 import traceback
@@ -45,10 +44,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion._atomic import atomic_write_json
-from quatmotion.datasets import data_root
-from quatmotion.pose import evaluate, labels, skeleton16
-from quatmotion.pose.data import PoseData
-from quatmotion.pose.index import PoseIndex, exact_knn, recall_at_k
+from quatmotion.datasets import ClipEntry, catalogue, data_root
+from quatmotion.pose import evaluate, labels
+from quatmotion.pose.data import PoseClip, PoseData
+from quatmotion.pose.index import HNSWIndex, exact_knn, recall_at_k
 from quatmotion.viz import pyplot, save_figure
 
 TARGET_FPS = 30.0
@@ -62,80 +61,56 @@ LEARNERS = ("L2", "LMS", "Xing", "SDA", "RDSR")
 
 @dataclass
 class Clip:
-    """One clip prepared for the pose benchmark (30 fps, 170 cm body)."""
+    """A clip prepared for the pose benchmark (30 fps, 170 cm body) with its split labels."""
 
-    name: str
-    group: str
-    cls: str
-    local: NDArray[np.float64]  # (T, 16, 3) body frame, Hip at (0, h, 0)
-    world: NDArray[np.float64]  # (T, 16, 3) world, scaled
-    poses: PoseData
+    pose_clip: PoseClip
+    group: str  # what the train/test split holds out: actor, subject or style
+    cls: str  # the class retrieval scores by ("" when the collection has none)
+
+    @property
+    def local(self) -> NDArray[np.float64]:
+        return self.pose_clip.local
+
+    @property
+    def world(self) -> NDArray[np.float64]:
+        return self.pose_clip.world
+
+    @property
+    def poses(self) -> PoseData:
+        return self.pose_clip.poses
 
 
-def _prepare(motion: Any, name: str, group: str, cls: str) -> Clip | None:
-    step = max(1, int(round(motion.fps / TARGET_FPS)))
-    if step > 1:
-        motion = motion.slice(step=step)
-    if motion.n_frames < 8:
-        return None
-    scale = skeleton16.height_scale(motion.skeleton, BODY_HEIGHT)
-    world = skeleton16.world_positions16(motion) * scale
-    local = skeleton16.to_body_frame(world, keep_height=True)
-    return Clip(name, group, cls, local, world, PoseData.from_clip(local, motion.fps))
+def _prepare(entry: ClipEntry, group: str, cls: str) -> Clip | None:
+    pose_clip = PoseClip.from_motion(entry.load(), fps=TARGET_FPS, height=BODY_HEIGHT)
+    return Clip(pose_clip, group, cls) if len(pose_clip) >= 8 else None
 
 
 def _load(kind: str, root: pathlib.Path, quick: bool) -> list[Clip]:
-    from quatmotion import io as qio
-
-    clips: list[Clip] = []
     if kind == "hdm05":
-        files = sorted((root / "hdm05" / "clips").glob("*/*.amc"))
+        entries = catalogue(root, collection="hdm05")
         if quick:  # a few clips per class and actor keep every split populated
             seen: dict[tuple[str, str], int] = {}
             kept = []
-            for f in files:
-                key = (f.parent.name, f.name.split("_")[1])
+            for e in entries:
+                key = (e.labels["class"], e.labels["actor"])
                 if seen.get(key, 0) < 2:
-                    kept.append(f)
+                    kept.append(e)
                     seen[key] = seen.get(key, 0) + 1
-            files = kept
-        for f in files:
-            clip = _prepare(qio.read_amc(f), f.stem, f.name.split("_")[1], f.parent.name)
-            if clip is not None:
-                clips.append(clip)
+            entries = kept
+        prepared = [_prepare(e, e.labels["actor"], e.labels["class"]) for e in entries]
     elif kind == "cmu":
-        for f in sorted((root / "cmu").glob("*/*.amc")):
-            clip = _prepare(qio.read_amc(f), f.stem, f.parent.name, "")
-            if clip is not None:
-                clips.append(clip)
-        read_bvh = getattr(qio, "read_bvh", None)
-        if read_bvh is not None:
-            for f in sorted((root / "cmu_bvh").glob("*/*.bvh")):
-                clip = _prepare(read_bvh(f), f.stem, f.parent.name, "")
-                if clip is not None:
-                    clips.append(clip)
+        entries = catalogue(root, collection=("cmu", "cmu_bvh"))
+        prepared = [_prepare(e, e.path.parent.name, "") for e in entries]
         if quick:
-            clips = [c for c in clips if c.poses.positions.shape[0] > 0][::2]
+            prepared = [c for c in prepared if c is not None][::2]
     elif kind == "bandai":
-        read_bvh = getattr(qio, "read_bvh", None)
-        if read_bvh is None:
-            raise RuntimeError("quatmotion.io.read_bvh is not available")
-        folder = root / "bandai1"
-        contents = (folder / "content_label.txt").read_text().split()
-        styles = (folder / "style_label.txt").read_text().split()
-        files = sorted((folder / "clips").glob("*.bvh"))
+        entries = catalogue(root, collection="bandai1")
         if quick:
-            files = files[::3]
-        for f in files:
-            tag = json.loads(f.with_suffix(".json").read_text())
-            cls = contents[int(tag["content"])].removeprefix("dataset-1_")
-            style = styles[int(tag["style"])].removeprefix("dataset-1_")
-            clip = _prepare(read_bvh(f), f.stem, style, cls)
-            if clip is not None:
-                clips.append(clip)
+            entries = entries[::3]
+        prepared = [_prepare(e, e.labels["style"], e.labels["content"]) for e in entries]
     else:
         raise ValueError(f"unknown dataset {kind!r}")
-    return clips
+    return [c for c in prepared if c is not None]
 
 
 def _split(clips: list[Clip]) -> tuple[list[int], list[int]]:
@@ -216,18 +191,26 @@ def _transition_experiment(
         local, world, TARGET_FPS, clips=test, thresholds=thresholds, n_positive=n_pairs,
         n_negative=n_pairs, n_queries=1500 if quick else 6000, random_state=rng,
     )  # fmt: skip
-    indexer = labels.PoseIndexer(np.array([len(c.local) for c in clips]))
+    clip_offsets = labels.ClipOffsets(np.array([len(c.local) for c in clips]))
     all_poses = PoseData.concat([c.poses for c in clips])
     train_pose_ids = np.concatenate(
-        [indexer.offsets[c] + np.arange(len(clips[c].local)) for c in train]
+        [clip_offsets.starts[c] + np.arange(len(clips[c].local)) for c in train]
     )
     n_unl = 1500 if quick else 5000
     unlabeled = rng.permutation(train_pose_ids)[:n_unl]
     tr_pairs = np.stack(
-        [indexer(tr.pairs[:, 0], tr.pairs[:, 1]), indexer(tr.pairs[:, 2], tr.pairs[:, 3])], 1
+        [
+            clip_offsets(tr.pairs[:, 0], tr.pairs[:, 1]),
+            clip_offsets(tr.pairs[:, 2], tr.pairs[:, 3]),
+        ],
+        1,
     )
     te_pairs = np.stack(
-        [indexer(te.pairs[:, 0], te.pairs[:, 1]), indexer(te.pairs[:, 2], te.pairs[:, 3])], 1
+        [
+            clip_offsets(te.pairs[:, 0], te.pairs[:, 1]),
+            clip_offsets(te.pairs[:, 2], te.pairs[:, 3]),
+        ],
+        1,
     )
     task = _Task(all_poses, unlabeled, tr_pairs, tr.labels)
     default_unl = min(5000, len(unlabeled))
@@ -346,11 +329,11 @@ def _retrieval_experiment(
     )
     n_pairs = 150 if quick else 500
     pairs, pair_labels = labels.retrieval_pairs(train_set, n_pairs, n_pairs, random_state=rng)
-    indexer = labels.PoseIndexer(np.array([len(c.local) for c in clips]))
+    clip_offsets = labels.ClipOffsets(np.array([len(c.local) for c in clips]))
     all_poses = PoseData.concat([c.poses for c in clips])
     _ = all_poses.gpd
     train_pose_ids = np.concatenate(
-        [indexer.offsets[c] + np.arange(len(clips[c].local)) for c in train]
+        [clip_offsets.starts[c] + np.arange(len(clips[c].local)) for c in train]
     )
     unlabeled = rng.permutation(train_pose_ids)[: (1500 if quick else 5000)]
     task = _Task(all_poses, unlabeled, pairs, pair_labels)
@@ -416,7 +399,7 @@ def _ann_benchmark(quick: bool, seed: int, log: Callable[[str], None]) -> dict[s
     Q = sample(n_queries)
     params = {"M": 16, "ef_construction": 64, "ef_search": 64}
     t0 = time.perf_counter()
-    index = PoseIndex(**params, n_threads=-1, random_state=seed).fit(X)
+    index = HNSWIndex(**params, n_threads=-1, random_state=seed).fit(X)
     build_s = time.perf_counter() - t0
     log(f"  ann build {n}: {build_s:.1f} s")
     exact, _ = exact_knn(X, Q, k)

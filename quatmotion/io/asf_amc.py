@@ -52,7 +52,7 @@ from quatmotion.io._text import (
     scan_tokens,
     token_hash,
 )
-from quatmotion.motion import Motion, Pose, Skeleton, forward_kinematics
+from quatmotion.motion import Motion, Skeleton, WorldTransforms, forward_kinematics
 
 __all__ = [
     "asf_bone_end_positions",
@@ -874,7 +874,9 @@ def write_amc(motion: Motion, path: str | Path) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def asf_bone_end_positions(motion: Motion, pose: Pose | None = None) -> NDArray[np.float64]:
+def asf_bone_end_positions(
+    motion: Motion, world: WorldTransforms | None = None
+) -> NDArray[np.float64]:
     """Positions of the root and of every bone's END, in ASF file order.
 
     This is the layout of the CMU/HDM05 reference positions: index 0 the root position, then
@@ -885,7 +887,7 @@ def asf_bone_end_positions(motion: Motion, pose: Pose | None = None) -> NDArray[
     ----------
     motion : Motion
         On a skeleton read with :func:`read_asf`.
-    pose : Pose, optional
+    world : WorldTransforms, optional
         ``forward_kinematics(motion)`` if already computed.
 
     Returns
@@ -895,9 +897,9 @@ def asf_bone_end_positions(motion: Motion, pose: Pose | None = None) -> NDArray[
     """
     sk = motion.skeleton
     _require_asf(sk, "asf_bone_end_positions")
-    if pose is None:
-        pose = forward_kinematics(motion, include_sites=False)
+    if world is None:
+        world = forward_kinematics(motion, include_sites=False)
     joints = [sk.index(b["name"]) for b in sk.extras["asf_bones"]]
     vectors = np.asarray(sk.extras["bone_vectors_cm"])[joints]
-    ends = pose.positions[:, joints] + quat.rotate(pose.rotations[:, joints], vectors)
-    return np.concatenate((pose.positions[:, :1], ends), axis=1)
+    ends = world.positions[:, joints] + quat.rotate(world.rotations[:, joints], vectors)
+    return np.concatenate((world.positions[:, :1], ends), axis=1)

@@ -2,13 +2,13 @@
 
 from quatmotion.motion.clip import Motion
 from quatmotion.motion.displacement import angular_displacements
-from quatmotion.motion.kinematics import Pose, forward_kinematics, standing_height
+from quatmotion.motion.kinematics import WorldTransforms, forward_kinematics, standing_height
 from quatmotion.motion.skeleton import Skeleton
 
 __all__ = [
     "Motion",
-    "Pose",
     "Skeleton",
+    "WorldTransforms",
     "angular_displacements",
     "forward_kinematics",
     "standing_height",

@@ -20,8 +20,8 @@ from quatmotion.quat.jit import multiply, rotate
 
 
 @dataclass(frozen=True, eq=False)
-class Pose:
-    """World-space result of forward kinematics.
+class WorldTransforms:
+    """World-space joint transforms of a clip: the result of forward kinematics.
 
     Attributes
     ----------
@@ -86,7 +86,7 @@ def _fk_kernel(
     return pos, glob, sites
 
 
-def forward_kinematics(motion: Motion, include_sites: bool = True) -> Pose:
+def forward_kinematics(motion: Motion, include_sites: bool = True) -> WorldTransforms:
     """Global positions and rotations of every joint (and end site) of ``motion``.
 
     Parameters
@@ -98,7 +98,7 @@ def forward_kinematics(motion: Motion, include_sites: bool = True) -> Pose:
 
     Returns
     -------
-    Pose
+    WorldTransforms
         ``positions (T, J, 3)`` cm, ``rotations (T, J, 4)``, ``site_positions (T, S, 3)`` cm.
     """
     sk = motion.skeleton
@@ -117,7 +117,7 @@ def forward_kinematics(motion: Motion, include_sites: bool = True) -> Pose:
         np.ascontiguousarray(site_parents),
         np.ascontiguousarray(sk.site_offsets[: len(site_parents)]),
     )
-    return Pose(positions=positions, rotations=rotations, site_positions=sites)
+    return WorldTransforms(positions=positions, rotations=rotations, site_positions=sites)
 
 
 def standing_height(motion: Motion, step: int = 1) -> float:

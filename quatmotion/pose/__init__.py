@@ -6,9 +6,12 @@ Submodules
 skeleton16
     ``JOINTS_16``, ``PARENTS_16``; world and body-local 16-joint positions of a clip.
 data
-    ``PoseData``: body-local positions with velocities and accelerations.
+    ``PoseData``: body-local positions with velocities and accelerations; ``PoseClip``: a
+    clip prepared for pose analysis (resampled, scaled, on the 16 joints).
 gpd
-    The 1683-dimensional Geometric Pose Descriptor and its normalisation (``GPD``).
+    The 1683-dimensional Geometric Pose Descriptor.
+scaler
+    ``MinMaxUnitScaler``: the paper's feature scaling (Eq. 38), for every feature family.
 metric
     ``RDSR``: semi-supervised metric learning with sparse representation.
 baselines, methods
@@ -18,7 +21,7 @@ labels
 evaluate
     Transition precision (Eq. 36-37) and retrieval precision@s.
 index
-    ``PoseIndex`` (hnswlib) and ``PoseLibrary`` (a saved, searchable library).
+    ``HNSWIndex`` (hnswlib) and ``PoseLibrary`` (a saved, searchable library).
 cli
     The ``quatmotion pose`` Typer sub-app (``index``, ``search``).
 
@@ -35,8 +38,9 @@ _EXPORTS = {
     "PARENTS_16": "skeleton16",
     "local_positions16": "skeleton16",
     "world_positions16": "skeleton16",
+    "PoseClip": "data",
     "PoseData": "data",
-    "GPD": "gpd",
+    "MinMaxUnitScaler": "scaler",
     "gpd_features": "gpd",
     "FEATURE_NAMES": "gpd",
     "RDSR": "metric",
@@ -45,8 +49,8 @@ _EXPORTS = {
     "precision_at": "evaluate",
     "transition_labels": "labels",
     "retrieval_set": "labels",
-    "PoseIndex": "index",
-    "PoseLibrary": "index",
+    "HNSWIndex": "index",
+    "PoseLibrary": "library",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -21,19 +21,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quatmotion import quat
+from quatmotion.motion import Motion
+from quatmotion.pose import skeleton16
 from quatmotion.pose.gpd import gpd_features
 from quatmotion.pose.skeleton16 import JOINTS_16, PARENTS_16
 
-if TYPE_CHECKING:
-    from quatmotion.motion import Motion
-
-__all__ = ["PoseData", "angular_velocities", "joint_orientations"]
+__all__ = ["PoseClip", "PoseData", "angular_velocities", "joint_orientations"]
 
 _N_JOINTS = len(JOINTS_16)
 _J = {name: k for k, name in enumerate(JOINTS_16)}
@@ -184,7 +182,8 @@ class PoseData:
 
     Notes
     -----
-    Build from clips with :meth:`from_clip` (or :meth:`from_motion`), join with :meth:`concat`,
+    Build from clips with :meth:`from_clip` (or :meth:`PoseClip.from_motion`), join with
+    :meth:`concat`,
     select with ``data[idx]`` (an int, slice, index array or boolean mask). ``gpd`` (N, 1683)
     and ``orientations`` (N, 16, 4) are computed on first use and cached.
     """
@@ -272,29 +271,6 @@ class PoseData:
         return cls(pos, vel, acc, height)
 
     @classmethod
-    def from_motion(cls, motion: Motion, height: float | None = None) -> PoseData:
-        """Poses of a :class:`~quatmotion.motion.Motion` through ``skeleton16``.
-
-        Parameters
-        ----------
-        motion : Motion
-            A clip on a skeleton ``quatmotion.pose.skeleton16`` knows.
-        height : float, optional
-            Rescale the body uniformly to this standing height, cm (the paper normalises
-            subjects by body height); ``None`` keeps the file's size.
-
-        Returns
-        -------
-        PoseData
-            ``motion.n_frames`` poses.
-        """
-        # Imported here: skeleton16 sits beside this module and is only needed for this path.
-        from quatmotion.pose import skeleton16
-
-        local = skeleton16.local_positions16(motion, keep_height=True, height=height)
-        return cls.from_clip(local, motion.fps)
-
-    @classmethod
     def concat(cls, parts: Sequence[PoseData]) -> PoseData:
         """Join pose sets in order (derivatives stay those computed within each clip)."""
         parts = list(parts)
@@ -346,3 +322,86 @@ class PoseData:
         out = angular_velocities(self.positions, self.velocities)
         out.setflags(write=False)
         return out
+
+
+@dataclass(frozen=True, eq=False)
+class PoseClip:
+    """One clip prepared for pose analysis: resampled, scaled, on the 16-joint skeleton.
+
+    The one way a clip becomes poses, for the pose library, its queries and the benchmarks.
+
+    Parameters
+    ----------
+    name : str
+        The clip's name (its file path when read from a file).
+    fps : float
+        Frame rate after resampling.
+    step : int
+        File frames per kept frame (frame ``i`` here is frame ``i * step`` of the file).
+    world : ndarray, shape (T, 16, 3)
+        World positions of the 16 pose joints, centimetres, scaled.
+    local : ndarray, shape (T, 16, 3)
+        The same in the body frame, the Hip at ``(0, hip height, 0)`` (see
+        :func:`quatmotion.pose.skeleton16.to_body_frame` with ``keep_height=True``).
+    poses : PoseData
+        The ``T`` poses with their time derivatives.
+    height : float or None
+        The stature the body was scaled to, centimetres (``None``: the file's own size).
+    """
+
+    name: str
+    fps: float
+    step: int
+    world: NDArray[np.float64]
+    local: NDArray[np.float64]
+    poses: PoseData
+    height: float | None = None
+
+    @classmethod
+    def from_motion(
+        cls,
+        motion: Motion,
+        *,
+        fps: float | None = None,
+        height: float | None = None,
+        name: str | None = None,
+    ) -> PoseClip:
+        """Resample ``motion`` to about ``fps``, scale its body to ``height`` and describe it.
+
+        Parameters
+        ----------
+        motion : Motion
+            A clip of a skeleton :mod:`quatmotion.pose.skeleton16` maps.
+        fps : float, optional
+            Target frame rate: every ``round(motion.fps / fps)``-th frame is kept (at least
+            every frame). ``None`` keeps every frame.
+        height : float, optional
+            Stature to scale the body to, centimetres (:func:`skeleton16.height_scale`);
+            ``None`` keeps the file's size.
+        name : str, optional
+            Default ``motion.name``.
+
+        Returns
+        -------
+        PoseClip
+        """
+        if fps is not None and not (np.isfinite(fps) and fps > 0):
+            raise ValueError(f"fps must be positive and finite, got {fps}")
+        step = 1 if fps is None else max(1, int(round(motion.fps / fps)))
+        if step > 1:
+            motion = motion.slice(step=step)
+        scale = 1.0 if height is None else skeleton16.height_scale(motion.skeleton, height)
+        world = skeleton16.world_positions16(motion) * scale
+        local = skeleton16.to_body_frame(world, keep_height=True)
+        return cls(
+            name=motion.name if name is None else name,
+            fps=motion.fps,
+            step=step,
+            world=world,
+            local=local,
+            poses=PoseData.from_clip(local, motion.fps),
+            height=height,
+        )
+
+    def __len__(self) -> int:
+        return self.local.shape[0]

@@ -1,44 +1,33 @@
-"""Approximate-nearest-neighbour pose index (hnswlib) and the pose library saved for search.
+"""Approximate nearest neighbours under Euclidean distance: an HNSW graph (hnswlib).
 
-A *pose library* answers "poses like frame F of clip C": every pose of a motion library is
-described by the GPD, normalised, projected by a learned metric ``W`` (RDSR, 50 dimensions),
-and put in an HNSW graph (Malkov & Yashunin, hnswlib). In the projected space the learned
-distance ``sqrt((x - y)^T W W^T (x - y))`` is plain Euclidean distance, so an L2 index answers
-learned-metric queries.
+The pose library (:mod:`quatmotion.pose.library`) projects poses so that the learned pose
+distance is Euclidean and searches them with :class:`HNSWIndex`; :func:`exact_knn` and
+:func:`recall_at_k` measure how close the approximate answers are to the exact ones.
 
 Conventions
 -----------
 * Distances returned are Euclidean (hnswlib's ``"l2"`` space returns squared distances; they
   are square-rooted here).
 * Vectors are stored as float32 (hnswlib's precision).
-* A library file is one ``.npz`` holding the serialised HNSW graph, the projection model and the
-  pose catalogue (clip names, frame numbers, fps); it is written to a temporary file and then
-  renamed, so a reader never sees half a library.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import pathlib
 import tempfile
-from dataclasses import dataclass, field
-from typing import Any
 
 import hnswlib
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from quatmotion._atomic import atomic_output
+__all__ = ["HNSWIndex", "exact_knn", "recall_at_k"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-_FORMAT = "quatmotion-pose-library"
-_VERSION = 1
 
-
-class PoseIndex:
+class HNSWIndex:
     """Approximate nearest neighbours under Euclidean distance, an HNSW graph (hnswlib).
 
     Parameters
@@ -92,7 +81,7 @@ class PoseIndex:
             raise ValueError("vectors must be finite")
         return arr
 
-    def fit(self, X: ArrayLike) -> PoseIndex:
+    def fit(self, X: ArrayLike) -> HNSWIndex:
         """Build the index over ``X``; item ``i`` is row ``i``.
 
         Parameters
@@ -123,7 +112,7 @@ class PoseIndex:
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "_index"):
-            raise ValueError("this PoseIndex is not built yet: call fit first")
+            raise ValueError("this HNSWIndex is not built yet: call fit first")
 
     def query(self, Q: ArrayLike, k: int = 10) -> tuple[IntArray, FloatArray]:
         """The ``k`` approximate nearest items of each query.
@@ -166,7 +155,7 @@ class PoseIndex:
     @classmethod
     def from_bytes(
         cls, data: bytes, dim: int, ef_search: int = 64, n_threads: int = -1
-    ) -> PoseIndex:
+    ) -> HNSWIndex:
         """Rebuild an index from :meth:`to_bytes` output.
 
         Parameters
@@ -253,134 +242,3 @@ def recall_at_k(approx: ArrayLike, exact: ArrayLike) -> float:
         raise ValueError(f"need equal (Q, k) arrays, got {a.shape} and {e.shape}")
     hits = [len(np.intersect1d(ra, re)) for ra, re in zip(a, e, strict=True)]
     return float(np.mean(hits) / a.shape[1])
-
-
-@dataclass
-class PoseLibrary:
-    """A searchable pose library: projection model, HNSW index and pose catalogue.
-
-    Attributes
-    ----------
-    index : PoseIndex
-        Over the projected poses; item ``i`` is pose ``i`` of the catalogue.
-    clip_names : list of str
-        One per clip (file paths as given when indexing).
-    clip_of : ndarray of int, shape (N,)
-        Clip of every indexed pose.
-    frame_of : ndarray of int, shape (N,)
-        Frame number of every indexed pose, in the clip's file (before any subsampling).
-    model : dict of str to ndarray
-        The projection: ``scale`` and ``offset`` (shape (D,), the GPD normalisation of Eq. 38),
-        ``W`` (shape (D, r), the metric's projection); poses map to
-        ``unit(scale * gpd + offset) @ W``.
-    meta : dict
-        JSON-serialisable settings (fps, frame step, height, method, labels used...).
-    """
-
-    index: PoseIndex
-    clip_names: list[str]
-    clip_of: IntArray
-    frame_of: IntArray
-    model: dict[str, FloatArray]
-    meta: dict[str, Any] = field(default_factory=dict)
-
-    def project(self, raw_gpd: ArrayLike) -> FloatArray:
-        """Map raw GPD features to the index space.
-
-        Parameters
-        ----------
-        raw_gpd : array_like, shape (N, D)
-            :func:`quatmotion.pose.gpd.gpd_features` output.
-
-        Returns
-        -------
-        ndarray, shape (N, r)
-        """
-        x = np.asarray(raw_gpd, dtype=np.float64)
-        x = x * self.model["scale"] + self.model["offset"]
-        norm = np.linalg.norm(x, axis=1, keepdims=True)
-        x = x / np.where(norm > 0, norm, 1.0)
-        return x @ self.model["W"]
-
-    def find(self, clip: str | int, frame: int) -> int:
-        """Catalogue number of the indexed pose nearest in time to ``frame`` of ``clip``.
-
-        Parameters
-        ----------
-        clip : str or int
-            Clip number, full name, or a unique suffix of the name (e.g. the file name).
-        frame : int
-            Frame number in the clip's file.
-        """
-        c = self._clip_number(clip)
-        rows = np.flatnonzero(self.clip_of == c)
-        if len(rows) == 0:
-            raise ValueError(f"clip {self.clip_names[c]!r} has no indexed pose")
-        return int(rows[np.argmin(np.abs(self.frame_of[rows] - frame))])
-
-    def _clip_number(self, clip: str | int) -> int:
-        if isinstance(clip, (int, np.integer)):
-            if not 0 <= clip < len(self.clip_names):
-                raise ValueError(f"clip number {clip} out of range 0..{len(self.clip_names) - 1}")
-            return int(clip)
-        matches = [i for i, n in enumerate(self.clip_names) if n == clip]
-        if not matches:
-            matches = [
-                i
-                for i, n in enumerate(self.clip_names)
-                if n.endswith(clip) or pathlib.Path(n).stem == clip
-            ]
-        if len(matches) != 1:
-            raise ValueError(
-                f"clip {clip!r} matches {len(matches)} indexed clips; give a longer name"
-            )
-        return matches[0]
-
-    def search(self, vectors: ArrayLike, k: int = 10) -> tuple[IntArray, FloatArray]:
-        """Approximate nearest indexed poses of projected query vectors, ``(Q, k)`` each."""
-        return self.index.query(vectors, k)
-
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the library to ``path`` (one ``.npz``; temporary file, then rename)."""
-        path = pathlib.Path(path)
-        meta = dict(self.meta)
-        meta.update(format=_FORMAT, version=_VERSION, dim=self.index.dim_)
-        payload = {
-            "index": np.frombuffer(self.index.to_bytes(), dtype=np.uint8),
-            "clip_names": np.asarray(self.clip_names, dtype=str),
-            "clip_of": self.clip_of,
-            "frame_of": self.frame_of,
-            "meta": np.asarray(json.dumps(meta)),
-        }
-        payload.update({f"model_{k}": v for k, v in self.model.items()})
-        with atomic_output(path) as temp, temp.open("wb") as fh:
-            np.savez(fh, **payload)
-
-    @classmethod
-    def load(cls, path: str | os.PathLike[str], ef_search: int = 64) -> PoseLibrary:
-        """Read a library written by :meth:`save`.
-
-        Raises
-        ------
-        ValueError
-            If the file is not a pose library.
-        """
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                meta = json.loads(str(data["meta"]))
-                if meta.get("format") != _FORMAT:
-                    raise ValueError(f"{path} is not a quatmotion pose library")
-                index = PoseIndex.from_bytes(
-                    data["index"].tobytes(), dim=int(meta["dim"]), ef_search=ef_search
-                )
-                model = {k[6:]: data[k] for k in data.files if k.startswith("model_")}
-                return cls(
-                    index=index,
-                    clip_names=[str(n) for n in data["clip_names"]],
-                    clip_of=data["clip_of"].astype(np.int64),
-                    frame_of=data["frame_of"].astype(np.int64),
-                    model=model,
-                    meta=meta,
-                )
-        except (KeyError, OSError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{path} is not a readable quatmotion pose library: {exc}") from exc

@@ -28,7 +28,7 @@ query's class and its phase is within ``phase_tolerance`` (0.1) of the query's.
 
 Pose indices
 ------------
-Clips are lists of arrays; a pose is addressed by ``(clip, frame)``. ``PoseIndexer`` turns
+Clips are lists of arrays; a pose is addressed by ``(clip, frame)``. ``ClipOffsets`` turns
 those into indices into the concatenation of all clips (the order of ``PoseData.concat``).
 """
 
@@ -238,8 +238,11 @@ def mean_joint_distance_matrix(query: ArrayLike, base: ArrayLike) -> FloatArray:
 
 
 @dataclass(frozen=True)
-class PoseIndexer:
-    """Maps ``(clip, frame)`` to an index into the concatenation of all clips' frames.
+class ClipOffsets:
+    """Where each clip starts in the concatenation of all clips' frames.
+
+    Maps ``(clip, frame)`` to an index into the concatenation (``ClipOffsets(lengths)(c, f)``)
+    and back (:meth:`clip_of`, :meth:`frame_of`).
 
     Parameters
     ----------
@@ -256,7 +259,7 @@ class PoseIndexer:
         object.__setattr__(self, "lengths", lengths)
 
     @property
-    def offsets(self) -> IntArray:
+    def starts(self) -> IntArray:
         """First index of each clip, shape (C,)."""
         return np.r_[0, np.cumsum(self.lengths)[:-1]].astype(np.int64)
 
@@ -270,7 +273,7 @@ class PoseIndexer:
         frame = np.asarray(frame, dtype=np.int64)
         if np.any(frame < 0) or np.any(frame >= self.lengths[clip]):
             raise ValueError("frame out of range for its clip")
-        return self.offsets[clip] + frame
+        return self.starts[clip] + frame
 
     def clip_of(self) -> IntArray:
         """Clip of every global pose index, shape (N,)."""
@@ -278,7 +281,7 @@ class PoseIndexer:
 
     def frame_of(self) -> IntArray:
         """Frame (within its clip) of every global pose index, shape (N,)."""
-        return np.arange(self.n_poses) - np.repeat(self.offsets, self.lengths)
+        return np.arange(self.n_poses) - np.repeat(self.starts, self.lengths)
 
 
 # --------------------------------------------------------------------------------------------
@@ -605,7 +608,7 @@ class RetrievalSet:
     Attributes
     ----------
     poses : ndarray of int, shape (N,)
-        Global pose indices (see :class:`PoseIndexer`).
+        Global pose indices (see :class:`ClipOffsets`).
     classes : ndarray of int, shape (N,)
         Class of each pose's clip.
     phases : ndarray, shape (N,)
@@ -693,7 +696,7 @@ def retrieval_set(
     if len(classes) != len(local) or len(groups) != len(local):
         raise ValueError("classes and groups need one entry per clip")
     chosen_clips = np.arange(len(local)) if clips is None else np.asarray(clips, dtype=np.int64)
-    indexer = PoseIndexer(np.array([len(c) for c in local]))
+    clip_offsets = ClipOffsets(np.array([len(c) for c in local]))
     phase_of: dict[int, FloatArray] = {}
     for cls in np.unique(classes[chosen_clips]):
         members = [int(c) for c in chosen_clips if classes[c] == cls]
@@ -710,7 +713,7 @@ def retrieval_set(
         out_frames.append(frames[pick])
     clip_arr = np.concatenate(out_clips)
     frame_arr = np.concatenate(out_frames)
-    out_poses = indexer(clip_arr, frame_arr)
+    out_poses = clip_offsets(clip_arr, frame_arr)
     phases = np.array([phase_of[c][f] for c, f in zip(clip_arr, frame_arr, strict=True)])
     return RetrievalSet(out_poses, classes[clip_arr], phases, clip_arr, groups[clip_arr])
 

@@ -37,8 +37,8 @@ from quatmotion.pose.baselines import (
     joint_relative_features,
 )
 from quatmotion.pose.data import PoseData
-from quatmotion.pose.gpd import GPD
 from quatmotion.pose.metric import RDSR
+from quatmotion.pose.scaler import MinMaxUnitScaler
 
 __all__ = [
     "FEATURES",
@@ -143,7 +143,7 @@ def _make_learner(feature: str, learner: str, kwargs: dict[str, Any]) -> Any:
 
 
 class FeatureMetric:
-    """A feature set, the GPD normalisation, and a metric learner.
+    """A feature set, the min-max + unit-length scaling, and a metric learner.
 
     Parameters
     ----------
@@ -156,7 +156,7 @@ class FeatureMetric:
 
     Attributes
     ----------
-    normalizer_ : GPD
+    normalizer_ : MinMaxUnitScaler
         Min-max + unit-length normalisation fitted on all training poses.
     learner_ : object
         The fitted learner.
@@ -191,7 +191,7 @@ class FeatureMetric:
             )
         extract = FEATURES[self.feature]
         raw_u, raw_a, raw_b = extract(unlabeled), extract(train_a), extract(train_b)
-        self.normalizer_ = GPD().fit(np.concatenate((raw_u, raw_a, raw_b)))
+        self.normalizer_ = MinMaxUnitScaler().fit(np.concatenate((raw_u, raw_a, raw_b)))
         norm = self.normalizer_.transform
         self.learner_.fit(norm(raw_u), norm(raw_a), norm(raw_b), labels)
         return self

@@ -1,0 +1,30 @@
+"""The ``quatmotion`` command line (Typer + Rich): thin modules, one per command group.
+
+Each module registers its commands on the root application (:mod:`quatmotion.cli._app`) and
+calls the library; none computes anything itself. Heavy imports (NumPy, scikit-learn, Numba
+kernels) happen inside the commands, so ``quatmotion --help`` stays quick. Every command keeps
+the bad-input contract of :mod:`quatmotion.cli._common`: exit code 2 and a one-line ``error:``
+message, never a traceback.
+
+Modules: :mod:`~quatmotion.cli.motion` (``info``, ``convert``, ``generate``),
+:mod:`~quatmotion.cli.datasets` (``datasets list|fetch``), :mod:`~quatmotion.cli.pose`
+(``pose index|search``), :mod:`~quatmotion.cli.bench` (``bench``), :mod:`~quatmotion.cli.demo`
+(``demo``).
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from quatmotion.cli._app import app
+
+# Importing a command module registers its commands; this order is the order of --help.
+for _module in ("motion", "datasets", "pose", "bench", "demo"):
+    importlib.import_module(f"quatmotion.cli.{_module}")
+
+__all__ = ["app", "main"]
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app()

@@ -1,0 +1,30 @@
+"""``quatmotion demo``: the main job on a built-in generated library (``make demo``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from quatmotion.cli._app import app
+from quatmotion.cli._common import console, user_errors
+
+
+@app.command()
+def demo(
+    paths: Annotated[
+        list[Path] | None,
+        typer.Argument(help="Clips or folders to use instead of the built-in generated library."),
+    ] = None,
+    out: Annotated[Path, typer.Option(help="Folder for the figure and summary.")] = Path(
+        "demo-out"
+    ),
+    seed: Annotated[int, typer.Option(help="Seed of the generated library and the learners.")] = 0,
+    quick: Annotated[bool, typer.Option(help="Fewer clips and iterations.")] = False,
+) -> None:
+    """Generate (or load) clips, show them, and compress them with QSSD vs K-SVD."""
+    from quatmotion.demo import run_demo
+
+    with user_errors():
+        run_demo(paths or [], out_dir=out, seed=seed, quick=quick, console=console)
