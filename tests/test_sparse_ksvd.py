@@ -74,12 +74,12 @@ def test_fit_transform_inverse_transform() -> None:
 
 def test_seeds_reproduce_and_validation() -> None:
     data = make_sparse_quaternion_data(60, 4, 6, 2, random_state=4)
-    a = KSVD(6, 2, max_iter=3, random_state=5).fit(data.Y)
-    b = KSVD(6, 2, max_iter=3, random_state=5).fit(data.Y)
+    a = KSVD(6, sparsity=2, max_iter=3, random_state=5).fit(data.Y)
+    b = KSVD(6, sparsity=2, max_iter=3, random_state=5).fit(data.Y)
     np.testing.assert_array_equal(a.dictionary_flat_, b.dictionary_flat_)
     with pytest.raises(ValueError, match="unit"):
-        KSVD(6, 2).fit(data.Y * 2)
+        KSVD(6, sparsity=2).fit(data.Y * 2)
     with pytest.raises(ValueError, match="shape"):
-        KSVD(6, 2).fit(data.Y[0])
+        KSVD(6, sparsity=2).fit(data.Y[0])
     with pytest.raises(ValueError, match="sparsity"):
-        KSVD(2, 3).fit(data.Y)
+        KSVD(2, sparsity=3).fit(data.Y)

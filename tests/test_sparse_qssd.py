@@ -161,22 +161,22 @@ def test_seeds_reproduce() -> None:
 def test_bad_input_raises_value_error() -> None:
     good = make_sparse_quaternion_data(20, 3, 4, 2, random_state=0).Y
     with pytest.raises(ValueError, match="shape"):
-        QSSD(4, 2).fit(good[..., :3])
+        QSSD(4, sparsity=2).fit(good[..., :3])
     with pytest.raises(ValueError, match="shape"):
-        QSSD(4, 2).fit(good.reshape(20, 12))
+        QSSD(4, sparsity=2).fit(good.reshape(20, 12))
     with pytest.raises(ValueError, match="unit"):
-        QSSD(4, 2).fit(good * 1.01)
+        QSSD(4, sparsity=2).fit(good * 1.01)
     bad = good.copy()
     bad[0, 0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
-        QSSD(4, 2).fit(bad)
+        QSSD(4, sparsity=2).fit(bad)
     with pytest.raises(ValueError, match="sparsity"):
         QSSD(n_atoms=2, sparsity=3).fit(good)
     with pytest.raises(ValueError, match="residual"):
-        QSSD(4, 2, residual="middle").fit(good)
+        QSSD(4, sparsity=2, residual="middle").fit(good)
     with pytest.raises(ValueError, match="not fitted"):
-        QSSD(4, 2).transform(good)
-    model = QSSD(4, 2, max_iter=1, random_state=0).fit(good)
+        QSSD(4, sparsity=2).transform(good)
+    model = QSSD(4, sparsity=2, max_iter=1, random_state=0).fit(good)
     with pytest.raises(ValueError, match="quaternions per sample"):
         model.transform(good[:, :2])
     with pytest.raises(ValueError, match="shape"):
@@ -189,3 +189,26 @@ def test_keep_best_returns_the_dictionary_with_the_lowest_training_objective() -
     Yhat = model.inverse_transform(model.transform(data.Y))
     objective = np.sum(1 - np.abs(np.sum(check_quaternion_samples(data.Y) * Yhat, -1)))
     assert objective == pytest.approx(np.min(model.objective_), rel=1e-9)
+
+
+def test_estimators_follow_scikit_learn_conventions() -> None:
+    import inspect
+
+    from sklearn.base import clone
+
+    from quatmotion.sparse import KSVD
+
+    good = make_sparse_quaternion_data(20, 3, 4, 2, random_state=0).Y
+    for cls in (QSSD, KSVD):
+        with pytest.raises(TypeError):
+            cls(4, 2)  # options after the first are keyword-only
+        model = cls(4, sparsity=2, max_iter=1, random_state=0)
+        assert clone(model).get_params() == model.get_params()
+        with pytest.raises(ValueError, match="max_iter"):
+            cls(4, sparsity=2, max_iter=0).fit(good)
+        fitted = model.fit(good, None)
+        assert fitted is model and model.n_features_in_ == 3
+    # The function the estimator calls has the estimator's defaults.
+    defaults = inspect.signature(update_dictionary).parameters
+    assert defaults["safeguard"].default == QSSD().safeguard
+    assert defaults["robust"].default == QSSD().robust

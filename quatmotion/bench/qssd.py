@@ -268,8 +268,8 @@ def table2(quick: bool, seed: int) -> dict[str, Any]:
     n_iter = 2 if quick else 3
     make_sparse_quaternion_data(50, 5, 5, 2, random_state=seed)
     warm = make_sparse_quaternion_data(300, 10, 5, 5, random_state=seed).Y
-    QSSD(5, 5, max_iter=1).fit(warm)
-    KSVD(5, 5, max_iter=1).fit(warm)
+    QSSD(5, sparsity=5, max_iter=1).fit(warm)
+    KSVD(5, sparsity=5, max_iter=1).fit(warm)
     rows = []
     for (N, n, K, L), (paper_ksvd, paper_qssd) in PAPER_TABLE2.items():
         Y = make_sparse_quaternion_data(N, n, K, L, random_state=seed).Y

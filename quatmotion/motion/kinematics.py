@@ -3,8 +3,7 @@
 The chain is walked in parent-first order (``parents[j] < j``), one frame after another on one
 core (fast enough that threads would cost more to start than they save). It is a Numba kernel
 because the per-joint step on ``(T, 4)`` arrays is too small for NumPy to amortise its call
-overhead: a NumPy version ran at about 20,000 frames/s on a 31-joint skeleton, this one at
-about 1.5 million.
+overhead (the I/O benchmark measures its throughput: ``docs/performance.md``).
 """
 
 from __future__ import annotations

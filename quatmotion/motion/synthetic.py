@@ -373,7 +373,7 @@ def _standing_height(sk: Skeleton) -> float:
 def foot_positions(motion: Motion) -> dict[str, FloatArray]:
     """Heel, ankle, ball and toe tip of each foot over the clip, centimetres.
 
-    The heel is not a CMU joint: it is placed on the sole, under and 5 % of the standing height
+    The heel is not a CMU joint: it is placed on the sole, under and 3 % of the standing height
     behind the ankle at rest, carried by the ankle (``lfoot``/``rfoot``) joint's global rotation.
 
     Parameters

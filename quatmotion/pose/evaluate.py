@@ -1,6 +1,7 @@
 """Evaluation of pose distances: transition precision and retrieval precision@s.
 
-Definitions follow /work/shared/METRICS.md ("Pose distance") and the GPD paper:
+Definitions follow METRICS.md ("Pose distance"), the project's one definition of every metric,
+and the GPD paper:
 
 * **Transition precision** (Eq. 36-37): with test pairs labelled positive (good transition) or
   negative, a threshold ``delta`` decides a pair correctly when a positive pair has distance

@@ -394,7 +394,7 @@ class RDSR(TransformerMixin, BaseEstimator):
         fraction of the unlabeled poses' variance (at least ``n_components`` of them). In the
         directions the data do not vary, ``A`` and ``B`` are both ~0, and the optimum of Eq. 27
         degenerates: it keeps the single best direction and pads W with those free null
-        directions (we measured one informative column out of 50 on full GPD). Restricting
+        directions, so most columns of W carry no information. Restricting
         to the data's span is the usual preprocessing of trace-ratio / LDA-type methods; it
         also makes every eigendecomposition small.
     max_active : int

@@ -27,7 +27,7 @@ scratch buffers take the samples in chunks of ``_CHUNK`` and allocate once per c
 What keeps the time down, besides the layout:
 
 * sine, cosine and arctangent are branch-free polynomials (:func:`_sincos`,
-  :func:`_atan_ratio`) that vectorise, where libm's are scalar calls of about 20 ns each;
+  :func:`_atan_ratio`) that vectorise, where libm's are scalar calls that do not;
 * a residual evaluation forms each power and multiplies it straight into the suffix products;
   the powers are kept so that a re-sort or a swapped-order trial reuses them;
 * the solver's trial steps go to a second set of buffers (no re-evaluation on rejection), and
@@ -60,7 +60,7 @@ _CHUNK = 16
 _FM = {"contract"}
 _FM_SUM = {"contract", "reassoc"}
 
-# sin and cos together, written by hand because glibc's cost about 20 ns each here, Numba
+# sin and cos together, written by hand because glibc's are slow scalar calls here, Numba
 # calls them one at a time and LLVM cannot vectorise a loop that calls them; they were most of
 # the Gauss-Newton refit. Reduction by pi/2 in two parts (Cody-Waite: exact for |x| < 1.6e6,
 # beyond which the error is of the order of ulp(x), the precision the argument itself has;
@@ -445,9 +445,8 @@ def _bcd(YTi, Dnorm, DaxisT, idx_row, coef_row, m, n_sweeps, weighted, A, suf, L
 # Relative size of the predicted Gauss-Newton decrease of |r|^2 below which a refit stops:
 # each step costs a full residual evaluation. On exact data the decrease stays large until the
 # residual vanishes (quadratic convergence), so this only cuts the last steps on noisy and real
-# data, where they move |r|^2 by under 0.1 %. Measured against 1e-10: 10-15 % less time per
-# iteration at N=5000, n=100, K=L=10; simulation restoration unchanged and final error 1.43 vs
-# 1.42 deg; CMU training error 5.518 vs 5.516 deg (K=100, L=10, 6 iterations).
+# data, where they move |r|^2 by under 0.1 %: less time per iteration for the same results
+# (the measurement against 1e-10 is in docs/performance.md).
 GN_STEP_TOL = 1e-3
 # Relative gap between adjacent weight magnitudes below which the swapped order is tried, and
 # how many such pairs (the closest first) are tried.

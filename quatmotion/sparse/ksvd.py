@@ -12,19 +12,17 @@ quaternions. Unused atoms are re-seeded with the worst-represented sample, as in
 
 from __future__ import annotations
 
-import time
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
-from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils import check_random_state
+from sklearn.utils.validation import check_is_fitted
 
 from quatmotion.sparse import _kernels as kern
+from quatmotion.sparse._base import DictionaryLearner
 from quatmotion.sparse._common import (
     Codes,
-    check_positive_int,
-    check_quaternion_samples,
     codes_to_matrix,
     compute_threads,
     group_by_atom,
@@ -94,7 +92,17 @@ def learn_linear_dictionary(
     return D
 
 
-class KSVD(TransformerMixin, BaseEstimator):
+@dataclass
+class _FitState:
+    """What K-SVD's fit carries between iterations."""
+
+    Y: NDArray[np.float64]  # (N, n, 4) validated samples
+    Yf: NDArray[np.float64]  # (N, 4n) flattened
+    D: NDArray[np.float64]  # (K, 4n) unit atoms
+    work: float
+
+
+class KSVD(DictionaryLearner):
     """K-SVD with OMP on flattened quaternion arrays (the paper's baseline, Algorithm 1).
 
     Parameters
@@ -123,43 +131,15 @@ class KSVD(TransformerMixin, BaseEstimator):
     objective_ : ndarray, shape (n_iter_,)
         ``|Y - X D|_F^2`` after each coding stage.
     iteration_seconds_ : ndarray, shape (n_iter_,)
+        Wall time of each iteration (coding + dictionary update).
     iteration_cpu_seconds_ : ndarray, shape (n_iter_,)
         Processor time of each iteration summed over threads (robust to a shared machine).
     n_features_in_ : int
     """
 
-    def __init__(
-        self,
-        n_atoms: int = 20,
-        sparsity: int = 5,
-        max_iter: int = 50,
-        tol: float = 1e-6,
-        random_state: int | np.random.RandomState | None = None,
-        verbose: bool = False,
-    ) -> None:
-        self.n_atoms = n_atoms
-        self.sparsity = sparsity
-        self.max_iter = max_iter
-        self.tol = tol
-        self.random_state = random_state
-        self.verbose = verbose
-
-    def _check_params(self) -> None:
-        check_positive_int(self.n_atoms, "n_atoms")
-        check_positive_int(self.sparsity, "sparsity")
-        check_positive_int(self.max_iter, "max_iter")
-        if self.sparsity > self.n_atoms:
-            raise ValueError(f"sparsity ({self.sparsity}) cannot exceed n_atoms ({self.n_atoms})")
-        if not (np.isfinite(self.tol) and self.tol >= 0):
-            raise ValueError(f"tol must be a finite number >= 0, got {self.tol!r}")
-
-    def fit(self, Y: ArrayLike, y: object = None) -> KSVD:
-        """Learn the dictionary from ``Y`` ``(N, n, 4)`` unit quaternions. Returns ``self``."""
-        self._check_params()
-        Yc = check_quaternion_samples(Y)
-        N, n, _ = Yc.shape
-        Yf = np.ascontiguousarray(Yc.reshape(N, 4 * n))
-        rng = check_random_state(self.random_state)
+    def _start(self, Y: NDArray[np.float64], rng: np.random.RandomState) -> _FitState:
+        N, n, _ = Y.shape
+        Yf = np.ascontiguousarray(Y.reshape(N, 4 * n))
         K = self.n_atoms
         chosen = rng.permutation(N)[:K]
         D = np.empty((K, 4 * n))
@@ -167,50 +147,25 @@ class KSVD(TransformerMixin, BaseEstimator):
         if chosen.size < K:
             extra = rng.standard_normal((K - chosen.size, 4 * n))
             D[chosen.size :] = extra / np.linalg.norm(extra, axis=1, keepdims=True)
-        errors: list[float] = []
-        objectives: list[float] = []
-        seconds: list[float] = []
-        cpu_seconds: list[float] = []
-        previous = np.inf
         # OMP's per-sample work is about K L (correlation updates), comparable to QSSD's n L.
         work = float(N * self.sparsity * max(self.n_atoms, n))
-        for it in range(self.max_iter):
-            t0 = time.perf_counter()
-            c0 = time.process_time()
-            with compute_threads(work):
-                codes = omp(Yf, D, self.sparsity)
-                R = Yf - _reconstruct(D, codes)
-            total = float(np.sum(R * R))
-            Yhat = _to_quaternions(Yf - R, n)
-            errors.append(
-                float(
-                    np.degrees(
-                        np.mean(2 * np.arccos(np.minimum(np.abs(np.sum(Yc * Yhat, -1)), 1.0)))
-                    )
-                )
-            )
-            objectives.append(total)
-            with compute_threads(work, blas_single=True):
-                self._update_dictionary(Yf, D, codes, R)
-            seconds.append(time.perf_counter() - t0)
-            cpu_seconds.append(time.process_time() - c0)
-            if self.verbose:
-                print(
-                    f"K-SVD iter {it + 1}: error {errors[-1]:.6g} deg, |R|^2 {total:.6g}, "
-                    f"{seconds[-1]:.3f} s"
-                )
-            if self.tol > 0 and it > 0 and abs(previous - total) <= self.tol * previous:
-                break
-            previous = total
-        self.dictionary_flat_ = D
-        self.dictionary_ = D.reshape(K, n, 4)
-        self.n_iter_ = len(errors)
-        self.errors_ = np.asarray(errors)
-        self.objective_ = np.asarray(objectives)
-        self.iteration_seconds_ = np.asarray(seconds)
-        self.iteration_cpu_seconds_ = np.asarray(cpu_seconds)
-        self.n_features_in_ = n
-        return self
+        return _FitState(Y, Yf, D, work)
+
+    def _iterate(self, state: _FitState) -> tuple[float, float, str]:
+        with compute_threads(state.work):
+            codes = omp(state.Yf, state.D, self.sparsity)
+            R = state.Yf - _reconstruct(state.D, codes)
+        total = float(np.sum(R * R))
+        Yhat = _to_quaternions(state.Yf - R, state.Y.shape[1])
+        cosines = np.minimum(np.abs(np.sum(state.Y * Yhat, -1)), 1.0)
+        error = float(np.degrees(np.mean(2 * np.arccos(cosines))))
+        with compute_threads(state.work, blas_single=True):
+            self._update_dictionary(state.Yf, state.D, codes, R)
+        return error, total, ""
+
+    def _finish(self, state: _FitState) -> None:
+        self.dictionary_flat_ = state.D
+        self.dictionary_ = state.D.reshape(self.n_atoms, state.Y.shape[1], 4)
 
     @staticmethod
     def _update_dictionary(
@@ -238,26 +193,18 @@ class KSVD(TransformerMixin, BaseEstimator):
             codes.coef[samples, slot] = w
             R[samples] = E - np.outer(w, u)
 
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "dictionary_flat_"):
-            raise ValueError("this KSVD instance is not fitted yet; call fit first")
-
-    def transform(self, Y: ArrayLike) -> sp.csr_matrix:
-        """OMP weights of ``Y`` ``(N, n, 4)``: ``csr_matrix`` ``(N, K)``."""
-        self._check_fitted()
-        Yc = check_quaternion_samples(Y)
-        if Yc.shape[1] != self.n_features_in_:
-            raise ValueError(
-                f"Y has {Yc.shape[1]} quaternions per sample, the model {self.n_features_in_}"
-            )
-        with compute_threads(float(len(Yc) * self.sparsity * max(self.n_atoms, Yc.shape[1]))):
+    def transform(self, X: ArrayLike) -> sp.csr_matrix:
+        """OMP weights of ``X`` ``(N, n, 4)``: ``csr_matrix`` ``(N, K)``."""
+        check_is_fitted(self)
+        Y = self._check_samples(X)
+        with compute_threads(float(len(Y) * self.sparsity * max(self.n_atoms, Y.shape[1]))):
             codes = omp(
-                np.ascontiguousarray(Yc.reshape(len(Yc), -1)), self.dictionary_flat_, self.sparsity
+                np.ascontiguousarray(Y.reshape(len(Y), -1)), self.dictionary_flat_, self.sparsity
             )
         return codes_to_matrix(codes, self.n_atoms)
 
-    def inverse_transform(self, W: ArrayLike | sp.spmatrix) -> NDArray[np.float64]:
+    def inverse_transform(self, X: ArrayLike | sp.spmatrix) -> NDArray[np.float64]:
         """``X D`` reshaped to ``(N, n, 4)`` and renormalised per quaternion."""
-        self._check_fitted()
-        codes = matrix_to_codes(W, self.n_atoms)
+        check_is_fitted(self)
+        codes = matrix_to_codes(X, self.n_atoms)
         return _to_quaternions(_reconstruct(self.dictionary_flat_, codes), self.n_features_in_)

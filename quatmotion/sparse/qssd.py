@@ -29,76 +29,67 @@ Conventions and what the paper leaves open
 
 Changes to the algorithm as printed (each switchable, to measure its effect)
 ----------------------------------------------------------------------------
-Measured on the paper's simulation (``quatmotion bench qssd``); the defaults are the changes.
-Together they matter more than apart: noiseless, N=500, 100 iterations, 3 seeds, the printed
-algorithm ends at 0.33 deg, with all the changes 0.17 deg; the left residual or Gauss-Newton
-alone end at 1.5 and 1.4 deg (each misses an atom on one seed), the log-space start alone at
-0.33 deg, within 2 % of it by iteration 5 instead of 37.
+The defaults are the changes; the printed algorithm is ``init="samples", residual="right",
+coef_solver="paper", refit="every"``. ``quatmotion bench qssd`` measures each change alone and
+together on the paper's simulation: the figures are in ``docs/performance.md`` (0.2.0, QSSD
+ablation and the measurements behind these defaults). Together they matter more than apart.
 
 * ``residual="left"``: Algorithm 2 line 8 prints ``R = Y (D_P (x) X_P)^-1``. The next atom is
   appended on the right of the combination (its weight is smaller), so what it must explain is
   ``C^-1 Y``; ``Y C^-1 = C (C^-1 Y) C^-1`` is that residual rotated by ``C``, whose log points
-  the wrong way once ``C`` is far from the identity (with the true dictionary at weight scale 2,
-  the right residual finds the true atom set for 87 % of samples, the left one for 97 %).
-  ``residual="right"`` is the printed rule.
+  the wrong way once ``C`` is far from the identity, so the printed rule picks a wrong atom more
+  often as weights grow. ``residual="right"`` is the printed rule.
 * ``coef_solver="gauss-newton"``: block coordinate descent with Eq. 6 (``"paper"``; or
   ``"weighted"``, each joint's square weighted by the amplitude ``rho_j`` of its term
-  ``rho_j cos(x a_j - b_j)`` of Eq. 5) converges slowly when atoms do not commute: with the true
-  dictionary and support it leaves 0.08 deg (scale 0.5) to 0.45 deg (scale 1) of error. A joint
-  Gauss-Newton step on all chosen weights (the residual log is linear in them to first order,
-  the Jacobian columns are the atom logs rotated by the suffix products) is exact on exact
-  data. The descending-order constraint makes the objective discontinuous where two weights are
-  nearly tied; a fit that stays poor also tries the swapped order of the two closest pairs.
-  A refit stops early once a step's predicted gain is below 0.1 % of ``|r|^2``
-  (``_kernels.GN_STEP_TOL``; exact data converge before that, so only noisy and real data
-  are cut short).
+  ``rho_j cos(x a_j - b_j)`` of Eq. 5) converges slowly when atoms do not commute, and leaves
+  error even with the true dictionary and support. A joint Gauss-Newton step on all chosen
+  weights (the residual log is linear in them to first order, the Jacobian columns are the atom
+  logs rotated by the suffix products) is exact on exact data. The descending-order constraint
+  makes the objective discontinuous where two weights are nearly tied; a fit that stays poor
+  also tries the swapped order of the two closest pairs. A refit stops early once a step's
+  predicted gain is below ``_kernels.GN_STEP_TOL`` of ``|r|^2`` (exact data converge before
+  that, so only noisy and real data are cut short).
 * ``refit="final"``: the paper refits all weights after every added atom; refitting only after
   the last one (the others get their Eq. 6 weight against the residual, and the residual
   advances by one product per joint) costs O(L) instead of O(L^2) refits for the same support
-  recovery at weight scales up to 1. ``refit="every"`` is the printed schedule.
+  recovery at moderate weight scales. ``refit="every"`` is the printed schedule.
 * ``init="log-ksvd"``: random samples (Algorithm 4 line 1, ``init="samples"``) are mixtures of
-  atoms, and QSSD learns slowly from them (37 iterations to within 2 % of its final error above).
-  To first order ``ln(A^a B^b) = a ln A + b ln B``, so ``init_iter`` iterations of linear K-SVD
-  on the sample logs, started from the random samples, give atoms that QSSD then refines
-  (there by iteration 5).
+  atoms, and QSSD learns slowly from them. To first order ``ln(A^a B^b) = a ln A + b ln B``, so
+  ``init_iter`` iterations of linear K-SVD on the sample logs, started from the random samples,
+  give atoms that QSSD then refines in a few iterations.
 * ``robust=True``: samples coded with a wrong atom set (greedy coding misses the true set of
-  about 2 % of the simulated samples even with the true dictionary) leave large unrelated
-  residuals in ``ln E``; each atom is refit once without the samples whose rank-1 misfit
-  exceeds three times the median. With it the true dictionary is a fixed point of the update
-  (started from it, the error stays at 0.09 deg); without, it drifts to 0.33 deg.
+  some samples even with the true dictionary) leave large unrelated residuals in ``ln E``;
+  each atom is refit once without the samples whose rank-1 misfit exceeds three times the
+  median. With it the true dictionary is a fixed point of the update; without, it drifts.
 * ``safeguard=True`` (off by default): the rank-1 SVD of ``ln E`` minimises a log-space
   surrogate and new weights may reorder the product; with the safeguard an atom update is kept
   only if the objective over its samples (with the re-sorted order) does not increase, so the
-  dictionary stage is monotone. It slowed recovery (updates that first increase the objective
-  are needed to leave poor starting atoms), hence off. On real data it makes no difference
-  (CMU, K=500, L=15, 15 iterations: training error 1.90 deg with it and without, test error
-  2.14 and 2.12).
+  dictionary stage is monotone. It slows recovery (updates that first increase the objective
+  are needed to leave poor starting atoms), hence off; on real data it made no difference.
 * ``keep_best=True``: neither greedy coding nor the log-space dictionary update is guaranteed
   to lower the objective; the estimator returns the dictionary whose coding had the lowest
-  training objective (a guard: in the runs above the error fell at nearly every iteration).
+  training objective (a guard).
 * ``n_sweeps``: Gauss-Newton steps (or coordinate-descent sweeps) per refit. Three by
-  default: two are about 10 % faster per iteration but end the simulation (N=500, 40
-  iterations, 3 seeds) at 0.36 deg instead of 0.16; without the order swaps it ends at
-  0.34 deg, for about 20 % less time.
+  default: fewer are faster per iteration but end the simulation at a higher error.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, replace
+from numbers import Integral
+from typing import Any, ClassVar
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
-from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils import check_random_state
+from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import check_is_fitted
 
 from quatmotion import quat
 from quatmotion.sparse import _kernels as kern
+from quatmotion.sparse._base import DictionaryLearner
 from quatmotion.sparse._common import (
     Codes,
-    check_positive_int,
-    check_quaternion_samples,
     codes_to_matrix,
     compute_threads,
     group_by_atom,
@@ -355,7 +346,7 @@ def update_dictionary(
     dictionary_log: NDArray[np.float64],
     codes: Codes,
     *,
-    safeguard: bool = True,
+    safeguard: bool = False,
     objective: NDArray[np.float64] | None = None,
     robust: bool = True,
 ) -> DictionaryUpdateResult:
@@ -491,7 +482,18 @@ def _reseed_unused(
     return done
 
 
-class QSSD(TransformerMixin, BaseEstimator):
+@dataclass
+class _FitState:
+    """What QSSD's fit carries between iterations (kernel layout)."""
+
+    YT: NDArray[np.float64]
+    DlogT: NDArray[np.float64]
+    work: float
+    best_total: float = np.inf
+    best_dictionary_log: NDArray[np.float64] | None = None
+
+
+class QSSD(DictionaryLearner):
     """Quaternion space sparse decomposition (Algorithms 2-4 of the paper).
 
     Parameters
@@ -545,16 +547,30 @@ class QSSD(TransformerMixin, BaseEstimator):
     objective_ : ndarray, shape (n_iter_,)
         The objective ``sum 1 - |<Y, Yhat>|`` after each coding stage.
     iteration_seconds_ : ndarray, shape (n_iter_,)
+        Wall time of each iteration (coding + dictionary update).
     iteration_cpu_seconds_ : ndarray, shape (n_iter_,)
         Processor time of each iteration summed over threads (robust to a shared machine).
-        Wall time of each iteration (coding + dictionary update).
     n_features_in_ : int
         ``n``, quaternions per sample.
     """
 
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        **DictionaryLearner._parameter_constraints,
+        "residual": [StrOptions({"left", "right"})],
+        "coef_solver": [StrOptions(set(_SOLVERS))],
+        "n_sweeps": [Interval(Integral, 1, None, closed="left")],
+        "refit": [StrOptions({"final", "every"})],
+        "safeguard": ["boolean"],
+        "robust": ["boolean"],
+        "keep_best": ["boolean"],
+        "init": [StrOptions({"log-ksvd", "samples"})],
+        "init_iter": [Interval(Integral, 1, None, closed="left")],
+    }
+
     def __init__(
         self,
         n_atoms: int = 20,
+        *,
         sparsity: int = 5,
         max_iter: int = 50,
         tol: float = 1e-6,
@@ -570,10 +586,14 @@ class QSSD(TransformerMixin, BaseEstimator):
         random_state: int | np.random.RandomState | None = None,
         verbose: bool = False,
     ) -> None:
-        self.n_atoms = n_atoms
-        self.sparsity = sparsity
-        self.max_iter = max_iter
-        self.tol = tol
+        super().__init__(
+            n_atoms,
+            sparsity=sparsity,
+            max_iter=max_iter,
+            tol=tol,
+            random_state=random_state,
+            verbose=verbose,
+        )
         self.residual = residual
         self.coef_solver = coef_solver
         self.n_sweeps = n_sweeps
@@ -583,29 +603,6 @@ class QSSD(TransformerMixin, BaseEstimator):
         self.keep_best = keep_best
         self.init = init
         self.init_iter = init_iter
-        self.random_state = random_state
-        self.verbose = verbose
-
-    def _check_params(self) -> None:
-        check_positive_int(self.n_atoms, "n_atoms")
-        check_positive_int(self.sparsity, "sparsity")
-        check_positive_int(self.max_iter, "max_iter")
-        check_positive_int(self.n_sweeps, "n_sweeps")
-        if self.sparsity > self.n_atoms:
-            raise ValueError(f"sparsity ({self.sparsity}) cannot exceed n_atoms ({self.n_atoms})")
-        if not (np.isfinite(self.tol) and self.tol >= 0):
-            raise ValueError(f"tol must be a finite number >= 0, got {self.tol!r}")
-        if self.residual not in ("left", "right"):
-            raise ValueError(f"residual must be 'left' or 'right', got {self.residual!r}")
-        if self.refit not in ("every", "final"):
-            raise ValueError(f"refit must be 'every' or 'final', got {self.refit!r}")
-        if self.init not in ("samples", "log-ksvd"):
-            raise ValueError(f"init must be 'samples' or 'log-ksvd', got {self.init!r}")
-        check_positive_int(self.init_iter, "init_iter")
-        if self.coef_solver not in _SOLVERS:
-            raise ValueError(
-                f"coef_solver must be one of {sorted(_SOLVERS)}, got {self.coef_solver!r}"
-            )
 
     def _initial_dictionary(
         self, Y: NDArray[np.float64], rng: np.random.RandomState
@@ -631,105 +628,67 @@ class QSSD(TransformerMixin, BaseEstimator):
             )
         return np.ascontiguousarray(D.reshape(K, n, 3))
 
-    def fit(self, Y: ArrayLike, y: object = None) -> QSSD:
-        """Learn the dictionary from ``Y`` ``(N, n, 4)`` unit quaternions.
+    def _start(self, Y: NDArray[np.float64], rng: np.random.RandomState) -> _FitState:
+        work = float(Y.shape[0] * Y.shape[1] * self.sparsity * self.n_sweeps)
+        return _FitState(_to_soa(Y), _to_soa(self._initial_dictionary(Y, rng)), work)
 
-        Returns
-        -------
-        self
-        """
-        self._check_params()
-        Yc = check_quaternion_samples(Y)
-        rng = check_random_state(self.random_state)
-        YT = _to_soa(Yc)
-        DlogT = _to_soa(self._initial_dictionary(Yc, rng))
-        errors: list[float] = []
-        objectives: list[float] = []
-        seconds: list[float] = []
-        cpu_seconds: list[float] = []
-        previous = np.inf
-        best_total = np.inf
-        best_DlogT: NDArray[np.float64] | None = None
-        work = float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)
-        for it in range(self.max_iter):
-            t0 = time.perf_counter()
-            c0 = time.process_time()
-            # BLAS on one thread here too: the atom projections are tiny products, and idle
-            # BLAS threads spinning after each one take the cores from Numba's threads.
-            with compute_threads(work, blas_single=True):
-                codes, objective, Rlog = _sparse_code(
-                    YT,
-                    DlogT,
-                    self.sparsity,
-                    residual=self.residual,
-                    coef_solver=self.coef_solver,
-                    n_sweeps=self.n_sweeps,
-                    refit=self.refit,
-                )
-                total = float(np.sum(objective))
-                # The rotation angle between sample and reconstruction is twice the norm of
-                # the residual log (left or right residual alike): no second combination.
-                errors.append(float(np.degrees(2.0 * np.mean(np.linalg.norm(Rlog, axis=1)))))
-            objectives.append(total)
-            if total < best_total:
-                best_total, best_DlogT = total, DlogT
-            with compute_threads(work, blas_single=True):
-                result = _update_dictionary(
-                    YT,
-                    DlogT,
-                    codes,
-                    safeguard=self.safeguard,
-                    objective=objective,
-                    robust=self.robust,
-                )
-            DlogT = result.dictionary_log
-            seconds.append(time.perf_counter() - t0)
-            cpu_seconds.append(time.process_time() - c0)
-            if self.verbose:
-                print(
-                    f"QSSD iter {it + 1}: error {errors[-1]:.6g} deg, objective {total:.6g}, "
-                    f"accepted {result.n_accepted}, rejected {result.n_rejected}, "
-                    f"reseeded {result.n_reseeded}, {seconds[-1]:.3f} s"
-                )
-            if self.tol > 0 and it > 0 and abs(previous - total) <= self.tol * previous:
-                break
-            previous = total
-        if self.keep_best and best_DlogT is not None:
+    def _iterate(self, state: _FitState) -> tuple[float, float, str]:
+        # BLAS on one thread here too: the atom projections are tiny products, and idle BLAS
+        # threads spinning after each one take the cores from Numba's threads.
+        with compute_threads(state.work, blas_single=True):
+            codes, objective, Rlog = _sparse_code(
+                state.YT,
+                state.DlogT,
+                self.sparsity,
+                residual=self.residual,
+                coef_solver=self.coef_solver,
+                n_sweeps=self.n_sweeps,
+                refit=self.refit,
+            )
+            total = float(np.sum(objective))
+            # The rotation angle between sample and reconstruction is twice the norm of the
+            # residual log (left or right residual alike): no second combination.
+            error = float(np.degrees(2.0 * np.mean(np.linalg.norm(Rlog, axis=1))))
+            if total < state.best_total:
+                state.best_total, state.best_dictionary_log = total, state.DlogT
+            result = _update_dictionary(
+                state.YT,
+                state.DlogT,
+                codes,
+                safeguard=self.safeguard,
+                objective=objective,
+                robust=self.robust,
+            )
+        state.DlogT = result.dictionary_log
+        note = (
+            f"accepted {result.n_accepted}, rejected {result.n_rejected}, "
+            f"reseeded {result.n_reseeded}, "
+        )
+        return error, total, note
+
+    def _finish(self, state: _FitState) -> None:
+        DlogT = state.DlogT
+        if self.keep_best and state.best_dictionary_log is not None:
             # Greedy coding and the log-space dictionary update are not monotone in the
             # objective; keep the dictionary that coded the training set best.
-            DlogT = best_DlogT
+            DlogT = state.best_dictionary_log
         self.dictionary_log_ = _from_soa(DlogT)
         self.dictionary_ = quat.exp(self.dictionary_log_)
-        self.n_iter_ = len(errors)
-        self.errors_ = np.asarray(errors)
-        self.objective_ = np.asarray(objectives)
-        self.iteration_seconds_ = np.asarray(seconds)
-        self.iteration_cpu_seconds_ = np.asarray(cpu_seconds)
-        self.n_features_in_ = Yc.shape[1]
-        return self
 
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "dictionary_log_"):
-            raise ValueError("this QSSD instance is not fitted yet; call fit first")
-
-    def transform(self, Y: ArrayLike) -> sp.csr_matrix:
-        """Sparse weights of ``Y`` ``(N, n, 4)`` on the learned dictionary (Algorithm 2).
+    def transform(self, X: ArrayLike) -> sp.csr_matrix:
+        """Sparse weights of ``X`` ``(N, n, 4)`` on the learned dictionary (Algorithm 2).
 
         Returns
         -------
         scipy.sparse.csr_matrix, shape (N, K)
             At most ``sparsity`` non-zeros per row; their magnitudes give the combination order.
         """
-        self._check_fitted()
-        Yc = check_quaternion_samples(Y)
-        if Yc.shape[1] != self.n_features_in_:
-            raise ValueError(
-                f"Y has {Yc.shape[1]} quaternions per sample, the model {self.n_features_in_}"
-            )
-        work = float(Yc.shape[0] * Yc.shape[1] * self.sparsity * self.n_sweeps)
+        check_is_fitted(self)
+        Y = self._check_samples(X)
+        work = float(Y.shape[0] * Y.shape[1] * self.sparsity * self.n_sweeps)
         with compute_threads(work, blas_single=True):
             codes, _ = sparse_code(
-                Yc,
+                Y,
                 self.dictionary_log_,
                 self.sparsity,
                 residual=self.residual,
@@ -739,7 +698,7 @@ class QSSD(TransformerMixin, BaseEstimator):
             )
         return codes_to_matrix(codes, self.n_atoms)
 
-    def inverse_transform(self, W: ArrayLike | sp.spmatrix) -> NDArray[np.float64]:
-        """Quaternion combination (Eq. 2-3) of weights ``W`` ``(N, K)``: ``-> (N, n, 4)``."""
-        self._check_fitted()
-        return quaternion_combination(self.dictionary_log_, W)
+    def inverse_transform(self, X: ArrayLike | sp.spmatrix) -> NDArray[np.float64]:
+        """Quaternion combination (Eq. 2-3) of weights ``X`` ``(N, K)``: ``-> (N, n, 4)``."""
+        check_is_fitted(self)
+        return quaternion_combination(self.dictionary_log_, X)
