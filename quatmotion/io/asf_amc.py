@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -190,194 +191,19 @@ def read_asf(path: str | Path) -> Skeleton:
         ``:hierarchy``, unknown bones, bad numbers, cycles, unreachable bones...
     """
     path = Path(path)
-    lines = _asf_lines(read_text(path))
-    sections: dict[str, list[tuple[int, list[str]]]] = {}
-    section_lines: dict[str, int] = {}
-    header: dict[str, str] = {}
-    current: str | None = None
-    for line, tokens in lines:
-        if tokens[0].startswith(":"):
-            current = tokens[0][1:].lower()
-            if current in sections:
-                raise FormatError(f"section :{current} appears twice", path, line)
-            sections[current] = []
-            section_lines[current] = line
-            header[current] = " ".join(tokens[1:])
-            continue
-        if current is None:
-            raise FormatError(f"text before the first section: {' '.join(tokens)!r}", path, line)
-        sections[current].append((line, tokens))
-    for required in ("root", "bonedata", "hierarchy"):
-        if required not in sections:
-            raise FormatError(f"missing :{required} section", path)
-
-    # Units.
-    units: list[tuple[str, str]] = []
-    length_unit = 1.0
-    angle_unit = "deg"
-    for line, tokens in sections.get("units", []):
-        if len(tokens) != 2:
-            raise FormatError("expected 'KEY VALUE' in :units", path, line)
-        key = tokens[0].lower()
-        if key == "length":
-            length_unit = parse_float(tokens[1], path, line, "length unit")
-            if length_unit <= 0:
-                raise FormatError("length unit must be positive", path, line)
-        elif key == "angle":
-            angle_unit = tokens[1].lower()
-            if angle_unit not in ("deg", "rad"):
-                raise FormatError(f"angle unit must be deg or rad, got {tokens[1]!r}", path, line)
-        elif key == "mass":
-            parse_float(tokens[1], path, line, "mass")
-        units.append((tokens[0], tokens[1]))
-    to_cm = INCH_CM / length_unit
-    to_rad = np.pi / 180.0 if angle_unit == "deg" else 1.0
-
-    # Root.
-    root: dict[str, Any] = {
-        "order": ("TX", "TY", "TZ", "RX", "RY", "RZ"),
-        "axis": "xyz",
-        "position": (0.0, 0.0, 0.0),
-        "orientation": (0.0, 0.0, 0.0),
-    }
-    for line, tokens in sections["root"]:
-        key, args = tokens[0].lower(), tokens[1:]
-        if key == "order":
-            order = tuple(a.upper() for a in args)
-            if set(order) - set(_ROOT_CHANNELS) or len(set(order)) != len(order):
-                raise FormatError(f"bad root order {' '.join(args)!r}", path, line)
-            root["order"] = order
-        elif key == "axis":
-            if len(args) != 1:
-                raise FormatError("expected 'axis ORDER' for the root", path, line)
-            root["axis"] = _euler_order(args[0], path, line)
-        elif key in ("position", "orientation"):
-            if len(args) != 3:
-                raise FormatError(f"root {key} needs 3 values, got {len(args)}", path, line)
-            root[key] = tuple(parse_floats(args, path, line, f"root {key}"))
-        else:
-            raise FormatError(f"unknown root field {tokens[0]!r}", path, line)
-
-    # Bones.
-    bones: list[dict[str, Any]] = []
-    block: list[tuple[int, list[str]]] | None = None
-    begin_line = section_lines["bonedata"]
-    for line, tokens in sections["bonedata"]:
-        key = tokens[0].lower()
-        if key == "begin":
-            if block is not None:
-                raise FormatError("'begin' inside a bone (missing 'end')", path, line)
-            block, begin_line = [], line
-        elif key == "end":
-            if block is None:
-                raise FormatError("'end' without 'begin'", path, line)
-            bones.append(_parse_bone(block, path, begin_line))
-            block = None
-        elif block is None:
-            raise FormatError(f"text outside a bone's begin/end: {' '.join(tokens)!r}", path, line)
-        else:
-            block.append((line, tokens))
-    if block is not None:
-        raise FormatError("bone not closed by 'end' (file truncated?)", path, begin_line)
-    if not bones:
-        raise FormatError("no bones in :bonedata", path, section_lines["bonedata"])
-    names = [b["name"] for b in bones]
-    if "root" in names or len(set(names)) != len(names):
-        raise FormatError(
-            "bone names must be unique and not 'root'", path, section_lines["bonedata"]
-        )
-    by_name = {b["name"]: b for b in bones}
-
-    # Hierarchy.
-    parent_of: dict[str, str] = {}
-    hierarchy: list[tuple[str, ...]] = []
-    inside = False
-    closed = False
-    for line, tokens in sections["hierarchy"]:
-        key = tokens[0].lower()
-        if key == "begin" and len(tokens) == 1 and not inside and not closed:
-            inside = True
-            continue
-        if key == "end" and len(tokens) == 1 and inside:
-            inside, closed = False, True
-            continue
-        if not inside:
-            raise FormatError(f"hierarchy line outside begin/end: {' '.join(tokens)!r}", path, line)
-        parent, children = tokens[0], tokens[1:]
-        if parent != "root" and parent not in by_name:
-            raise FormatError(f"unknown bone {parent!r} in hierarchy", path, line)
-        for child in children:
-            if child not in by_name:
-                raise FormatError(f"unknown bone {child!r} in hierarchy", path, line)
-            if child in parent_of:
-                raise FormatError(f"bone {child!r} has two parents", path, line)
-            parent_of[child] = parent
-        hierarchy.append(tuple(tokens))
-    if not closed:
-        raise FormatError(
-            "hierarchy not closed by 'end' (file truncated?)", path, section_lines["hierarchy"]
-        )
-    orphans = [n for n in names if n not in parent_of]
-    if orphans:
-        raise FormatError(
-            f"bones missing from the hierarchy: {orphans}", path, section_lines["hierarchy"]
-        )
-
-    # Joint order: file order if parents come first, else depth-first from the root.
-    order = ["root"]
-    placed = {"root"}
-    for n in names:
-        if parent_of[n] not in placed:
-            break
-        placed.add(n)
-    if len(placed) == len(names) + 1:
-        order += names
-    else:
-        children_of: dict[str, list[str]] = {}
-        for n in names:
-            children_of.setdefault(parent_of[n], []).append(n)
-        stack = list(reversed(children_of.get("root", [])))
-        while stack:
-            n = stack.pop()
-            order.append(n)
-            stack.extend(reversed(children_of.get(n, [])))
-        if len(order) != len(names) + 1:
-            raise FormatError("the hierarchy has a cycle", path, section_lines["hierarchy"])
-    index = {n: i for i, n in enumerate(order)}
-
-    J = len(order)
-    parents = np.full(J, -1, dtype=np.int64)
-    offsets = np.zeros((J, 3))
-    axes = np.zeros((J, 4))
-    channels: list[tuple[str, ...]] = []
-    site_names: list[str] = []
-    site_parents: list[int] = []
-    site_offsets: list[NDArray[np.float64]] = []
-    bone_vectors = np.zeros((J, 3))
-    offsets[0] = np.asarray(root["position"]) * to_cm
-    axes[0] = quat.from_euler(np.asarray(root["orientation"]) * to_rad, root["axis"])
-    channels.append(tuple(_ROOT_CHANNELS[c] for c in root["order"]))
-    has_children = {parent_of[n] for n in names}
-    for j, n in enumerate(order[1:], start=1):
-        bone = by_name[n]
-        direction = np.asarray(bone["direction"])
-        bone_vectors[j] = direction * bone["length"] * to_cm
-        parent = parent_of[n]
-        parents[j] = index[parent]
-        if parent != "root":
-            offsets[j] = bone_vectors[index[parent]]
-        axes[j] = quat.from_euler(np.asarray(bone["axis"]) * to_rad, bone["axis_order"])
-        channels.append(tuple(d for d in bone["dof"] if d in _ROTATION_DOFS))
-        if n not in has_children:
-            site_names.append(f"{n}_end")
-            site_parents.append(j)
-            site_offsets.append(bone_vectors[j])
-    bone_vectors.setflags(write=False)
+    sections = _AsfSections.split(_asf_lines(read_text(path)), path)
+    units, to_cm, to_rad, angle_unit = _parse_units(sections.body.get("units", []), path)
+    root = _parse_root(sections.body["root"], path)
+    bones = _parse_bones(sections.body["bonedata"], sections.line["bonedata"], path)
+    parent_of, hierarchy = _parse_hierarchy(
+        sections.body["hierarchy"], sections.line["hierarchy"], bones, path
+    )
+    order = _joint_order([b["name"] for b in bones], parent_of, sections.line["hierarchy"], path)
     extras = {
         "format": "asf",
-        "asf_version": header.get("version", "1.10"),
-        "asf_name": header.get("name", ""),
-        "asf_documentation": tuple(" ".join(t) for _, t in sections.get("documentation", [])),
+        "asf_version": sections.header.get("version", "1.10"),
+        "asf_name": sections.header.get("name", ""),
+        "asf_documentation": tuple(" ".join(t) for _, t in sections.body.get("documentation", [])),
         "asf_units": tuple(units),
         "asf_root": {k: root[k] for k in ("order", "axis", "position", "orientation")},
         "asf_bones": tuple(
@@ -397,37 +223,237 @@ def read_asf(path: str | Path) -> Skeleton:
         "asf_hierarchy": tuple(hierarchy),
         "length_scale": to_cm,
         "angle_unit": angle_unit,
-        "bone_vectors_cm": bone_vectors,
     }
     try:
-        return _asf_skeleton(
-            order,
-            parents,
-            offsets,
-            channels,
-            axes,
-            site_names,
-            site_parents,
-            site_offsets,
-            path,
-            extras,
-        )
+        return _asf_skeleton(order, parent_of, root, bones, to_cm, to_rad, path, extras)
     except ValueError as error:  # e.g. lengths so large they overflow once in centimetres
         raise FormatError(str(error), path) from error
 
 
+@dataclass
+class _AsfSections:
+    """The ``:section`` blocks of an ASF: their lines, first line and header text."""
+
+    body: dict[str, list[tuple[int, list[str]]]]
+    line: dict[str, int]
+    header: dict[str, str]
+
+    @classmethod
+    def split(cls, lines: list[tuple[int, list[str]]], path: Path) -> _AsfSections:
+        out = cls({}, {}, {})
+        current: str | None = None
+        for line, tokens in lines:
+            if tokens[0].startswith(":"):
+                current = tokens[0][1:].lower()
+                if current in out.body:
+                    raise FormatError(f"section :{current} appears twice", path, line)
+                out.body[current] = []
+                out.line[current] = line
+                out.header[current] = " ".join(tokens[1:])
+                continue
+            if current is None:
+                raise FormatError(
+                    f"text before the first section: {' '.join(tokens)!r}", path, line
+                )
+            out.body[current].append((line, tokens))
+        for required in ("root", "bonedata", "hierarchy"):
+            if required not in out.body:
+                raise FormatError(f"missing :{required} section", path)
+        return out
+
+
+def _parse_units(
+    block: list[tuple[int, list[str]]], path: Path
+) -> tuple[list[tuple[str, str]], float, float, str]:
+    """``:units``: the raw pairs, centimetres per length unit, radians per angle unit, and the
+    angle unit's name."""
+    units: list[tuple[str, str]] = []
+    length_unit = 1.0
+    angle_unit = "deg"
+    for line, tokens in block:
+        if len(tokens) != 2:
+            raise FormatError("expected 'KEY VALUE' in :units", path, line)
+        key = tokens[0].lower()
+        if key == "length":
+            length_unit = parse_float(tokens[1], path, line, "length unit")
+            if length_unit <= 0:
+                raise FormatError("length unit must be positive", path, line)
+        elif key == "angle":
+            angle_unit = tokens[1].lower()
+            if angle_unit not in ("deg", "rad"):
+                raise FormatError(f"angle unit must be deg or rad, got {tokens[1]!r}", path, line)
+        elif key == "mass":
+            parse_float(tokens[1], path, line, "mass")
+        units.append((tokens[0], tokens[1]))
+    to_rad = np.pi / 180.0 if angle_unit == "deg" else 1.0
+    return units, INCH_CM / length_unit, to_rad, angle_unit
+
+
+def _parse_root(block: list[tuple[int, list[str]]], path: Path) -> dict[str, Any]:
+    """``:root``: channel order, axis order, position and orientation (file units)."""
+    root: dict[str, Any] = {
+        "order": ("TX", "TY", "TZ", "RX", "RY", "RZ"),
+        "axis": "xyz",
+        "position": (0.0, 0.0, 0.0),
+        "orientation": (0.0, 0.0, 0.0),
+    }
+    for line, tokens in block:
+        key, args = tokens[0].lower(), tokens[1:]
+        if key == "order":
+            order = tuple(a.upper() for a in args)
+            if set(order) - set(_ROOT_CHANNELS) or len(set(order)) != len(order):
+                raise FormatError(f"bad root order {' '.join(args)!r}", path, line)
+            root["order"] = order
+        elif key == "axis":
+            if len(args) != 1:
+                raise FormatError("expected 'axis ORDER' for the root", path, line)
+            root["axis"] = _euler_order(args[0], path, line)
+        elif key in ("position", "orientation"):
+            if len(args) != 3:
+                raise FormatError(f"root {key} needs 3 values, got {len(args)}", path, line)
+            root[key] = tuple(parse_floats(args, path, line, f"root {key}"))
+        else:
+            raise FormatError(f"unknown root field {tokens[0]!r}", path, line)
+    return root
+
+
+def _parse_bones(
+    block: list[tuple[int, list[str]]], section_line: int, path: Path
+) -> list[dict[str, Any]]:
+    """``:bonedata``: every ``begin ... end`` block, in file order, names unique."""
+    bones: list[dict[str, Any]] = []
+    lines: list[tuple[int, list[str]]] | None = None
+    begin_line = section_line
+    for line, tokens in block:
+        key = tokens[0].lower()
+        if key == "begin":
+            if lines is not None:
+                raise FormatError("'begin' inside a bone (missing 'end')", path, line)
+            lines, begin_line = [], line
+        elif key == "end":
+            if lines is None:
+                raise FormatError("'end' without 'begin'", path, line)
+            bones.append(_parse_bone(lines, path, begin_line))
+            lines = None
+        elif lines is None:
+            raise FormatError(f"text outside a bone's begin/end: {' '.join(tokens)!r}", path, line)
+        else:
+            lines.append((line, tokens))
+    if lines is not None:
+        raise FormatError("bone not closed by 'end' (file truncated?)", path, begin_line)
+    if not bones:
+        raise FormatError("no bones in :bonedata", path, section_line)
+    names = [b["name"] for b in bones]
+    if "root" in names or len(set(names)) != len(names):
+        raise FormatError("bone names must be unique and not 'root'", path, section_line)
+    return bones
+
+
+def _parse_hierarchy(
+    block: list[tuple[int, list[str]]],
+    section_line: int,
+    bones: list[dict[str, Any]],
+    path: Path,
+) -> tuple[dict[str, str], list[tuple[str, ...]]]:
+    """``:hierarchy``: each bone's parent, and the raw lines (for the writer)."""
+    known = {b["name"] for b in bones}
+    parent_of: dict[str, str] = {}
+    hierarchy: list[tuple[str, ...]] = []
+    inside = False
+    closed = False
+    for line, tokens in block:
+        key = tokens[0].lower()
+        if key == "begin" and len(tokens) == 1 and not inside and not closed:
+            inside = True
+            continue
+        if key == "end" and len(tokens) == 1 and inside:
+            inside, closed = False, True
+            continue
+        if not inside:
+            raise FormatError(f"hierarchy line outside begin/end: {' '.join(tokens)!r}", path, line)
+        parent, children = tokens[0], tokens[1:]
+        if parent != "root" and parent not in known:
+            raise FormatError(f"unknown bone {parent!r} in hierarchy", path, line)
+        for child in children:
+            if child not in known:
+                raise FormatError(f"unknown bone {child!r} in hierarchy", path, line)
+            if child in parent_of:
+                raise FormatError(f"bone {child!r} has two parents", path, line)
+            parent_of[child] = parent
+        hierarchy.append(tuple(tokens))
+    if not closed:
+        raise FormatError("hierarchy not closed by 'end' (file truncated?)", path, section_line)
+    orphans = [b["name"] for b in bones if b["name"] not in parent_of]
+    if orphans:
+        raise FormatError(f"bones missing from the hierarchy: {orphans}", path, section_line)
+    return parent_of, hierarchy
+
+
+def _joint_order(
+    names: list[str], parent_of: dict[str, str], section_line: int, path: Path
+) -> list[str]:
+    """Joints: the root, then the bones in file order if parents come first, else depth first."""
+    order = ["root"]
+    placed = {"root"}
+    for n in names:
+        if parent_of[n] not in placed:
+            break
+        placed.add(n)
+    if len(placed) == len(names) + 1:
+        return order + names
+    children_of: dict[str, list[str]] = {}
+    for n in names:
+        children_of.setdefault(parent_of[n], []).append(n)
+    stack = list(reversed(children_of.get("root", [])))
+    while stack:
+        n = stack.pop()
+        order.append(n)
+        stack.extend(reversed(children_of.get(n, [])))
+    if len(order) != len(names) + 1:
+        raise FormatError("the hierarchy has a cycle", path, section_line)
+    return order
+
+
 def _asf_skeleton(
     order: list[str],
-    parents: NDArray[np.int64],
-    offsets: NDArray[np.float64],
-    channels: list[tuple[str, ...]],
-    axes: NDArray[np.float64],
-    site_names: list[str],
-    site_parents: list[int],
-    site_offsets: list[NDArray[np.float64]],
+    parent_of: dict[str, str],
+    root: dict[str, Any],
+    bones: list[dict[str, Any]],
+    to_cm: float,
+    to_rad: float,
     path: Path,
     extras: dict[str, Any],
 ) -> Skeleton:
+    """The skeleton of the parsed sections: offsets, pre-rotations, channels, end sites."""
+    by_name = {b["name"]: b for b in bones}
+    index = {n: i for i, n in enumerate(order)}
+    J = len(order)
+    parents = np.full(J, -1, dtype=np.int64)
+    offsets = np.zeros((J, 3))
+    axes = np.zeros((J, 4))
+    channels: list[tuple[str, ...]] = []
+    site_names: list[str] = []
+    site_parents: list[int] = []
+    site_offsets: list[NDArray[np.float64]] = []
+    bone_vectors = np.zeros((J, 3))
+    offsets[0] = np.asarray(root["position"]) * to_cm
+    axes[0] = quat.from_euler(np.asarray(root["orientation"]) * to_rad, root["axis"])
+    channels.append(tuple(_ROOT_CHANNELS[c] for c in root["order"]))
+    has_children = set(parent_of.values())
+    for j, n in enumerate(order[1:], start=1):
+        bone = by_name[n]
+        bone_vectors[j] = np.asarray(bone["direction"]) * bone["length"] * to_cm
+        parent = parent_of[n]
+        parents[j] = index[parent]
+        if parent != "root":
+            offsets[j] = bone_vectors[index[parent]]
+        axes[j] = quat.from_euler(np.asarray(bone["axis"]) * to_rad, bone["axis_order"])
+        channels.append(tuple(d for d in bone["dof"] if d in _ROTATION_DOFS))
+        if n not in has_children:
+            site_names.append(f"{n}_end")
+            site_parents.append(j)
+            site_offsets.append(bone_vectors[j])
+    bone_vectors.setflags(write=False)
     return Skeleton(
         joint_names=tuple(order),
         parents=parents,
@@ -439,7 +465,7 @@ def _asf_skeleton(
         site_parents=np.asarray(site_parents, dtype=np.int64),
         site_offsets=np.asarray(site_offsets).reshape(-1, 3),
         name=path.stem,
-        extras=extras,
+        extras={**extras, "bone_vectors_cm": bone_vectors},
     )
 
 

@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
 from quatmotion import quat
-from quatmotion.sparse._kernels import gram_matvec
+from quatmotion.sparse._linear_kernels import gram_matvec
 
 UNIT_TOLERANCE = 1e-6
 # Below this many quaternion products per kernel call, thread start-up and waiting for a

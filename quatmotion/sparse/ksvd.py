@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from sklearn.utils.validation import check_is_fitted
 
-from quatmotion.sparse import _kernels as kern
+from quatmotion.sparse import _linear_kernels as kern
 from quatmotion.sparse._base import DictionaryLearner
 from quatmotion.sparse._common import (
     Codes,
