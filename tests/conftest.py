@@ -13,25 +13,29 @@ import pytest
 from quatmotion.datasets import data_root
 
 
-class QuietHandler(http.server.SimpleHTTPRequestHandler):
-    """Serves files without logging each request to stderr."""
+def _quiet(handler: type) -> type:
+    """``handler`` without its log line per request on stderr."""
 
-    def log_message(self, format, *args):  # noqa: A002 (the base class's signature)
-        pass
+    class Quiet(handler):
+        def log_message(self, format, *args):  # noqa: A002 (the base class's signature)
+            pass
+
+    return Quiet
 
 
 @pytest.fixture()
 def serve_directory() -> Iterator[Callable[..., str]]:
     """Start static HTTP servers on 127.0.0.1 (free port, a thread each) for one test.
 
-    Call it with a folder (and optionally a handler class); it returns the base URL. Every
-    server it started is shut down when the test ends. Nothing but the loopback is reached.
+    Call it with a folder (and optionally a ``SimpleHTTPRequestHandler`` subclass); it returns
+    the base URL. Requests are not logged. Every server it started is shut down when the test
+    ends. Nothing but the loopback is reached.
     """
     started: list[tuple[http.server.ThreadingHTTPServer, threading.Thread]] = []
 
-    def start(directory: Path, handler: type = QuietHandler) -> str:
+    def start(directory: Path, handler: type = http.server.SimpleHTTPRequestHandler) -> str:
         server = http.server.ThreadingHTTPServer(
-            ("127.0.0.1", 0), functools.partial(handler, directory=str(directory))
+            ("127.0.0.1", 0), functools.partial(_quiet(handler), directory=str(directory))
         )
         thread = threading.Thread(target=server.serve_forever, daemon=True)
         thread.start()
@@ -45,9 +49,11 @@ def serve_directory() -> Iterator[Callable[..., str]]:
         thread.join(timeout=5)
 
 
-# The real mocap folder ($QUATMOTION_DATA, else ../shared/data): tests that read it are marked
-# ``needs_data`` and skip, naming the folder, only where it is absent (CI always has it).
-DATA = data_root(must_exist=False)
-needs_data = pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"mocap data folder {DATA} absent (set QUATMOTION_DATA)"
-)
+# The real mocap folder ($QUATMOTION_DATA, else ../shared/data): tests that read it carry the
+# ``needs_data`` marker and skip, naming the folder, only where it is absent (CI always has it).
+_DATA = data_root(must_exist=False)
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    if item.get_closest_marker("needs_data") and not _DATA.is_dir():
+        pytest.skip(f"mocap data folder {_DATA} absent (set QUATMOTION_DATA)")

@@ -10,13 +10,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA, needs_data
 from typer.testing import CliRunner
 
 from quatmotion import bench as bench_package
 from quatmotion import io
 from quatmotion.cli import app
+from quatmotion.datasets import data_root
 from quatmotion.motion import forward_kinematics
+
+DATA = data_root(must_exist=False)
 
 PROJECT = Path(__file__).resolve().parents[1]
 CLIPS = {
@@ -59,7 +61,7 @@ def _positions(motion) -> np.ndarray:
 # --- info ---------------------------------------------------------------------------------------
 
 
-@needs_data
+@pytest.mark.needs_data
 @pytest.mark.parametrize("key", list(CLIPS))
 def test_info_reports_the_clip(key):
     path = CLIPS[key]
@@ -77,7 +79,7 @@ def test_info_reports_the_clip(key):
     )
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_info_takes_an_explicit_skeleton_and_reads_asf_alone():
     amc, asf = CLIPS["cmu_amc"], CLIPS["cmu_amc"].with_name("02.asf")
     result = _invoke("info", amc, "--skeleton", asf)
@@ -89,7 +91,7 @@ def test_info_takes_an_explicit_skeleton_and_reads_asf_alone():
 # --- convert ------------------------------------------------------------------------------------
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_convert_amc_to_bvh_keeps_the_motion(tmp_path):
     out = tmp_path / "walk.bvh"
     result = _invoke("convert", CLIPS["cmu_amc"], out)
@@ -100,7 +102,7 @@ def test_convert_amc_to_bvh_keeps_the_motion(tmp_path):
     np.testing.assert_allclose(_positions(converted), _positions(original), atol=1e-3)
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_convert_amc_to_amc_writes_a_findable_asf(tmp_path):
     out = tmp_path / "HDM_bd_kick_001_120.amc"
     result = _invoke("convert", CLIPS["hdm05_amc"], out)
@@ -111,7 +113,7 @@ def test_convert_amc_to_amc_writes_a_findable_asf(tmp_path):
     np.testing.assert_allclose(_positions(converted), _positions(original), atol=1e-3)
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_convert_many_into_a_folder(tmp_path):
     inputs = [CLIPS["bandai_bvh"], CLIPS["cmu_bvh"]]
     out = tmp_path / "converted"
@@ -125,7 +127,7 @@ def test_convert_many_into_a_folder(tmp_path):
         np.testing.assert_allclose(_positions(b), _positions(a), atol=1e-3)
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_bvh_to_amc_is_refused_cleanly(tmp_path):
     result = _invoke("convert", CLIPS["bandai_bvh"], tmp_path / "x.amc")
     _assert_bad_input(result, "ASF")
@@ -208,7 +210,7 @@ def test_bench_lists_the_real_benchmarks():
     _assert_bad_input(result, *names)
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_datasets_list_counts_the_collection():
     from quatmotion.datasets import catalogue
 
@@ -220,7 +222,7 @@ def test_datasets_list_counts_the_collection():
     _assert_bad_input(_invoke("datasets", "list", "--collection", "nope"), "nope")
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_datasets_fetch_against_a_local_server(tmp_path, serve_directory):
     site = tmp_path / "site" / "subjects"
     site.mkdir(parents=True)

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
+import http.server
 import json
 from pathlib import Path
 
 import pytest
-from conftest import DATA, QuietHandler, needs_data
 
 from quatmotion.datasets import (
     DATA_ENV_VAR,
@@ -20,6 +20,8 @@ from quatmotion.datasets import (
     fetch_cmu,
     project_root,
 )
+
+DATA = data_root(must_exist=False)
 
 PROJECT = Path(__file__).resolve().parents[1]
 
@@ -137,7 +139,7 @@ def test_cmu_index_and_trials(fake_root, tmp_path):
 # --- catalogue on the real data ------------------------------------------------------------------
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_catalogue_of_the_real_data_matches_its_files():
     entries = catalogue(DATA)
     by = {
@@ -210,7 +212,7 @@ def test_fetch_errors(cmu_site, tmp_path, serve_directory):
         fetch_cmu([], dest=tmp_path / "d")
 
 
-class _TruncatingHandler(QuietHandler):
+class _TruncatingHandler(http.server.SimpleHTTPRequestHandler):
     """Promises more bytes than it sends, then hangs up: a download cut off mid-file."""
 
     def do_GET(self):  # noqa: N802 (http.server's naming)

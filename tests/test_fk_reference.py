@@ -10,23 +10,25 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA, needs_data
 
+from quatmotion.datasets import data_root
 from quatmotion.io import asf_bone_end_positions, read_amc, read_bvh
 from quatmotion.motion import forward_kinematics
+
+DATA = data_root(must_exist=False)
 
 REFERENCES = sorted((DATA / "reference").glob("*.npz")) if DATA.is_dir() else []
 AMC_REFERENCES = [r for r in REFERENCES if "positions_cm" in np.load(r).files]
 TOLERANCE_CM = 1e-3
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_reference_folder_has_both_formats():
     kinds = {"positions_cm" in np.load(r).files for r in REFERENCES}
     assert kinds == {True, False}, "expected AMC and BVH references"
 
 
-@needs_data
+@pytest.mark.needs_data
 @pytest.mark.parametrize("reference", REFERENCES, ids=lambda p: p.stem)
 def test_forward_kinematics_matches_reference(reference: Path):
     ref = np.load(reference)
@@ -48,7 +50,7 @@ def test_forward_kinematics_matches_reference(reference: Path):
     assert error < TOLERANCE_CM, f"{reference.stem}: max error {error} > {TOLERANCE_CM}"
 
 
-@needs_data
+@pytest.mark.needs_data
 @pytest.mark.parametrize("reference", AMC_REFERENCES, ids=lambda p: p.stem)
 def test_reference_parents_match_asf_hierarchy(reference: Path):
     ref = np.load(reference)
@@ -60,7 +62,7 @@ def test_reference_parents_match_asf_hierarchy(reference: Path):
     assert np.array_equal(ref["parents"], ours)
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_forward_kinematics_keeps_bone_lengths_on_real_motion():
     clip = next(iter(sorted((DATA / "cmu").glob("*/*.amc"))))
     motion = read_amc(clip).slice(0, None, 7)

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA, needs_data
 
 from quatmotion import FormatError, quat
+from quatmotion.datasets import data_root
 from quatmotion.io import (
     asf_bone_end_positions,
     find_asf_for_amc,
@@ -23,6 +23,8 @@ from quatmotion.io import (
     write_motion,
 )
 from quatmotion.motion import forward_kinematics
+
+DATA = data_root(must_exist=False)
 
 UNIT_CM = 2.54 / 0.45  # one ASF unit at ':units length 0.45'
 
@@ -207,7 +209,7 @@ def test_find_asf_conventions(tmp_path: Path):
     assert found.resolve() == (tmp_path / "hdm" / "skeletons" / "HDM_xx.asf").resolve()
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_find_asf_on_the_data():
     cmu = next(iter(sorted((DATA / "cmu").glob("*/*.amc"))))
     assert find_asf_for_amc(cmu) == cmu.with_name(cmu.stem.split("_")[0] + ".asf")
@@ -262,7 +264,7 @@ def _principal(angles: np.ndarray) -> np.ndarray:
     return inside
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_every_skeleton_round_trips(tmp_path: Path):
     asfs = sorted(DATA.glob("cmu/*/*.asf")) + sorted(DATA.glob("hdm05/skeletons/*.asf"))
     assert asfs
@@ -281,7 +283,7 @@ def test_every_skeleton_round_trips(tmp_path: Path):
         ]
 
 
-@needs_data
+@pytest.mark.needs_data
 @pytest.mark.parametrize("actor", sorted(AMC_GROUPS))
 def test_every_amc_round_trips_through_amc_and_bvh(actor: str, tmp_path: Path):
     """AMC -> Motion -> AMC keeps rotations (1e-4 deg) and the file's numbers; AMC -> BVH ->

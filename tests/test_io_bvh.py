@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA, needs_data
 
 from quatmotion import FormatError, quat
+from quatmotion.datasets import data_root
 from quatmotion.io import (
     detect_bvh_scale,
     read_bvh,
@@ -18,6 +18,8 @@ from quatmotion.io import (
     write_motion,
 )
 from quatmotion.motion import forward_kinematics
+
+DATA = data_root(must_exist=False)
 
 TINY_BVH = """HIERARCHY
 ROOT hips
@@ -172,7 +174,7 @@ BVH_GROUPS = {
 FRAME_STEP = 10
 
 
-@needs_data
+@pytest.mark.needs_data
 @pytest.mark.parametrize("group", sorted(BVH_GROUPS))
 def test_every_bvh_round_trips(group: str, tmp_path: Path):
     clips = BVH_GROUPS[group]
@@ -192,7 +194,7 @@ def test_every_bvh_round_trips(group: str, tmp_path: Path):
         assert np.degrees(quat.angle(again.rotations, kept.rotations)).max() < 1e-4
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_bandai_joints_carry_translations_and_cmu_root_only():
     bandai = read_bvh(BVH_GROUPS["bandai1"][0])
     assert bandai.joint_translations is not None

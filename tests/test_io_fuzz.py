@@ -12,15 +12,18 @@ from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
-from conftest import DATA, needs_data
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from quatmotion import FormatError
+from quatmotion.datasets import data_root
 from quatmotion.io import read_amc, read_asf, read_bvh
 from quatmotion.motion import Motion, Skeleton
 
-pytestmark = needs_data
+DATA = data_root(must_exist=False)
+
+pytestmark = pytest.mark.needs_data
 N_FRAMES = 50
 FUZZ = settings(
     max_examples=60,

@@ -7,13 +7,15 @@ import time
 
 import numpy as np
 import pytest
-from conftest import DATA
 
 from quatmotion import quat
+from quatmotion.datasets import data_root
 from quatmotion.pose import gpd, skeleton16
 from quatmotion.pose.data import PoseClip, PoseData, angular_velocities, joint_orientations
 from quatmotion.pose.scaler import MinMaxUnitScaler
 from quatmotion.pose.skeleton16 import JOINTS_16, PARENTS_16
+
+DATA = data_root(must_exist=False)
 
 J = {name: k for k, name in enumerate(JOINTS_16)}
 

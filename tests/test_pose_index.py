@@ -7,11 +7,13 @@ import pathlib
 
 import numpy as np
 import pytest
-from conftest import DATA
 from scipy.spatial.distance import cdist
 
+from quatmotion.datasets import data_root
 from quatmotion.pose.index import HNSWIndex, exact_knn, recall_at_k
 from quatmotion.pose.library import PoseLibrary
+
+DATA = data_root(must_exist=False)
 
 
 def _pose_like(n: int, dim: int = 50, seed: int = 0) -> np.ndarray:

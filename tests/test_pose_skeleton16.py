@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import DATA, needs_data
 
 from quatmotion import quat
+from quatmotion.datasets import data_root
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
 from quatmotion.pose import skeleton16 as s16
+
+DATA = data_root(must_exist=False)
 
 # A Bandai-named skeleton in a T-pose facing +Z (left is +X), offsets in cm.
 _BONES = [
@@ -160,7 +162,7 @@ _ASF_PARENT_BONE = {
 }  # fmt: skip
 
 
-@needs_data
+@pytest.mark.needs_data
 @pytest.mark.parametrize(
     ("ref", "path"),
     [
@@ -190,7 +192,7 @@ def test_asf_positions_match_independent_reference(ref: str, path: str) -> None:
         assert np.median(cos) > 0.9
 
 
-@needs_data
+@pytest.mark.needs_data
 def test_bandai_bvh_positions_match_independent_reference() -> None:
     from quatmotion.io import read_bvh
 

@@ -17,12 +17,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import DATA, needs_data
 
+from quatmotion.datasets import data_root
 from quatmotion.io import read_asf, read_bvh
 from quatmotion.motion import forward_kinematics
 
-pytestmark = needs_data
+DATA = data_root(must_exist=False)
+
+pytestmark = pytest.mark.needs_data
 ASFS = (
     sorted(DATA.glob("cmu/*/*.asf")) + sorted(DATA.glob("hdm05/skeletons/*.asf"))
     if DATA.is_dir()
