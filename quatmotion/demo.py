@@ -182,6 +182,26 @@ def run_demo(
     start = time.perf_counter()
     clips = _load(list(paths), seed, quick)
     source = "given clips" if paths else "generated library"
+    console.print(_clip_table(clips, source))
+    figure = plot_stick_figure(clips[0][0], out_dir / f"stick_{clips[0][0].name}.png")
+    console.print(f"stick figure of {clips[0][0].name}: {figure}")
+    summary: dict[str, Any] = {
+        "source": source,
+        "seed": seed,
+        "quick": quick,
+        "clips": [
+            {"name": m.name, "label": lab, "frames": m.n_frames, "fps": m.fps} for m, lab in clips
+        ],
+        "figure": str(figure),
+    }
+    summary.update(_dictionary_comparison(clips, seed, quick, console))
+    summary["seconds"] = time.perf_counter() - start
+    atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
+    console.print(f"summary: {out_dir / 'summary.json'} ({summary['seconds']:.1f} s)")
+    return summary
+
+
+def _clip_table(clips: list[tuple[Motion, str]], source: str) -> Table:
     table = Table(title=f"{len(clips)} clips ({source})", title_justify="left")
     for column in ("clip", "label", "frames", "fps", "seconds", "joints", "standing cm"):
         table.add_column(column, justify="left" if column in ("clip", "label") else "right")
@@ -195,74 +215,59 @@ def run_demo(
             str(motion.n_joints),
             f"{standing_height(motion, max(1, motion.n_frames // 100)):.0f}",
         )
-    console.print(table)
+    return table
 
-    figure = plot_stick_figure(clips[0][0], out_dir / f"stick_{clips[0][0].name}.png")
-    console.print(f"stick figure of {clips[0][0].name}: {figure}")
 
+def _dictionary_comparison(
+    clips: list[tuple[Motion, str]], seed: int, quick: bool, console: Console
+) -> dict[str, Any]:
+    """QSSD against K-SVD on the clips' angular displacements (a random frame split)."""
     samples = [angular_displacements(m, step=sample_step(m)) for m, _ in clips]
-    shapes = {s.shape[1] for s in samples}
-    summary: dict[str, Any] = {
-        "source": source,
-        "seed": seed,
-        "quick": quick,
-        "clips": [
-            {"name": m.name, "label": lab, "frames": m.n_frames, "fps": m.fps} for m, lab in clips
-        ],
-        "figure": str(figure),
-    }
-    if len(shapes) != 1:
+    if len({s.shape[1] for s in samples}) != 1:
         console.print(
             "[yellow]the clips have different skeletons; the dictionary comparison "
             "needs one skeleton, so it is skipped.[/yellow]"
         )
-        rows = None
-    else:
-        Y = np.concatenate(samples)
-        order = np.random.default_rng(seed).permutation(len(Y))
-        n_test = max(1, int(round(_TEST_FRACTION * len(Y))))
-        train, test = Y[order[n_test:]], Y[order[:n_test]]
-        summary.update(
-            {
-                "n_train": int(len(train)),
-                "n_test": int(len(test)),
-                "quaternions_per_sample": int(Y.shape[1]),
-            }
+        return {"methods": []}
+    Y = np.concatenate(samples)
+    order = np.random.default_rng(seed).permutation(len(Y))
+    n_test = max(1, int(round(_TEST_FRACTION * len(Y))))
+    train, test = Y[order[n_test:]], Y[order[:n_test]]
+    console.print(
+        f"angular displacements: {len(train)} training and {len(test)} test "
+        f"frames of {Y.shape[1]} joint quaternions; learning dictionaries..."
+    )
+    rows = _compare(train, test, seed, quick)
+    result = Table(
+        title="reconstruction of angular displacements "
+        "(mean rotation error, degrees per joint per frame)",
+        title_justify="left",
+    )
+    columns = (
+        "method",
+        "atoms K",
+        "sparsity L",
+        "iterations",
+        "train error",
+        "test error",
+        "fit s",
+    )
+    for column in columns:
+        result.add_column(column, justify="left" if column == "method" else "right")
+    for row in rows:
+        result.add_row(
+            row["method"],
+            str(row["n_atoms"]),
+            str(row["sparsity"]),
+            str(row["max_iter"]),
+            f"{row['train_error_deg']:.3f}",
+            f"{row['test_error_deg']:.3f}",
+            f"{row['fit_seconds']:.1f}",
         )
-        console.print(
-            f"angular displacements: {len(train)} training and {len(test)} test "
-            f"frames of {Y.shape[1]} joint quaternions; learning dictionaries..."
-        )
-        rows = _compare(train, test, seed, quick)
-    if rows:
-        result = Table(
-            title="reconstruction of angular displacements "
-            "(mean rotation error, degrees per joint per frame)",
-            title_justify="left",
-        )
-        for column in (
-            "method",
-            "atoms K",
-            "sparsity L",
-            "iterations",
-            "train error",
-            "test error",
-            "fit s",
-        ):
-            result.add_column(column, justify="left" if column == "method" else "right")
-        for row in rows:
-            result.add_row(
-                row["method"],
-                str(row["n_atoms"]),
-                str(row["sparsity"]),
-                str(row["max_iter"]),
-                f"{row['train_error_deg']:.3f}",
-                f"{row['test_error_deg']:.3f}",
-                f"{row['fit_seconds']:.1f}",
-            )
-        console.print(result)
-    summary["methods"] = rows or []
-    summary["seconds"] = time.perf_counter() - start
-    atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
-    console.print(f"summary: {out_dir / 'summary.json'} ({summary['seconds']:.1f} s)")
-    return summary
+    console.print(result)
+    return {
+        "n_train": int(len(train)),
+        "n_test": int(len(test)),
+        "quaternions_per_sample": int(Y.shape[1]),
+        "methods": rows,
+    }

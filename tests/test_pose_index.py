@@ -183,3 +183,32 @@ def test_cli_index_then_search_returns_the_query_pose(
     assert hit["clip"].endswith("02_02.amc") and hit["frame"] == 40 and hit["distance"] < 1e-4
     res = runner.invoke(app, ["pose", "search", str(out), "--clip", "nope", "--frame", "1"])
     assert res.exit_code == 2
+
+
+def test_library_file_checks_its_format_version(tmp_path: pathlib.Path) -> None:
+    from quatmotion.errors import FormatError
+
+    rng = np.random.default_rng(0)
+    lib = PoseLibrary(
+        index=HNSWIndex(random_state=0).fit(rng.normal(size=(20, 3))),
+        clip_names=["a.bvh"],
+        clip_of=np.zeros(20, dtype=np.int64),
+        frame_of=np.arange(20),
+        model={"scale": np.ones(4), "offset": np.zeros(4), "W": rng.normal(size=(4, 3))},
+        meta={"fps": 30.0},
+    )
+    path = tmp_path / "lib.idx"
+    lib.save(path)
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(str(arrays["meta"]))
+    for version, word in ((meta["version"] + 1, "newer"), (0, "differs")):
+        arrays["meta"] = np.asarray(json.dumps({**meta, "version": version}))
+        with open(path, "wb") as fh:
+            np.savez(fh, **arrays)
+        with pytest.raises(FormatError, match=word) as caught:
+            PoseLibrary.load(path)
+        assert str(path) in str(caught.value)
+    path.write_bytes(b"not a library at all")
+    with pytest.raises(FormatError, match="pose library"):
+        PoseLibrary.load(path)

@@ -244,68 +244,29 @@ def read_bvh(path: str | Path, scale: float | Literal["auto"] = "auto") -> Motio
     """
     path = Path(path)
     text = read_text(path)
-    # Find the MOTION keyword on a line of its own (joint names never are 'MOTION').
-    head_end = 0
-    motion_line = None
-    line_number = 1
-    while head_end < len(text):
-        end = text.find("\n", head_end)
-        end = len(text) if end < 0 else end
-        if text[head_end:end].strip().upper() == "MOTION":
-            motion_line = line_number
-            break
-        head_end = end + 1
-        line_number += 1
+    head_end, motion_line, found = _find_motion_keyword(text)
     hierarchy_tokens = [
         (token, number)
         for number, raw in enumerate(text[:head_end].split("\n"), start=1)
         for token in raw.split()
     ]
-    tokens = _Tokens(hierarchy_tokens, path, line_number if motion_line is None else motion_line)
+    tokens = _Tokens(hierarchy_tokens, path, motion_line)
     hierarchy = _parse_hierarchy(tokens)
     names, parents, offsets, channels, site_names, site_parents, site_offsets = hierarchy
     if tokens.peek() is not None:
         token, line = tokens.next("MOTION")
         raise FormatError(f"expected MOTION after the hierarchy, got {token!r}", path, line)
-    if motion_line is None:
-        raise FormatError("no MOTION section (truncated?)", path, line_number)
-
-    # MOTION header: 'Frames: N' then 'Frame Time: dt', each on its own line.
-    rest = text[head_end:].split("\n", 3)
-    if len(rest) < 3:
-        raise FormatError(
-            "MOTION section lacks 'Frames:' and 'Frame Time:' (truncated?)", path, motion_line
-        )
-    frames_tokens = rest[1].split()
-    if len(frames_tokens) != 2 or frames_tokens[0].lower() != "frames:":
-        raise FormatError(f"expected 'Frames: N', got {rest[1].strip()!r}", path, motion_line + 1)
-    n_frames = parse_int(frames_tokens[1], path, motion_line + 1, "frame count")
-    if n_frames < 1:
-        raise FormatError(f"frame count must be positive, got {n_frames}", path, motion_line + 1)
-    time_tokens = rest[2].split()
-    if len(time_tokens) != 3 or [t.lower() for t in time_tokens[:2]] != ["frame", "time:"]:
-        raise FormatError(
-            f"expected 'Frame Time: SECONDS', got {rest[2].strip()!r}", path, motion_line + 2
-        )
-    frame_time = parse_float(time_tokens[2], path, motion_line + 2, "frame time")
-    if frame_time <= 0:
-        raise FormatError(f"frame time must be positive, got {frame_time}", path, motion_line + 2)
-    block = rest[3] if len(rest) > 3 else ""
+    if not found:
+        raise FormatError("no MOTION section (truncated?)", path, motion_line)
+    n_frames, frame_time, block = _motion_header(text[head_end:], motion_line, path)
     n_channels = sum(len(c) for c in channels)
     if n_channels == 0:
         raise FormatError("no joint has channels", path, motion_line)
     values = _frame_values(block, motion_line + 3, n_frames, n_channels, path)
-
     offsets_units = np.asarray(offsets, dtype=np.float64)
     site_units = np.asarray(site_offsets, dtype=np.float64).reshape(-1, 3)
     if scale == "auto":
-        # Rest positions in file units (parents come first in file order).
-        rest = np.zeros((len(names), 3))
-        for j in range(1, len(names)):
-            rest[j] = rest[parents[j]] + offsets_units[j]
-        rest = np.concatenate((rest, rest[np.asarray(site_parents, dtype=np.int64)] + site_units))
-        with np.errstate(over="ignore", invalid="ignore"):
-            cm_per_unit = detect_bvh_scale(rest)
+        cm_per_unit = _detect_file_scale(parents, offsets_units, site_parents, site_units)
     else:
         cm_per_unit = float(scale)
         if not (np.isfinite(cm_per_unit) and cm_per_unit > 0):
@@ -328,6 +289,60 @@ def read_bvh(path: str | Path, scale: float | Literal["auto"] = "auto") -> Motio
         )
     except ValueError as error:  # e.g. values so large they overflow once scaled
         raise FormatError(str(error), path) from error
+
+
+def _find_motion_keyword(text: str) -> tuple[int, int, bool]:
+    """Offset and line number of the ``MOTION`` line (joint names never are 'MOTION'), and
+    whether there is one (if not: the end of the text and its last line)."""
+    head_end = 0
+    line_number = 1
+    while head_end < len(text):
+        end = text.find("\n", head_end)
+        end = len(text) if end < 0 else end
+        if text[head_end:end].strip().upper() == "MOTION":
+            return head_end, line_number, True
+        head_end = end + 1
+        line_number += 1
+    return head_end, line_number, False
+
+
+def _motion_header(section: str, motion_line: int, path: Path) -> tuple[int, float, str]:
+    """``Frames: N`` and ``Frame Time: dt`` after ``MOTION``: ``(N, dt, frame text)``."""
+    rest = section.split("\n", 3)
+    if len(rest) < 3:
+        raise FormatError(
+            "MOTION section lacks 'Frames:' and 'Frame Time:' (truncated?)", path, motion_line
+        )
+    frames_tokens = rest[1].split()
+    if len(frames_tokens) != 2 or frames_tokens[0].lower() != "frames:":
+        raise FormatError(f"expected 'Frames: N', got {rest[1].strip()!r}", path, motion_line + 1)
+    n_frames = parse_int(frames_tokens[1], path, motion_line + 1, "frame count")
+    if n_frames < 1:
+        raise FormatError(f"frame count must be positive, got {n_frames}", path, motion_line + 1)
+    time_tokens = rest[2].split()
+    if len(time_tokens) != 3 or [t.lower() for t in time_tokens[:2]] != ["frame", "time:"]:
+        raise FormatError(
+            f"expected 'Frame Time: SECONDS', got {rest[2].strip()!r}", path, motion_line + 2
+        )
+    frame_time = parse_float(time_tokens[2], path, motion_line + 2, "frame time")
+    if frame_time <= 0:
+        raise FormatError(f"frame time must be positive, got {frame_time}", path, motion_line + 2)
+    return n_frames, frame_time, rest[3] if len(rest) > 3 else ""
+
+
+def _detect_file_scale(
+    parents: list[int],
+    offsets_units: NDArray[np.float64],
+    site_parents: list[int],
+    site_units: NDArray[np.float64],
+) -> float:
+    """:func:`detect_bvh_scale` of the rest skeleton, from offsets in file units."""
+    rest = np.zeros((len(parents), 3))
+    for j in range(1, len(parents)):  # parents come first in file order
+        rest[j] = rest[parents[j]] + offsets_units[j]
+    rest = np.concatenate((rest, rest[np.asarray(site_parents, dtype=np.int64)] + site_units))
+    with np.errstate(over="ignore", invalid="ignore"):
+        return detect_bvh_scale(rest)
 
 
 def _build_motion(
