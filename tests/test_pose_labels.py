@@ -7,6 +7,7 @@ import pytest
 
 from quatmotion.pose import evaluate
 from quatmotion.pose import labels as lab
+from quatmotion.pose.skeleton16 import rotate_about_y
 
 # ---------------------------------------------------------------------------------------------
 # Evaluation (Eq. 36-37, precision@s)
@@ -75,10 +76,10 @@ def test_point_cloud_distance_ignores_yaw_and_floor_translation() -> None:
     theta = rng.uniform(-np.pi, np.pi, size=6)
     t = np.zeros((6, 1, 3))
     t[..., [0, 2]] = rng.normal(scale=200, size=(6, 1, 2))
-    b = lab.rotate_about_y(a, theta) + t
+    b = rotate_about_y(a, theta) + t
     d, th, tt = lab.point_cloud_distance(a, b, return_alignment=True)
     np.testing.assert_allclose(d, 0.0, atol=1e-5)
-    np.testing.assert_allclose(lab.rotate_about_y(b, th) + tt[:, None], a, atol=1e-8)
+    np.testing.assert_allclose(rotate_about_y(b, th) + tt[:, None], a, atol=1e-8)
     # a vertical offset is not aligned away: it is the whole distance
     np.testing.assert_allclose(lab.point_cloud_distance(a, a + [0.0, 7.0, 0.0]), 7.0)
 
@@ -86,10 +87,10 @@ def test_point_cloud_distance_ignores_yaw_and_floor_translation() -> None:
 def test_point_cloud_distance_is_the_optimum_over_rotations() -> None:
     rng = np.random.default_rng(2)
     a = rng.normal(scale=30, size=(40, 3))
-    b = lab.rotate_about_y(a + rng.normal(scale=5, size=a.shape), 1.1) + [50.0, 0.0, -20.0]
+    b = rotate_about_y(a + rng.normal(scale=5, size=a.shape), 1.1) + [50.0, 0.0, -20.0]
     d = lab.point_cloud_distance(a, b)
     thetas = np.linspace(-np.pi, np.pi, 7201)
-    rb = lab.rotate_about_y(np.broadcast_to(b, (len(thetas), 40, 3)), thetas)
+    rb = rotate_about_y(np.broadcast_to(b, (len(thetas), 40, 3)), thetas)
     tr = a.mean(0) - rb.mean(1)
     tr[:, 1] = 0.0
     scan = np.sqrt(np.sum((rb + tr[:, None] - a) ** 2, -1).mean(-1))
@@ -100,7 +101,7 @@ def test_point_cloud_distance_is_the_optimum_over_rotations() -> None:
 def test_windowed_distance_clamps_at_clip_ends_and_is_zero_for_moved_copies() -> None:
     rng = np.random.default_rng(3)
     clip = np.cumsum(rng.normal(size=(30, 16, 3)), axis=0)
-    moved = lab.rotate_about_y(clip, 0.8) + [10.0, 0.0, 5.0]
+    moved = rotate_about_y(clip, 0.8) + [10.0, 0.0, 5.0]
     pairs = np.array([[0, 0, 1, 0], [0, 15, 1, 15], [0, 29, 1, 29], [0, 3, 1, 20]])
     d = lab.windowed_cloud_distance([clip, moved], pairs, half_window=4)
     np.testing.assert_allclose(d[:3], 0.0, atol=1e-6)
@@ -127,7 +128,7 @@ def _walk_clips(rng: np.random.Generator, n_clips: int = 6, T: int = 60) -> tupl
         local.append(pose)
         root = np.zeros((T, 1, 3))
         root[..., 2] = 3.0 * np.arange(T)[:, None]
-        world.append(lab.rotate_about_y(pose, 0.3 * c) + root)
+        world.append(rotate_about_y(pose, 0.3 * c) + root)
     return local, world
 
 

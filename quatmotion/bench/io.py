@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from quatmotion._atomic import atomic_write_json
-from quatmotion.datasets import data_root
+from quatmotion.datasets import catalogue, data_root
 from quatmotion.io import (
     asf_bone_end_positions,
     find_asf_for_amc,
@@ -44,6 +44,11 @@ from quatmotion.viz import pyplot, save_figure
 
 FK_FRAMES = 100_000
 REPEATS = 5
+
+
+def _paths(root: pathlib.Path, collections: tuple[str, ...]) -> list[pathlib.Path]:
+    """The clip files of these collections of the data folder, in the given order."""
+    return [e.path for c in collections for e in catalogue(root, collection=c)]
 
 
 def _subset(files: list[pathlib.Path], quick: bool, rng: np.random.Generator, n: int) -> list:
@@ -170,8 +175,8 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     out.parent.mkdir(parents=True, exist_ok=True)
     root = data_root()
     rng = np.random.default_rng(seed)
-    amcs = sorted(root.glob("cmu/*/*.amc")) + sorted(root.glob("hdm05/clips/*/*.amc"))
-    bvhs = sorted(root.glob("bandai1/clips/*.bvh")) + sorted(root.glob("cmu_bvh/*/*.bvh"))
+    amcs = _paths(root, ("cmu", "hdm05"))
+    bvhs = _paths(root, ("bandai1", "cmu_bvh"))
     amcs = _subset(amcs, quick, rng, 20)
     bvhs = _subset(bvhs, quick, rng, 20)
     skeletons = {}
@@ -208,7 +213,7 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
         "amc": _write_rate(write_amcs, write_amc, ".amc"),
         "bvh": _write_rate(write_bvhs, write_bvh, ".bvh"),
     }
-    cmu = sorted(root.glob("cmu/*/*.amc"))
+    cmu = _paths(root, ("cmu",))
     if cmu:
         longest = max(cmu, key=lambda p: p.stat().st_size)
         result["forward_kinematics"] = {"clip": longest.name, **_fk_rate(read_amc(longest))}

@@ -26,7 +26,7 @@ import numpy as np
 
 from quatmotion import quat
 from quatmotion._atomic import atomic_write_json
-from quatmotion.datasets import data_root
+from quatmotion.datasets import catalogue, data_root
 from quatmotion.motion import angular_displacements
 from quatmotion.sparse import (
     KSVD,
@@ -204,8 +204,8 @@ def moving_displacements(paths: list[pathlib.Path], frame_step: int) -> np.ndarr
 def table1(quick: bool, seed: int) -> dict[str, Any]:
     root = data_root()
     datasets = {
-        "cmu_mixed": sorted((root / "cmu").glob("*/*.amc")),
-        "hdm05": sorted((root / "hdm05" / "clips").glob("*/*.amc")),
+        "cmu_mixed": [e.path for e in catalogue(root, collection="cmu")],
+        "hdm05": [e.path for e in catalogue(root, collection="hdm05")],
     }
     if quick:
         K, L, n_iter, frame_step, init_iter = 200, 15, 5, 16, 5

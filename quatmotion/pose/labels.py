@@ -121,27 +121,6 @@ def point_cloud_distance(
     return dist, theta, t
 
 
-def rotate_about_y(points: ArrayLike, theta: ArrayLike) -> FloatArray:
-    """Rotate points by ``theta`` radians about Y: ``(x, z) -> (x cos + z sin, -x sin + z cos)``.
-
-    Parameters
-    ----------
-    points : array_like, shape (..., K, 3)
-    theta : array_like, shape (...)
-
-    Returns
-    -------
-    ndarray, shape (..., K, 3)
-    """
-    p = np.asarray(points, dtype=np.float64)
-    th = np.asarray(theta, dtype=np.float64)[..., None]
-    c, s = np.cos(th), np.sin(th)
-    out = p.copy()
-    out[..., 0] = p[..., 0] * c + p[..., 2] * s
-    out[..., 2] = -p[..., 0] * s + p[..., 2] * c
-    return out
-
-
 def window_frames(frames: ArrayLike, n_frames: ArrayLike, half_window: int) -> IntArray:
     """Frame indices of windows centred on ``frames``, clamped to each clip.
 

@@ -46,7 +46,7 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from quatmotion import quat
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
@@ -227,13 +227,28 @@ def to_body_frame(
     hip = p[..., :1, :].copy()
     if keep_height:
         hip[..., 1] = 0.0
-    rel = p - hip
-    c, s = np.cos(yaw)[..., None], np.sin(yaw)[..., None]
-    out = np.empty_like(rel)
-    # rotate by -yaw about Y: the facing direction (sin yaw, 0, cos yaw) goes to +Z
-    out[..., 0] = rel[..., 0] * c - rel[..., 2] * s
-    out[..., 1] = rel[..., 1]
-    out[..., 2] = rel[..., 0] * s + rel[..., 2] * c
+    # Rotate by -yaw about Y: the facing direction (sin yaw, 0, cos yaw) goes to +Z.
+    return rotate_about_y(p - hip, -yaw)
+
+
+def rotate_about_y(points: ArrayLike, theta: ArrayLike) -> NDArray[np.float64]:
+    """Rotate points by ``theta`` radians about Y: ``(x, z) -> (x cos + z sin, -x sin + z cos)``.
+
+    Parameters
+    ----------
+    points : array_like, shape (..., K, 3)
+    theta : array_like, shape (...)
+
+    Returns
+    -------
+    ndarray, shape (..., K, 3)
+    """
+    p = np.asarray(points, dtype=np.float64)
+    th = np.asarray(theta, dtype=np.float64)[..., None]
+    c, s = np.cos(th), np.sin(th)
+    out = p.copy()
+    out[..., 0] = p[..., 0] * c + p[..., 2] * s
+    out[..., 2] = -p[..., 0] * s + p[..., 2] * c
     return out
 
 
@@ -327,8 +342,6 @@ def local_rotations16(motion: Motion) -> NDArray[np.float64]:
     idx = joint_indices16(motion.skeleton)
     pose = forward_kinematics(motion, include_sites=False)
     yaw = facing_yaw(pose.positions[:, idx])
-    unyaw = np.zeros((yaw.shape[0], 4))  # rotation by -yaw about Y
-    unyaw[:, 0] = np.cos(-yaw / 2)
-    unyaw[:, 2] = np.sin(-yaw / 2)
+    unyaw = quat.about_axis(-yaw, "y")
     rot = quat.multiply(unyaw[:, None, :], pose.rotations[:, idx])
     return quat.make_continuous(quat.canonicalize(rot), axis=0)
