@@ -18,9 +18,7 @@
 
 from __future__ import annotations
 
-import os
 import pathlib
-import platform
 import statistics
 import tempfile
 import time
@@ -29,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from quatmotion._atomic import atomic_write_json
+from quatmotion.bench._provenance import provenance
 from quatmotion.datasets import catalogue, data_root
 from quatmotion.io import (
     asf_bone_end_positions,
@@ -191,18 +190,7 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     if bvhs:
         read_bvh(bvhs[0])
 
-    result: dict[str, Any] = {
-        "benchmark": "io",
-        "quick": quick,
-        "seed": seed,
-        "data": str(root),
-        "machine": {
-            "python": platform.python_version(),
-            "numpy": np.__version__,
-            "processor": platform.processor() or platform.machine(),
-            "cpus": os.cpu_count(),
-        },
-    }
+    result: dict[str, Any] = {**provenance("io", out, quick, seed), "data": str(root)}
     result["parse"] = {
         "amc": _parse_rates(amcs, lambda p: read_amc(p, asf_of[p])),
         "bvh": _parse_rates(bvhs, read_bvh),

@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion._atomic import atomic_write_json
+from quatmotion.bench._provenance import provenance
 from quatmotion.datasets import ClipEntry, catalogue, data_root
 from quatmotion.pose import evaluate, labels
 from quatmotion.pose.data import PoseClip, PoseData
@@ -568,9 +569,7 @@ def run(
 
     root = data_root()
     results: dict[str, Any] = {
-        "benchmark": "pose",
-        "quick": quick,
-        "seed": seed,
+        **provenance("pose", out, quick, seed),
         "data_root": str(root),
         "fps": TARGET_FPS,
         "body_height_cm": BODY_HEIGHT,

@@ -26,6 +26,7 @@ import numpy as np
 
 from quatmotion import quat
 from quatmotion._atomic import atomic_write_json
+from quatmotion.bench._provenance import provenance
 from quatmotion.datasets import catalogue, data_root
 from quatmotion.motion import angular_displacements
 from quatmotion.sparse import (
@@ -385,7 +386,7 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
 def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     """Run the three validations; write JSON to ``out`` and figures beside it."""
     out = pathlib.Path(out)
-    results: dict[str, Any] = {"benchmark": "qssd", "quick": quick, "seed": seed}
+    results: dict[str, Any] = provenance("qssd", out, quick, seed)
     for name, fn in (("table2", table2), ("table1", table1), ("simulation", simulation)):
         t0 = time.perf_counter()
         results[name] = fn(quick, seed)
