@@ -84,11 +84,8 @@ def test_view_page_plays_offline_and_shows_the_comparison(browser, compare_page,
     # What the page decoded is the clip, and the error it shows is the frame's RMS.
     expected = forward_kinematics(clip).all_positions()
     P = expected.shape[1]
-    shown = np.array(
-        page.evaluate(
-            f"Array.from(quatmotionViewer.clips[0].positions.subarray({180 * P * 3}, {181 * P * 3}))"
-        )
-    ).reshape(P, 3)
+    frame_180 = f"quatmotionViewer.clips[0].positions.subarray({180 * P * 3}, {181 * P * 3})"
+    shown = np.array(page.evaluate(f"Array.from({frame_180})")).reshape(P, 3)
     np.testing.assert_allclose(shown, expected[180], atol=0.01)
     distance = np.linalg.norm(expected - forward_kinematics(decoded).all_positions(), axis=-1)
     rms_text = page.locator(".qmv-frame-rms").inner_text()
