@@ -1,4 +1,4 @@
-"""``quatmotion view``: the 3D viewer page."""
+"""``quatmotion view | report``: the 3D viewer page and the benchmark report page."""
 
 from __future__ import annotations
 
@@ -102,3 +102,19 @@ def view(
         path = write_view(out, motions, others, ghost=ghost, layout=layout)  # type: ignore[arg-type]
         frames = sum(m.n_frames for m in motions)
         console.print(f"wrote {path} ({len(motions)} clip(s), {frames} frames)")
+
+
+@app.command()
+def report(
+    results: Annotated[list[Path], typer.Argument(help="Benchmark JSON files (PNGs beside them).")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="HTML page to write.")] = Path(
+        "report.html"
+    ),
+    title: Annotated[str, typer.Option(help="Page title.")] = "quatmotion benchmarks",
+) -> None:
+    """Write one standalone page with the tables and figures of benchmark runs."""
+    from quatmotion.viz import write_report
+
+    with user_errors():
+        path = write_report(out, results, title=title)
+        console.print(f"wrote {path} ({len(results)} benchmark result(s))")
