@@ -5,7 +5,6 @@ from __future__ import annotations
 import functools
 import http.server
 import os
-import shutil
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -62,53 +61,25 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
         pytest.skip(f"mocap data folder {_DATA} absent (set QUATMOTION_DATA)")
 
 
-# A real headless browser for the viewer (and web app) tests: Debian's chromium driven by
-# Playwright through executable_path (Playwright's own browser download is not used).
-# `make browser` installs both; .ci/run does it and sets QUATMOTION_REQUIRE_BROWSER=1, so on CI
-# a missing browser fails the tests instead of skipping them.
-CHROMIUM_ARGS = (
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",  # WebGL still renders, on SwiftShader
-    "--disable-quic",
-    "--no-first-run",
-    # Without these, Chromium's background connections are refused on a closed network.
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-)
-
+# A real headless browser for the viewer (and web app) tests: quatmotion.viz.browser launches
+# Debian's chromium through Playwright. `make browser` installs both; .ci/run does it and sets
+# QUATMOTION_REQUIRE_BROWSER=1, so on CI a missing browser fails the tests instead of skipping.
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
 """Screenshots the browser tests leave for people to look at (ignored by git)."""
-
-
-def chromium_executable() -> str | None:
-    """``$QUATMOTION_CHROMIUM``, else a ``chromium`` on the PATH."""
-    return (
-        os.environ.get("QUATMOTION_CHROMIUM")
-        or shutil.which("chromium")
-        or shutil.which("chromium-browser")
-    )
 
 
 @pytest.fixture(scope="session")
 def browser() -> Iterator[Any]:
     """A headless Chromium (a Playwright ``Browser``), one per test process."""
-    executable = chromium_executable()
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        missing = "the playwright Python package is not installed (run `make browser`)"
-    else:
-        missing = None if executable else "no chromium on the PATH (run `make browser`)"
-    if missing:
+    from quatmotion.viz.browser import headless_chromium, missing_browser
+
+    reason = missing_browser()
+    if reason:
         if os.environ.get("QUATMOTION_REQUIRE_BROWSER"):
-            pytest.fail(f"browser tests required but {missing}")
-        pytest.skip(missing)
-    with sync_playwright() as playwright:
-        launched = playwright.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
+            pytest.fail(f"browser tests required but {reason}")
+        pytest.skip(reason)
+    with headless_chromium() as launched:
         yield launched
-        launched.close()
 
 
 @pytest.fixture()

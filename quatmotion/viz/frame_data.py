@@ -22,8 +22,9 @@ Conventions
   coordinates span a body's size whatever distance the clip travels, so the step stays a few
   thousandths of a centimetre for a person. Every payload states its bound,
   ``max_quantisation_cm``.
-* Why not float32 throughout: four bytes per coordinate, then base64, put a 10,000-frame clip
-  of 38 points at 6 MB; quantised frame deltas under deflate take about a quarter of that.
+* Why not float32 throughout: four bytes per coordinate, then base64, would fill the 6 MB
+  budget of a 10,000-frame page with frame data alone; quantised frame deltas under deflate
+  take a fraction of that (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -52,7 +53,10 @@ __all__ = [
 
 FORMAT = "quatmotion-frames/1"
 _UINT16_LEVELS = 65535
-_ZLIB_LEVEL = 6  # on mocap deltas, level 9 saves about 1 % more at ten times the time
+ERROR_STEP_CM = 0.001
+"""Finest step of shipped point errors, cm: the viewer prints them to 0.01 cm, and coarser
+levels compress better (ARMS and the maximum are computed before quantising)."""
+_ZLIB_LEVEL = 6  # level 9 barely shrinks mocap deltas further, at many times the time
 
 
 def encode_float32(values: NDArray[np.floating]) -> dict[str, Any]:
@@ -68,11 +72,14 @@ def encode_float32(values: NDArray[np.floating]) -> dict[str, Any]:
     }
 
 
-def encode_uint16(values: NDArray[np.floating], groups: int = 1) -> dict[str, Any]:
+def encode_uint16(
+    values: NDArray[np.floating], groups: int = 1, *, min_step: float = 0.0
+) -> dict[str, Any]:
     """A ``uint16-delta-planes`` block of ``values``, shape ``(T, C)``.
 
     Columns ``c % groups`` share an offset and a step: their minimum and
-    ``(max - min) / 65535``. ``C`` must be a multiple of ``groups``.
+    ``(max - min) / 65535``, or ``min_step`` if larger (a coarser step compresses better where
+    the finest one is not needed). ``C`` must be a multiple of ``groups``.
     """
     array = np.asarray(values, dtype=np.float64)
     if array.ndim != 2 or array.shape[1] % groups:
@@ -89,7 +96,7 @@ def encode_uint16(values: NDArray[np.floating], groups: int = 1) -> dict[str, An
     else:
         offset = span = np.zeros(groups)
     # A constant group still needs a positive step for the decoder's multiply.
-    step = np.where(span > 0, span / _UINT16_LEVELS, 1.0)
+    step = np.where(span > 0, np.maximum(span / _UINT16_LEVELS, min_step), 1.0)
     levels = np.rint((grouped - offset) / step).astype(np.uint16).reshape(T, C)
     deltas = np.diff(levels, axis=0, prepend=np.zeros((1, C), np.uint16))  # wraps mod 2**16
     planes = deltas.astype("<u2").view(np.uint8).reshape(-1, 2).T
@@ -244,7 +251,7 @@ def encode_comparison(
             f"{reference.name!r} at {reference.fps:g} fps"
         )
     errors = point_errors(a, b)
-    block = encode_uint16(errors)
+    block = encode_uint16(errors, min_step=ERROR_STEP_CM)
     summary = {
         "block": block,
         "arms_cm": float(np.mean(np.sqrt(np.mean(errors**2, axis=1)))) if errors.size else 0.0,
