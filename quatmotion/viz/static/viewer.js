@@ -445,7 +445,11 @@
     step(n) { this.pause(); this.seek(this.frame + n); }
     setSpeed(x) { this.speed = x; this._updateUi(); }
     setLoop(b) { this.loop = !!b; this._updateUi(); }
-    setFollow(b) { this.follow = !!b; this._dirty = true; this._updateUi(); }
+    setFollow(b) {
+      this.follow = !!b;
+      if (this.preset) this.cameraPreset(this.preset); // re-frame: the body, or the whole area
+      this._dirty = true; this._updateUi();
+    }
     setLayout(layout) {
       this.layout = layout === 'overlay' ? 'overlay' : 'side';
       this._dirty = true; this._updateUi();
@@ -464,7 +468,10 @@
       this._dirty = true;
     }
     cameraPreset(name) {
-      const d = this.bodyHeight * 2.6;
+      // Following, the body fills the view; otherwise the whole floor area the clips cover.
+      this.preset = name;
+      const area = Math.max(...this.stats.map((s) => Math.max(s.maxX - s.minX, s.maxZ - s.minZ)));
+      const d = this.follow ? this.bodyHeight * 2.6 : Math.max(this.bodyHeight * 2.6, area * 1.1);
       const target = new THREE.Vector3(0, this.bodyHeight * 0.5, 0);
       const directions = { front: [0, 0.15, 1], side: [1, 0.15, 0], top: [0, 1, 0.001] };
       const dir = new THREE.Vector3(...(directions[name] || directions.front)).normalize();
@@ -672,7 +679,8 @@
     '<label>speed <select class="qmv-speed"></select></label>' +
     '<label><input class="qmv-loop" type="checkbox"> loop</label>' +
     '<label><input class="qmv-follow" type="checkbox"> follow root</label>' +
-    '<span class="qmv-cams">camera <button data-camera="front">front</button><button data-camera="side">side</button><button data-camera="top">top</button></span>' +
+    '<span class="qmv-cams">camera <button data-camera="front" title="from +Z (the front of a CMU rest pose)">front</button>' +
+    '<button data-camera="side" title="from +X">side</button><button data-camera="top" title="from above (+Y)">top</button></span>' +
     '<label>layout <select class="qmv-layout"><option value="side">side by side</option><option value="overlay">overlay</option></select></label>' +
     '<label title="a faint pose every N frames; 0 = off">ghost every <input class="qmv-ghost" type="number" min="0" step="1" value="0"> frames</label>' +
     '<label class="qmv-compare-only"><input class="qmv-error-colours" type="checkbox" checked> error colours</label>' +
