@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -9,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from quatmotion.cli._app import app
-from quatmotion.cli._common import CliInputError, console, read_clip, user_errors
+from quatmotion.cli._common import CliInputError, console, read_clip, require_file, user_errors
 
 if TYPE_CHECKING:
     from types import ModuleType
@@ -23,11 +24,11 @@ LIBRARY_SEPARATOR = "::"
 def _codec(purpose: str) -> ModuleType:
     """``quatmotion.codec``, or a one-line error saying it is needed for ``purpose``.
 
-    The hook for the codec: imported by name because the package does not exist yet; when it
-    does, this becomes a plain import (so the import-linter sees it). The viewer expects
-    ``codec.read_clip(library: Path, clip: str) -> Motion`` (the decoded clip) and
-    ``codec.roundtrip(motion: Motion) -> Motion`` (compressed with the default settings, then
-    decoded).
+    The hook for the codec: imported by name because the package is not on this branch yet;
+    when it is, this becomes a plain import (so the import-linter sees it). The viewer uses the
+    codec branch's API: ``codec.open(path_or_bytes)`` gives an archive whose ``read(clip)``
+    decodes a clip (by name) to a Motion, and ``codec.compress([motion]).data`` is the bytes of
+    a one-clip ``.qmz`` (default method and settings).
     """
     try:
         return importlib.import_module("quatmotion.codec")
@@ -43,8 +44,19 @@ def _read(spec: str, skeleton: Path | None) -> Motion:
         library, clip = spec.split(LIBRARY_SEPARATOR, 1)
         if not library or not clip:
             raise CliInputError(f"{spec}: expected LIBRARY.qmz::CLIP")
-        return _codec(f"{spec}: reading a .qmz clip").read_clip(Path(library), clip)
+        codec = _codec(f"{spec}: reading a .qmz clip")
+        with codec.open(require_file(Path(library))) as archive:
+            motion = archive.read(clip)
+        return dataclasses.replace(motion, name=f"{Path(library).name}::{clip}")
     return read_clip(Path(spec), skeleton)
+
+
+def _decoded(motion: Motion) -> Motion:
+    """``motion`` compressed into a one-clip ``.qmz`` in memory, then decoded."""
+    codec = _codec("--compare-decoded")
+    with codec.open(codec.compress([motion]).data) as archive:
+        decoded = archive.read(0)
+    return dataclasses.replace(decoded, name=f"{motion.name} (decoded)")
 
 
 @app.command()
@@ -97,8 +109,7 @@ def view(
                 )
             others = [_read(spec, skeleton) for spec in compare]
         elif compare_decoded:
-            codec = _codec("--compare-decoded")
-            others = [codec.roundtrip(m) for m in motions]
+            others = [_decoded(m) for m in motions]
         path = write_view(out, motions, others, ghost=ghost, layout=layout)  # type: ignore[arg-type]
         frames = sum(m.n_frames for m in motions)
         console.print(f"wrote {path} ({len(motions)} clip(s), {frames} frames)")
