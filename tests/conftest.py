@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import functools
 import http.server
+import os
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -57,3 +59,31 @@ _DATA = data_root(must_exist=False)
 def pytest_runtest_setup(item: pytest.Item) -> None:
     if item.get_closest_marker("needs_data") and not _DATA.is_dir():
         pytest.skip(f"mocap data folder {_DATA} absent (set QUATMOTION_DATA)")
+
+
+# A real headless browser for the viewer (and web app) tests: quatmotion.viz.browser launches
+# Debian's chromium through Playwright. `make browser` installs both; .ci/run does it and sets
+# QUATMOTION_REQUIRE_BROWSER=1, so on CI a missing browser fails the tests instead of skipping.
+ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
+"""Screenshots the browser tests leave for people to look at (ignored by git)."""
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[Any]:
+    """A headless Chromium (a Playwright ``Browser``), one per test process."""
+    from quatmotion.viz.browser import headless_chromium, missing_browser
+
+    reason = missing_browser()
+    if reason:
+        if os.environ.get("QUATMOTION_REQUIRE_BROWSER"):
+            pytest.fail(f"browser tests required but {reason}")
+        pytest.skip(reason)
+    with headless_chromium() as launched:
+        yield launched
+
+
+@pytest.fixture()
+def artifact_dir() -> Path:
+    """``test-artifacts/`` at the project root, created."""
+    ARTIFACTS.mkdir(exist_ok=True)
+    return ARTIFACTS

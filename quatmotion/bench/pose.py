@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion._atomic import atomic_write_json
+from quatmotion.bench._provenance import provenance
 from quatmotion.datasets import ClipEntry, catalogue, data_root
 from quatmotion.pose import evaluate, labels
 from quatmotion.pose.data import PoseClip, PoseData
@@ -437,24 +438,46 @@ def _ann_benchmark(quick: bool, seed: int, log: Callable[[str], None]) -> dict[s
 
 def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
     plt = pyplot()
+    from matplotlib.patches import Patch
+
     written: list[str] = []
+    quick = " (quick run)" if results.get("quick") else ""
+    ours = "GPD+RDSR"  # the paper's method, drawn in red in every figure
 
     def save(fig: Any, suffix: str) -> None:
-        written.append(str(save_figure(fig, out.with_name(f"{out.stem}_{suffix}.png"))))
+        written.append(save_figure(fig, out.with_name(f"{out.stem}_{suffix}.png")).name)
 
     for ds, res in results["datasets"].items():
         tr = res.get("transition")
         if tr:
+            pairs = f"{tr['test']['pairs']} test pose pairs from {tr['test']['clips']} clips"
             names = [n for n, e in tr["methods"].items() if "precision" in e]
             if names:
-                fig, ax = plt.subplots(figsize=(max(6, 0.45 * len(names)), 4))
+                fig, ax = plt.subplots(figsize=(max(7, 0.45 * len(names)), 4.5))
                 vals = [tr["methods"][n]["precision"] for n in names]
-                colors = ["tab:red" if n == "GPD+RDSR" else "tab:blue" for n in names]
+                colors = ["tab:red" if n == ours else "tab:blue" for n in names]
                 ax.bar(range(len(names)), vals, color=colors)
+                eq35 = tr.get("baseline_eq35_precision")
+                handles = [
+                    Patch(color="tab:red", label=f"{ours} (the paper's method)"),
+                    Patch(color="tab:blue", label="baselines"),
+                ]
+                if eq35 is not None:
+                    handles.append(
+                        ax.axhline(
+                            eq35, color="k", ls=":", lw=1, label="Eq. 35 mean joint distance"
+                        )
+                    )
                 ax.set_xticks(range(len(names)), names, rotation=70, fontsize=8)
-                ax.set_ylim(min(vals) - 0.05, 1.0)
+                ax.set_ylim(min([*vals, eq35 or 1.0]) - 0.05, 1.0)
+                ax.set_xlabel("pose distance (feature + learner, or a fixed distance)")
                 ax.set_ylabel("transition precision (Eq. 37)")
-                ax.set_title(f"{ds}: pose distances (Fig. 5)")
+                ax.set_title(
+                    f"{ds}: which pose pairs make smooth transitions (paper Fig. 5){quick}\n"
+                    f"{pairs}; higher is better",
+                    fontsize=10,
+                )
+                ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
                 save(fig, f"{ds}_fig5_transition")
                 grid = np.full((len(LEARNERS), len(FEATURES)), np.nan)
                 for i, lrn in enumerate(LEARNERS):
@@ -463,10 +486,12 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
                         if "precision" in e:
                             grid[i, j] = e["precision"]
                 if np.isfinite(grid).any():
-                    fig, ax = plt.subplots(figsize=(5, 4))
+                    fig, ax = plt.subplots(figsize=(5.5, 4.5))
                     im = ax.imshow(grid, cmap="viridis")
                     ax.set_xticks(range(len(FEATURES)), FEATURES)
                     ax.set_yticks(range(len(LEARNERS)), LEARNERS)
+                    ax.set_xlabel("pose feature")
+                    ax.set_ylabel("metric learner")
                     mid = 0.5 * (np.nanmin(grid) + np.nanmax(grid))
                     for (i, j), v in np.ndenumerate(grid):
                         if np.isfinite(v):
@@ -474,52 +499,83 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
                             ax.text(
                                 j, i, f"{v:.3f}", ha="center", va="center", color=ink, fontsize=8
                             )
-                    fig.colorbar(im)
-                    ax.set_title(f"{ds}: features x learners (Fig. 6)")
+                    fig.colorbar(im, label="transition precision (Eq. 37)")
+                    ax.set_title(
+                        f"{ds}: features x learners (paper Fig. 6){quick}\n{pairs}", fontsize=10
+                    )
                     save(fig, f"{ds}_fig6_features_learners")
             sweep = tr.get("rank_sweep", {})
             pts = [(int(r), e["precision"]) for r, e in sweep.items() if "precision" in e]
             if pts:
-                fig, ax = plt.subplots(figsize=(5, 3.5))
-                ax.plot(*zip(*sorted(pts), strict=True), "o-")
+                fig, ax = plt.subplots(figsize=(6, 4))
+                ranks, precisions = zip(*sorted(pts), strict=True)
+                ax.plot(ranks, precisions, "o-", color="tab:red", label=ours)
                 ax.set_xscale("log")
-                ax.set_xlabel("rank of W")
-                ax.set_ylabel("transition precision")
-                ax.set_title(f"{ds}: GPD+RDSR rank (Fig. 4)")
+                ax.set_xticks(ranks, [str(r) for r in ranks])
+                ax.minorticks_off()
+                ax.set_xlabel("rank of W (dimension of the learned projection, log scale)")
+                ax.set_ylabel("transition precision (Eq. 37)")
+                ax.set_title(f"{ds}: {ours} against its rank (paper Fig. 4){quick}", fontsize=10)
+                ax.legend(fontsize=8)
+                ax.grid(True, alpha=0.3)
                 save(fig, f"{ds}_fig4_rank")
             us = tr.get("unlabeled_sweep", {})
             if any(us.values()):
-                fig, ax = plt.subplots(figsize=(5, 3.5))
+                fig, ax = plt.subplots(figsize=(6, 4))
                 for name, ent in us.items():
                     pts = [(int(n), e["precision"]) for n, e in ent.items() if "precision" in e]
                     if pts:
-                        ax.plot(*zip(*sorted(pts), strict=True), "o-", label=name)
-                ax.set_xlabel("unlabeled poses N'")
-                ax.set_ylabel("transition precision")
-                ax.legend()
-                ax.set_title(f"{ds}: unlabeled data (Fig. 7)")
+                        color = "tab:red" if name == ours else "tab:blue"
+                        ax.plot(*zip(*sorted(pts), strict=True), "o-", label=name, color=color)
+                ax.set_xlabel("unlabeled poses N' used in training")
+                ax.set_ylabel("transition precision (Eq. 37)")
+                ax.legend(fontsize=8)
+                ax.grid(True, alpha=0.3)
+                ax.set_title(f"{ds}: effect of unlabeled data (paper Fig. 7){quick}", fontsize=10)
                 save(fig, f"{ds}_fig7_unlabeled")
         rt = res.get("retrieval")
         if rt and rt["methods"]:
-            fig, ax = plt.subplots(figsize=(6, 4))
-            for name, e in rt["methods"].items():
-                if "precision_at" in e:
-                    xs = [int(s) for s in e["precision_at"]]
-                    style = "o-" if name == "GPD+RDSR" else ".-"
+            curves = {
+                name: e["precision_at"] for name, e in rt["methods"].items() if "precision_at" in e
+            }
+            if curves:
+                fig, ax = plt.subplots(figsize=(7, 4.5))
+                # 27 curves cannot each have a readable colour: the paper's method, the best
+                # other method (mean precision over scopes) and the oracle stand out; the rest
+                # are grey.
+                others = {n: np.mean(list(c.values())) for n, c in curves.items() if n != ours}
+                best = max(others, key=others.get) if others else None
+                grey_label = f"other methods ({max(0, len(others) - 1)})"
+                for name, curve in curves.items():
+                    xs = [int(s) for s in curve]
+                    if name == ours:
+                        ax.plot(xs, list(curve.values()), "o-", color="tab:red", lw=2.2, label=name)
+                    elif name == best:
+                        label = f"{name} (best other)"
+                        ax.plot(
+                            xs, list(curve.values()), "s-", color="tab:blue", lw=1.8, label=label
+                        )
+                    else:
+                        ax.plot(
+                            xs, list(curve.values()), "-", color="0.7", lw=0.8, label=grey_label
+                        )
+                        grey_label = "_nolegend_"
+                if "oracle" in rt:
                     ax.plot(
-                        xs,
-                        list(e["precision_at"].values()),
-                        style,
-                        label=name,
-                        lw=2 if name == "GPD+RDSR" else 1,
+                        rt["scopes"], rt["oracle"], "k--", lw=1, label="oracle (all correct first)"
                     )
-            if "oracle" in rt:
-                ax.plot(rt["scopes"], rt["oracle"], "k--", lw=1, label="oracle (all correct first)")
-            ax.set_xlabel("scope s")
-            ax.set_ylabel("precision@s")
-            ax.legend(fontsize=6, ncol=2)
-            ax.set_title(f"{ds}: pose retrieval (Fig. 8)")
-            save(fig, f"{ds}_fig8_retrieval")
+                if "chance" in rt:
+                    ax.axhline(rt["chance"], color="k", ls=":", lw=1, label="chance")
+                ax.set_xlabel("scope s (number of poses retrieved)")
+                ax.set_ylabel("precision@s (fraction of the s poses that are correct)")
+                ax.legend(fontsize=8)
+                ax.grid(True, alpha=0.3)
+                ax.set_title(
+                    f"{ds}: pose retrieval (paper Fig. 8){quick}\n"
+                    f"{rt['test_poses']} query poses; higher is better",
+                    fontsize=10,
+                )
+                save(fig, f"{ds}_fig8_retrieval")
     return written
 
 
@@ -568,9 +624,7 @@ def run(
 
     root = data_root()
     results: dict[str, Any] = {
-        "benchmark": "pose",
-        "quick": quick,
-        "seed": seed,
+        **provenance("pose", out, quick, seed),
         "data_root": str(root),
         "fps": TARGET_FPS,
         "body_height_cm": BODY_HEIGHT,

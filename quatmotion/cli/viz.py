@@ -1,0 +1,131 @@
+"""``quatmotion view | report``: the 3D viewer page and the benchmark report page."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from quatmotion.cli._app import app
+from quatmotion.cli._common import CliInputError, console, read_clip, require_file, user_errors
+
+if TYPE_CHECKING:
+    from types import ModuleType
+
+    from quatmotion.motion import Motion
+
+LIBRARY_SEPARATOR = "::"
+"""``LIB.qmz::CLIP`` names one clip of a compressed library."""
+
+
+def _codec(purpose: str) -> ModuleType:
+    """``quatmotion.codec``, or a one-line error saying it is needed for ``purpose``.
+
+    The hook for the codec: imported by name because the package is not on this branch yet;
+    when it is, this becomes a plain import (so the import-linter sees it). The viewer uses the
+    codec branch's API: ``codec.open(path_or_bytes)`` gives an archive whose ``read(clip)``
+    decodes a clip (by name) to a Motion, and ``codec.compress([motion]).data`` is the bytes of
+    a one-clip ``.qmz`` (default method and settings).
+    """
+    try:
+        return importlib.import_module("quatmotion.codec")
+    except ModuleNotFoundError:
+        raise CliInputError(
+            f"{purpose} needs the codec (quatmotion.codec), which this version does not have"
+        ) from None
+
+
+def _read(spec: str, skeleton: Path | None) -> Motion:
+    """The clip named on the command line: a motion file, or ``LIB.qmz::CLIP``."""
+    if LIBRARY_SEPARATOR in spec:
+        library, clip = spec.split(LIBRARY_SEPARATOR, 1)
+        if not library or not clip:
+            raise CliInputError(f"{spec}: expected LIBRARY.qmz::CLIP")
+        codec = _codec(f"{spec}: reading a .qmz clip")
+        with codec.open(require_file(Path(library))) as archive:
+            motion = archive.read(clip)
+        return dataclasses.replace(motion, name=f"{Path(library).name}::{clip}")
+    return read_clip(Path(spec), skeleton)
+
+
+def _decoded(motion: Motion) -> Motion:
+    """``motion`` compressed into a one-clip ``.qmz`` in memory, then decoded."""
+    codec = _codec("--compare-decoded")
+    with codec.open(codec.compress([motion]).data) as archive:
+        decoded = archive.read(0)
+    return dataclasses.replace(decoded, name=f"{motion.name} (decoded)")
+
+
+@app.command()
+def view(
+    files: Annotated[
+        list[str],
+        typer.Argument(
+            help="Clips: .amc/.bvh files (a .qmz clip as LIB.qmz::CLIP with the codec)."
+        ),
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="HTML page to write.")] = Path(
+        "view.html"
+    ),
+    compare: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="A clip to compare with each FILE, in order (repeat the option): shown in green "
+            "beside the original in blue, with the per-joint error (same skeleton, frames, fps)."
+        ),
+    ] = None,
+    compare_decoded: Annotated[
+        bool,
+        typer.Option(
+            "--compare-decoded",
+            help="Compare each FILE with its compressed-then-decoded version (codec).",
+        ),
+    ] = False,
+    ghost: Annotated[int, typer.Option(help="A faint pose every N frames (0: none).", min=0)] = 0,
+    layout: Annotated[
+        str | None, typer.Option(help="side (a viewport per clip) or overlay (one viewport).")
+    ] = None,
+    skeleton: Annotated[
+        Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC input (else found by name).")
+    ] = None,
+) -> None:
+    """Write a standalone 3D viewer page (opens offline; frames count from 0)."""
+    from quatmotion.viz import write_view
+
+    with user_errors():
+        if compare and compare_decoded:
+            raise CliInputError("give --compare or --compare-decoded, not both")
+        if layout not in (None, "side", "overlay"):
+            raise CliInputError(f"--layout must be side or overlay, got {layout!r}")
+        motions = [_read(spec, skeleton) for spec in files]
+        others = None
+        if compare:
+            if len(compare) != len(files):
+                raise CliInputError(
+                    f"{len(compare)} --compare clip(s) for {len(files)} file(s): give one per file"
+                )
+            others = [_read(spec, skeleton) for spec in compare]
+        elif compare_decoded:
+            others = [_decoded(m) for m in motions]
+        path = write_view(out, motions, others, ghost=ghost, layout=layout)  # type: ignore[arg-type]
+        frames = sum(m.n_frames for m in motions)
+        console.print(f"wrote {path} ({len(motions)} clip(s), {frames} frames)")
+
+
+@app.command()
+def report(
+    results: Annotated[list[Path], typer.Argument(help="Benchmark JSON files (PNGs beside them).")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="HTML page to write.")] = Path(
+        "report.html"
+    ),
+    title: Annotated[str, typer.Option(help="Page title.")] = "quatmotion benchmarks",
+) -> None:
+    """Write one standalone page with the tables and figures of benchmark runs."""
+    from quatmotion.viz import write_report
+
+    with user_errors():
+        path = write_report(out, results, title=title)
+        console.print(f"wrote {path} ({len(results)} benchmark result(s))")
