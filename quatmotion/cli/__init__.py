@@ -8,7 +8,8 @@ message, never a traceback.
 
 Modules: :mod:`~quatmotion.cli.motion` (``info``, ``convert``, ``generate``),
 :mod:`~quatmotion.cli.datasets` (``datasets list|fetch``), :mod:`~quatmotion.cli.pose`
-(``pose index|search``), :mod:`~quatmotion.cli.bench` (``bench``), :mod:`~quatmotion.cli.demo`
+(``pose index|search``), :mod:`~quatmotion.cli.retrieval` (``index build|add|remove|ls``,
+``search``), :mod:`~quatmotion.cli.bench` (``bench``), :mod:`~quatmotion.cli.demo`
 (``demo``).
 """
 
@@ -19,7 +20,7 @@ import importlib
 from quatmotion.cli._app import app
 
 # Importing a command module registers its commands; this order is the order of --help.
-for _module in ("motion", "datasets", "pose", "bench", "demo"):
+for _module in ("motion", "datasets", "pose", "retrieval", "bench", "demo"):
     importlib.import_module(f"quatmotion.cli.{_module}")
 
 __all__ = ["app", "main"]
