@@ -29,7 +29,12 @@ import numpy as np
 
 from quatmotion._atomic import atomic_write_json
 from quatmotion.motion import Motion
-from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
+from quatmotion.retrieval.features import (
+    FEATURE_FPS,
+    HORIZON_S,
+    clip_features,
+    skeleton_fingerprint,
+)
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, Library, QueryFeatures, Ranking
 
 __all__ = ["run", "retrieval_scores"]
@@ -210,7 +215,8 @@ def _synthetic_library(
         b = T - int(rng.integers(0, max(1, T // 5)))
         idx = np.clip(np.round(np.arange(a, max(b, a + 1), rng.uniform(0.8, 1.25))), 0, T - 1)
         G = F[idx.astype(int)] + rng.normal(0.0, 1.0, (idx.size, F.shape[1]))
-        V = np.gradient(G, axis=0) * 10.0 * 0.5 if len(G) > 1 else np.zeros_like(G)
+        # a stand-in for the velocity part: only the embedding's size and spread matter here
+        V = np.gradient(G, axis=0) * FEATURE_FPS * HORIZON_S if len(G) > 1 else np.zeros_like(G)
         item = {
             "frames": G.astype(np.float32),
             "embedding": motion_embedding(G, V).astype(np.float32),

@@ -22,7 +22,7 @@ import hashlib
 import io
 import json
 import sqlite3
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -134,7 +134,8 @@ class ClipIndex:
     # -- opening -------------------------------------------------------------------------
     @classmethod
     def create(cls, path: str | Path) -> ClipIndex:
-        """A new, empty index at ``path`` (an existing index there is opened instead)."""
+        """A new, empty index at ``path``; an existing index there is opened for writing
+        instead (so that a build resumes), after the checks of :meth:`open`."""
         path = Path(path)
         if path.exists() and path.stat().st_size > 0:
             return cls.open(path, write=True)
@@ -310,6 +311,3 @@ class ClipIndex:
                     self._db.execute("UPDATE clips SET label = ? WHERE id = ?", (label, row.id))
                     n += 1
         return n
-
-    def iter_rows(self) -> Iterator[ClipRow]:
-        yield from self.clips()
