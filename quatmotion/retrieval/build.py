@@ -67,7 +67,11 @@ def skeleton_for(path: Path, skeletons: Path | None) -> Path | None:
     if path.suffix.lower() != ".amc":
         return None
     if skeletons is None:
-        return find_asf_for_amc(path)
+        try:
+            return find_asf_for_amc(path)
+        except FormatError as error:
+            reason = error.reason.replace("pass it (--skeleton)", "pass their folder (--skeletons)")
+            raise FormatError(reason, path) from None
     stem = path.stem
     candidates = [skeletons / (stem.split("_", 1)[0] + ".asf")]
     parts = stem.split("_")
@@ -108,7 +112,14 @@ def _guarded(job: ClipJob) -> ClipRecord | tuple[str, str]:
     try:
         return index_clip(job)
     except (FormatError, ValueError, OSError) as error:
-        return (job.path, str(error).splitlines()[0] if str(error) else type(error).__name__)
+        return (job.path, _reason(error))
+
+
+def _reason(error: Exception) -> str:
+    """The first line of ``error``'s message, without the file name a FormatError prepends
+    (the report names the file already)."""
+    text = getattr(error, "reason", None) or str(error) or type(error).__name__
+    return str(text).splitlines()[0]
 
 
 def read_labels_csv(path: str | Path) -> dict[str, str]:
@@ -200,7 +211,7 @@ def build_index(
                 skeleton = skeleton_for(path, skeleton_dir)
                 sha = content_hash(path, skeleton)
             except (FormatError, OSError) as error:
-                report.failed.append((str(path), str(error).splitlines()[0]))
+                report.failed.append((str(path), _reason(error)))
                 continue
             if index.contains(str(path), sha):
                 report.skipped += 1
