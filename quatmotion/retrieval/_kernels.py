@@ -16,17 +16,21 @@ _INF = 1e30
 
 
 @nb.njit(cache=True, fastmath=True, nogil=True)
-def dtw_banded(a, b, band, dims):  # pragma: no cover - compiled
+def dtw_banded(a, b, band, dims, max_radius):  # pragma: no cover - compiled
     """DTW of ``a`` (n, d) and ``b`` (m, d) on their first ``dims`` columns: squared Euclidean
-    local cost, steps (1,0), (0,1), (1,1), a Sakoe-Chiba band of radius
-    ``max(1, band * max(n, m))`` frames around the diagonal rescaled to the two lengths;
-    the path cost divided by ``n + m``."""
+    local cost, steps (1,0), (0,1), (1,1), a Sakoe-Chiba band around the diagonal rescaled to
+    the two lengths, of radius ``band * max(n, m)`` frames, at most ``max_radius`` (if
+    positive), at least 1 and half the slope plus one (so that a path exists); the path cost
+    divided by ``n + m``."""
     n, m = a.shape[0], b.shape[0]
-    r = max(1.0, band * max(n, m))
+    slope = (m - 1) / max(n - 1, 1)
+    r = band * max(n, m)
+    if max_radius > 0 and r > max_radius:
+        r = max_radius
+    r = max(r, 1.0, 0.5 * slope + 1.0)
     prev = np.full(m + 1, _INF, dtype=np.float64)
     cur = np.full(m + 1, _INF, dtype=np.float64)
     prev[0] = 0.0
-    slope = (m - 1) / max(n - 1, 1)
     for i in range(1, n + 1):
         centre = (i - 1) * slope + 1
         lo = max(1, int(np.floor(centre - r)))
@@ -49,13 +53,13 @@ def dtw_banded(a, b, band, dims):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, nogil=True)
-def dtw_to_candidates(query, frames, offsets, candidates, band, dims):  # pragma: no cover
+def dtw_to_candidates(query, frames, offsets, candidates, band, dims, max_radius):
     """:func:`dtw_banded` from ``query`` to clips ``candidates`` of the concatenated
     ``frames`` (clip ``c`` is ``frames[offsets[c]:offsets[c + 1]]``)."""
     out = np.empty(candidates.shape[0])
     for t in range(candidates.shape[0]):
         c = candidates[t]
-        out[t] = dtw_banded(query, frames[offsets[c] : offsets[c + 1]], band, dims)
+        out[t] = dtw_banded(query, frames[offsets[c] : offsets[c + 1]], band, dims, max_radius)
     return out
 
 

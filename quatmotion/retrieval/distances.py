@@ -58,16 +58,26 @@ def pack_sequences(sequences: list[ArrayLike]) -> tuple[NDArray[np.float32], NDA
     return np.ascontiguousarray(np.concatenate(seqs)), offsets
 
 
-def dtw(a: ArrayLike, b: ArrayLike, *, band: float = 0.1, dims: int | None = None) -> float:
+def dtw(
+    a: ArrayLike,
+    b: ArrayLike,
+    *,
+    band: float = 0.1,
+    dims: int | None = None,
+    max_radius: float = 0.0,
+) -> float:
     """Banded DTW distance of two sequences ``(n, d)`` and ``(m, d)`` (module conventions).
 
     Parameters
     ----------
     a, b : array_like, shapes (n, d) and (m, d)
     band : float
-        Sakoe-Chiba radius as a fraction of the longer sequence (at least one frame).
+        Sakoe-Chiba radius as a fraction of the longer sequence.
     dims : int, optional
         Compare only the first ``dims`` columns (default all).
+    max_radius : float
+        Largest radius in frames (0: none). The radius is at least one frame, and at least
+        half the length ratio plus one, so that a warping path exists.
 
     Returns
     -------
@@ -77,7 +87,7 @@ def dtw(a: ArrayLike, b: ArrayLike, *, band: float = 0.1, dims: int | None = Non
     if A.shape[1] != B.shape[1]:
         raise ValueError(f"a has {A.shape[1]} columns, b {B.shape[1]}")
     d = A.shape[1] if dims is None else int(dims)
-    return float(_kernels.dtw_banded(A, B, float(band), d))
+    return float(_kernels.dtw_banded(A, B, float(band), d, float(max_radius)))
 
 
 def dtw_to_library(
@@ -88,6 +98,7 @@ def dtw_to_library(
     *,
     band: float = 0.1,
     dims: int | None = None,
+    max_radius: float = 0.0,
 ) -> FloatArray:
     """Banded DTW from ``query`` ``(n, d)`` to library clips (module conventions).
 
@@ -97,7 +108,7 @@ def dtw_to_library(
     frames, offsets : library from :func:`pack_sequences`
     candidates : array_like of int, optional
         Clip numbers to compare (default all).
-    band, dims : see :func:`dtw`
+    band, dims, max_radius : see :func:`dtw`
 
     Returns
     -------
@@ -115,7 +126,7 @@ def dtw_to_library(
     if cand.size and (cand.min() < 0 or cand.max() >= n_clips):
         raise ValueError(f"candidates must be clip numbers in 0..{n_clips - 1}")
     d = q.shape[1] if dims is None else int(dims)
-    return _kernels.dtw_to_candidates(q, frames, offsets, cand, float(band), d)
+    return _kernels.dtw_to_candidates(q, frames, offsets, cand, float(band), d, float(max_radius))
 
 
 def embedding_distances(embeddings: NDArray[np.float32], query: ArrayLike) -> FloatArray:

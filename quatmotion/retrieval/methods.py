@@ -15,7 +15,8 @@ features of every method it was built for.
   every clip.
 - ``"pooled"``: Euclidean distance of the pooled embeddings (blind to temporal order).
 - ``"pooled+dtw"`` (the default, :data:`DEFAULT_METHOD`): the pooled embedding shortlists
-  ``K = 64`` clips, DTW over the motion frames re-ranks them, and the two distances, each
+  ``K = 64`` clips, DTW over the motion frames (band 0.2, at most :data:`MAX_WARP_S`)
+  re-ranks them, and the two distances, each
   divided by its median over the shortlist, are added. The shortlist comes first, ordered by
   that sum (its ``distance``); the other clips follow by embedding distance, with distance NaN.
 """
@@ -29,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion.retrieval import distances as dist
-from quatmotion.retrieval.features import POSITION_DIM
+from quatmotion.retrieval.features import FEATURE_FPS, POSITION_DIM
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -203,6 +204,7 @@ class ShortlistThenDTW:
     name: str
     shortlist: int = 64
     band: float = 0.2
+    max_radius: float = 0.0
     dtw_weight: float = 1.0
     kinds: tuple[str, ...] = ("motion",)
 
@@ -217,7 +219,14 @@ class ShortlistThenDTW:
         short = np.argpartition(d_emb, k - 1)[:k] if k < len(d_emb) else np.arange(len(d_emb))
         short = short[np.isfinite(d_emb[short])].astype(np.int64)
         frames, offsets = library.frames
-        d_dtw = dist.dtw_to_library(query.arrays["frames"], frames, offsets, short, band=self.band)
+        d_dtw = dist.dtw_to_library(
+            query.arrays["frames"],
+            frames,
+            offsets,
+            short,
+            band=self.band,
+            max_radius=self.max_radius,
+        )
         fused = d_emb[short] / _positive_median(d_emb[short]) + self.dtw_weight * (
             d_dtw / _positive_median(d_dtw)
         )
@@ -239,6 +248,9 @@ def _positive_median(x: FloatArray) -> float:
 
 
 DEFAULT_METHOD = "pooled+dtw"
+MAX_WARP_S = 1.0
+"""Largest time shift of the default's DTW re-rank from the rescaled diagonal, seconds: it
+bounds the cost of long clips, and measured no loss of accuracy (docs/performance.md)."""
 
 METHODS: dict[str, RetrievalMethod] = {
     "paper-qssd": DictionaryMatching("paper-qssd", "qssd"),
@@ -246,6 +258,6 @@ METHODS: dict[str, RetrievalMethod] = {
     "dtw-positions": SequenceDTW("dtw-positions", dims=POSITION_DIM, band=0.1),
     "dtw-motion": SequenceDTW("dtw-motion", dims=52, band=0.2),
     "pooled": PooledEmbedding("pooled"),
-    DEFAULT_METHOD: ShortlistThenDTW(DEFAULT_METHOD),
+    DEFAULT_METHOD: ShortlistThenDTW(DEFAULT_METHOD, max_radius=MAX_WARP_S * FEATURE_FPS),
 }
 """Name -> method; every method the benchmark scores."""
