@@ -137,6 +137,8 @@ def test_cli_index_then_search_returns_the_query_pose(
             str(out),
             "--fps",
             "15",
+            "--metric",
+            "GPD+RDSR",
             "--rank",
             "10",
             "--unlabeled",
@@ -212,3 +214,25 @@ def test_library_file_checks_its_format_version(tmp_path: pathlib.Path) -> None:
     path.write_bytes(b"not a library at all")
     with pytest.raises(FormatError, match="pose library"):
         PoseLibrary.load(path)
+
+
+@pytest.mark.parametrize("n_clips", [1, 3])
+def test_default_metric_is_gpd_lms_with_a_diagonal_projection(n_clips: int) -> None:
+    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.pose.data import PoseClip
+    from quatmotion.pose.library import DEFAULT_METRIC
+
+    clips = [
+        PoseClip.from_motion(generate_clip(k, 1, n_frames=240), fps=15, height=170, name=k)
+        for k in ("walk", "squat", "wave")[:n_clips]
+    ]
+    library = PoseLibrary.build(clips, n_unlabeled=200, n_pairs=60)
+    assert DEFAULT_METRIC == "GPD+LMS" and library.meta["metric"] == "GPD+LMS"
+    assert library.meta["n_negative_pairs"] > 0
+    W = library.model["W"]
+    # one non-negative weight per kept GPD dimension: each column has a single positive entry
+    assert np.all(W >= 0) and np.all(np.count_nonzero(W, axis=0) == 1)
+    row = 48 // clips[-1].step  # frame 48 of the file
+    ids, dist = library.search(library.project(clips[-1].poses.gpd[row : row + 1]), k=1)
+    assert library.frame_of[ids[0, 0]] == 48 and dist[0, 0] < 1e-4
+    assert library.clip_of[ids[0, 0]] == n_clips - 1

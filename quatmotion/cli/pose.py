@@ -41,17 +41,24 @@ def index_command(
     height: Annotated[
         float, typer.Option(help="Body height every skeleton is scaled to, cm.")
     ] = 170.0,
-    rank: Annotated[int, typer.Option(help="Dimensions of the learned projection W.")] = 50,
+    metric: Annotated[
+        str, typer.Option(help="Pose distance to learn: GPD+LMS (measured best) or GPD+RDSR.")
+    ] = "GPD+LMS",
+    rank: Annotated[int, typer.Option(help="Dimensions of RDSR's projection W.")] = 50,
     unlabeled: Annotated[int, typer.Option(help="Unlabeled poses for RDSR.")] = 5000,
-    pairs: Annotated[int, typer.Option(help="Positive transition pairs for RDSR.")] = 500,
+    pairs: Annotated[
+        int, typer.Option(help="Transition pairs wanted (similar, and as many dissimilar for LMS).")
+    ] = 500,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
 ) -> None:
     """Learn a pose distance on the library and index every pose of it."""
     from quatmotion.io import find_motion_files
     from quatmotion.pose.data import PoseClip
-    from quatmotion.pose.library import PoseLibrary
+    from quatmotion.pose.library import METRICS, PoseLibrary
 
     with user_errors():
+        if metric not in METRICS:
+            raise CliInputError(f"unknown --metric {metric!r}; choose from {', '.join(METRICS)}")
         files = find_motion_files(paths)
         clips = []
         for f in files:
@@ -63,7 +70,13 @@ def index_command(
                 _echo(f"skipping {f}: {exc}")
         _echo(f"read {len(clips)} of {len(files)} clips")
         library = PoseLibrary.build(
-            clips, rank=rank, n_unlabeled=unlabeled, n_pairs=pairs, seed=seed, log=_echo
+            clips,
+            rank=rank,
+            n_unlabeled=unlabeled,
+            n_pairs=pairs,
+            seed=seed,
+            metric_name=metric,
+            log=_echo,
         )
         library.save(output)
     _echo(f"wrote {output}: {len(library.clip_of)} poses of {len(library.clip_names)} clips")

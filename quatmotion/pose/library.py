@@ -1,13 +1,20 @@
 """A saved, searchable pose library: "poses like frame F of clip C".
 
 Every pose of a motion library is described by the GPD, scaled (min-max, then unit length),
-projected by a learned metric ``W`` (RDSR by default, rank 50), and put in an HNSW graph
+projected by a learned metric ``W``, and put in an HNSW graph
 (:class:`~quatmotion.pose.index.HNSWIndex`). In the projected space the learned distance
 ``sqrt((x - y)^T W W^T (x - y))`` is plain Euclidean distance, so an L2 index answers
-learned-metric queries. :meth:`PoseLibrary.build` learns the metric from the library itself:
-positive pairs are good transitions labelled by Kovar's windowed point-cloud distance, the
-unlabeled poses a random sample. A library of a single clip has no cross-clip pairs: then
-consecutive frames serve as the positive pairs.
+learned-metric queries. :meth:`PoseLibrary.build` learns the metric from the library itself,
+on transition pairs labelled by Kovar's windowed point-cloud distance:
+
+* ``"GPD+LMS"`` (the default: it measures better than the paper's RDSR in ``bench pose``, see
+  docs/performance.md): non-negative least-squares weights per GPD dimension from similar and
+  dissimilar pairs; ``W`` is the diagonal of their square roots, dimensions of weight 0 left out.
+* ``"GPD+RDSR"`` (the GPD paper): RDSR of rank ``rank`` from the similar pairs and an
+  unlabeled random sample.
+
+A library of a single clip has no cross-clip pairs: then consecutive frames serve as the
+similar pairs, and (for LMS) poses at least a second apart as the dissimilar ones.
 
 Conventions
 -----------
@@ -39,12 +46,13 @@ from quatmotion._atomic import atomic_output
 from quatmotion.errors import FormatError
 from quatmotion.motion import Motion
 from quatmotion.pose import labels
+from quatmotion.pose.baselines import LMS
 from quatmotion.pose.data import PoseClip, PoseData
 from quatmotion.pose.index import HNSWIndex
 from quatmotion.pose.metric import RDSR
 from quatmotion.pose.scaler import MinMaxUnitScaler
 
-__all__ = ["PoseLibrary"]
+__all__ = ["DEFAULT_METRIC", "METRICS", "PoseLibrary"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -53,6 +61,11 @@ _FORMAT = "quatmotion-pose-library"
 _VERSION = 1
 # Fewer transition pairs than this teach a metric too little: use consecutive frames instead.
 _MIN_TRANSITION_PAIRS = 10
+_FAR_APART_S = 1.0  # fallback dissimilar pairs: poses of one clip at least this far apart
+
+METRICS: tuple[str, ...] = ("GPD+LMS", "GPD+RDSR")
+"""The pose distances :meth:`PoseLibrary.build` can learn."""
+DEFAULT_METRIC = "GPD+LMS"
 
 
 @dataclass
@@ -96,6 +109,7 @@ class PoseLibrary:
         M: int = 16,
         ef_construction: int = 100,
         metric: Any = None,
+        metric_name: str = DEFAULT_METRIC,
         log: Callable[[str], None] | None = None,
     ) -> PoseLibrary:
         """Learn a pose distance on the clips' own poses, project every pose and index it.
@@ -120,8 +134,11 @@ class PoseLibrary:
         M, ef_construction : int
             HNSW graph parameters.
         metric : estimator, optional
-            Unfitted, with ``fit(X_unlabeled, positive_pairs)`` and ``components_`` of shape
-            ``(rank, D)`` after fitting; default ``RDSR(n_components=rank)``.
+            For ``"GPD+RDSR"``: unfitted, with ``fit(X_unlabeled, positive_pairs)`` and
+            ``components_`` of shape ``(rank, D)`` after fitting; default
+            ``RDSR(n_components=rank)``.
+        metric_name : {"GPD+LMS", "GPD+RDSR"}
+            The pose distance to learn (module docstring); ``rank`` applies to RDSR only.
         log : callable, optional
             Called with progress messages.
 
@@ -130,6 +147,10 @@ class PoseLibrary:
         PoseLibrary
         """
         say = log or (lambda _msg: None)
+        if metric_name not in METRICS:
+            raise ValueError(
+                f"unknown pose metric {metric_name!r}; choose from {', '.join(METRICS)}"
+            )
         if not clips:
             raise ValueError("no clips to index")
         for name, value in (("rank", rank), ("n_unlabeled", n_unlabeled), ("n_pairs", n_pairs)):
@@ -144,16 +165,27 @@ class PoseLibrary:
         t0 = time.perf_counter()
         raw = poses.gpd
         say(f"GPD of {len(poses)} poses: {time.perf_counter() - t0:.1f} s")
-        positive, pairs_from = _positive_pairs(clips, clip_offsets, n_pairs, rng, say)
+        lms = metric_name == "GPD+LMS"
+        pairs, similar, pairs_from = _labelled_pairs(
+            clips, clip_offsets, n_pairs, rng, say, dissimilar=lms
+        )
         unlabeled = rng.permutation(len(poses))[:n_unlabeled]
-        scaler = MinMaxUnitScaler().fit(raw[np.unique(np.r_[unlabeled, positive.ravel()])])
+        scaler = MinMaxUnitScaler().fit(raw[np.unique(np.r_[unlabeled, pairs.ravel()])])
         X = scaler.transform(raw)
-        rank = min(rank, X.shape[1])
         t0 = time.perf_counter()
-        learner = RDSR(n_components=rank, random_state=seed) if metric is None else metric
-        learner.fit(X[unlabeled], np.stack([X[positive[:, 0]], X[positive[:, 1]]], axis=1))
-        say(f"metric of rank {rank}: {time.perf_counter() - t0:.1f} s")
-        W = learner.components_.T
+        if lms:
+            weights = LMS(power=2).fit(None, X[pairs[:, 0]], X[pairs[:, 1]], similar).weights_
+            kept = np.flatnonzero(weights > 0)
+            W = np.zeros((X.shape[1], kept.size))
+            W[kept, np.arange(kept.size)] = np.sqrt(weights[kept])
+            rank = kept.size
+        else:
+            rank = min(rank, X.shape[1])
+            positive = pairs[similar]
+            learner = RDSR(n_components=rank, random_state=seed) if metric is None else metric
+            learner.fit(X[unlabeled], np.stack([X[positive[:, 0]], X[positive[:, 1]]], axis=1))
+            W = learner.components_.T
+        say(f"{metric_name} metric of rank {rank}: {time.perf_counter() - t0:.1f} s")
         t0 = time.perf_counter()
         index = HNSWIndex(M=M, ef_construction=ef_construction, random_state=seed).fit(X @ W)
         say(f"HNSW index of {len(X)} poses: {time.perf_counter() - t0:.1f} s")
@@ -170,7 +202,9 @@ class PoseLibrary:
                 "file_fps": [c.fps * c.step for c in clips],
                 "rank": rank,
                 "n_unlabeled": len(unlabeled),
-                "n_positive_pairs": len(positive),
+                "metric": metric_name,
+                "n_positive_pairs": int(similar.sum()),
+                "n_negative_pairs": int((~similar).sum()),
                 "positive_pairs_from": pairs_from,
                 "seed": seed,
             },
@@ -296,37 +330,54 @@ class PoseLibrary:
             ) from exc
 
 
-def _positive_pairs(
+def _labelled_pairs(
     clips: Sequence[PoseClip],
     clip_offsets: labels.ClipOffsets,
     n_pairs: int,
     rng: np.random.Generator,
     say: Callable[[str], None],
-) -> tuple[IntArray, str]:
-    """Pose pairs ``(P, 2)`` (indices into the concatenated clips) the metric should call near,
-    and where they came from."""
-    positive = np.zeros((0, 2), dtype=np.int64)
+    dissimilar: bool,
+) -> tuple[IntArray, NDArray[np.bool_], str]:
+    """Pose pairs ``(P, 2)`` (indices into the concatenated clips), whether each is similar,
+    and where they came from; dissimilar pairs only if ``dissimilar``."""
     if len(clips) >= 2:
         try:
-            pairs, thresholds = labels.transition_labels(
+            found, thresholds = labels.transition_labels(
                 [c.local for c in clips],
                 [c.world for c in clips],
                 clips[0].fps,
                 n_positive=n_pairs,
-                n_negative=0,
+                n_negative=n_pairs if dissimilar else 0,
                 n_queries=max(2000, 4 * n_pairs),
                 random_state=rng,
             )
-            p = pairs.pairs[pairs.labels]
-            positive = np.stack([clip_offsets(p[:, 0], p[:, 1]), clip_offsets(p[:, 2], p[:, 3])], 1)
-            say(f"{len(positive)} positive pairs below {thresholds[0]:.2f} cm")
+            p = found.pairs
+            pairs = np.stack([clip_offsets(p[:, 0], p[:, 1]), clip_offsets(p[:, 2], p[:, 3])], 1)
+            similar = np.asarray(found.labels, dtype=bool)
+            say(f"{int(similar.sum())} similar pairs below {thresholds[0]:.2f} cm")
+            if similar.sum() >= _MIN_TRANSITION_PAIRS and (
+                not dissimilar or (~similar).sum() >= _MIN_TRANSITION_PAIRS
+            ):
+                return pairs, similar, "transition pairs (Kovar point-cloud distance)"
         except ValueError as exc:
             say(f"no transition pairs ({exc})")
-    if len(positive) >= _MIN_TRANSITION_PAIRS:
-        return positive, "transition pairs (Kovar point-cloud distance)"
     n_poses = clip_offsets.n_poses
     within = np.flatnonzero(np.isin(np.arange(n_poses - 1) + 1, clip_offsets.starts, invert=True))
     take = rng.permutation(within)[:n_pairs]
     if len(take) == 0:
         raise ValueError("the library needs a clip of at least two frames to learn a pose distance")
-    return np.stack([take, take + 1], axis=1), "consecutive frames"
+    pairs = np.stack([take, take + 1], axis=1)
+    if not dissimilar:
+        return pairs, np.ones(len(pairs), dtype=bool), "consecutive frames"
+    clip_of = clip_offsets.clip_of()
+    frame_of = clip_offsets.frame_of()
+    gap = max(1, int(round(_FAR_APART_S * clips[0].fps)))
+    a = rng.integers(0, n_poses, 20 * n_pairs)
+    b = rng.integers(0, n_poses, 20 * n_pairs)
+    far = (clip_of[a] != clip_of[b]) | (np.abs(frame_of[a] - frame_of[b]) >= gap)
+    apart = np.stack([a[far], b[far]], axis=1)[:n_pairs]
+    if len(apart) == 0:
+        raise ValueError("the library is too short to learn a pose distance with dissimilar pairs")
+    both = np.concatenate((pairs, apart))
+    similar = np.r_[np.ones(len(pairs), dtype=bool), np.zeros(len(apart), dtype=bool)]
+    return both, similar, f"consecutive frames; poses {_FAR_APART_S:g} s apart as dissimilar"

@@ -1,0 +1,54 @@
+"""Content-based motion retrieval: "find motions like this one" over a clip library.
+
+Submodules
+----------
+features
+    Per-clip features: motion frames (16-joint body-frame positions and the Hip's travel, 10
+    frames/s), the pooled embedding, the QSSD paper's per-clip dictionaries.
+distances
+    Banded and subsequence DTW, embedding distances, the paper's atom matching (Eq. 10).
+methods
+    ``METHODS``: every retrieval method by name (the paper's, the DTW baseline, ours) and
+    ``DEFAULT_METHOD``; ``Library``, clips' features packed in memory.
+index
+    ``ClipIndex``: the SQLite ``.qidx`` file (clips, labels, features; versioned).
+build
+    ``build_index``: a pure per-clip feature function mapped over all cores, one writer.
+search
+    ``search`` and ``search_within`` (subsequence DTW inside long takes).
+
+Names are loaded on first use, so ``import quatmotion.retrieval`` stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "clip_features": "features",
+    "motion_frames": "features",
+    "DEFAULT_METHOD": "methods",
+    "METHODS": "methods",
+    "Library": "methods",
+    "ClipIndex": "index",
+    "build_index": "build",
+    "search": "search",
+    "search_within": "search",
+    "query_features": "search",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'quatmotion.retrieval' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"quatmotion.retrieval.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -1,0 +1,255 @@
+"""Building and extending a clip index: one pure per-clip feature function mapped over the
+clips, one writer committing in batches.
+
+``index_clip`` reads a clip and computes its features; it depends on nothing but its
+arguments, so any executor can map it (here a process pool over all cores; the execution
+layer of ``quatmotion.parallel`` can take its place). The writer, in the calling process,
+stores finished clips in transactions of ``batch`` clips, so a killed build keeps every batch
+already committed and the next build skips those clips (same path and content hash).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from multiprocessing import get_context
+from pathlib import Path
+
+from quatmotion.errors import FormatError
+from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
+from quatmotion.retrieval.index import ClipIndex, ClipRecord, content_hash
+
+__all__ = [
+    "BuildReport",
+    "ClipJob",
+    "build_index",
+    "catalogue_labels",
+    "index_clip",
+    "read_labels_csv",
+    "skeleton_for",
+]
+
+
+@dataclass(frozen=True)
+class ClipJob:
+    """What :func:`index_clip` needs: the file, its ASF (AMC only), kinds, label."""
+
+    path: str
+    skeleton: str | None
+    kinds: tuple[str, ...]
+    label: str
+    sha256: str
+
+
+@dataclass
+class BuildReport:
+    """What a build did: clips added, skipped (already indexed) and failed (path, reason)."""
+
+    added: int = 0
+    skipped: int = 0
+    failed: list[tuple[str, str]] = field(default_factory=list)
+
+
+def skeleton_for(path: Path, skeletons: Path | None) -> Path | None:
+    """The ASF of an AMC: from ``skeletons`` (a folder) when given, else by the CMU / HDM05
+    layouts (:func:`quatmotion.io.find_asf_for_amc`); ``None`` for BVH files.
+
+    Raises
+    ------
+    FormatError
+        When no skeleton is found (naming where it looked).
+    """
+    from quatmotion.io import find_asf_for_amc
+
+    if path.suffix.lower() != ".amc":
+        return None
+    if skeletons is None:
+        try:
+            return find_asf_for_amc(path)
+        except FormatError as error:
+            reason = error.reason.replace("pass it (--skeleton)", "pass their folder (--skeletons)")
+            raise FormatError(reason, path) from None
+    stem = path.stem
+    candidates = [skeletons / (stem.split("_", 1)[0] + ".asf")]
+    parts = stem.split("_")
+    if len(parts) >= 2:
+        candidates.append(skeletons / f"{parts[0]}_{parts[1]}.asf")
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    found = sorted(skeletons.glob("*.asf"))
+    if len(found) == 1:
+        return found[0]
+    raise FormatError(
+        f"no ASF for this AMC in {skeletons} (looked for "
+        f"{', '.join(c.name for c in candidates)}, and the folder holds {len(found)} ASF files)",
+        path,
+    )
+
+
+def index_clip(job: ClipJob) -> ClipRecord:
+    """Read one clip and compute its features (a pure function of ``job``)."""
+    from quatmotion.io import read_motion
+
+    motion = read_motion(job.path, job.skeleton)
+    return ClipRecord(
+        name=Path(job.path).stem,
+        path=job.path,
+        sha256=job.sha256,
+        label=job.label,
+        frames=motion.n_frames,
+        fps=float(motion.fps),
+        skeleton=skeleton_fingerprint(motion.skeleton),
+        arrays=clip_features(motion, job.kinds),
+    )
+
+
+def _guarded(job: ClipJob) -> ClipRecord | tuple[str, str]:
+    """:func:`index_clip`, a bad file turned into ``(path, reason)``."""
+    try:
+        return index_clip(job)
+    except (FormatError, ValueError, OSError) as error:
+        return (job.path, _reason(error))
+
+
+def _reason(error: Exception) -> str:
+    """The first line of ``error``'s message, without the file name a FormatError prepends
+    (the report names the file already)."""
+    text = getattr(error, "reason", None) or str(error) or type(error).__name__
+    return str(text).splitlines()[0]
+
+
+def read_labels_csv(path: str | Path) -> dict[str, str]:
+    """Labels from a CSV with columns ``clip`` (file name stem or path) and ``label``.
+
+    Raises
+    ------
+    FormatError
+        When the header lacks those columns.
+    """
+    path = Path(path)
+    with open(path, newline="", encoding="utf-8") as f:
+        reader = csv.DictReader(f)
+        if not reader.fieldnames or not {"clip", "label"} <= set(reader.fieldnames):
+            raise FormatError("a labels CSV needs the columns 'clip' and 'label'", path, 1)
+        return {row["clip"].strip(): (row["label"] or "").strip() for row in reader}
+
+
+def catalogue_labels() -> dict[str, str]:
+    """Resolved path -> label of every clip of the data folder's catalogue (empty without one)."""
+    from quatmotion.datasets import DataNotFoundError, catalogue
+
+    try:
+        return {str(e.path.resolve()): e.label for e in catalogue()}
+    except DataNotFoundError:
+        return {}
+
+
+def _label(path: Path, labels: dict[str, str], known: dict[str, str]) -> str:
+    for key in (str(path), path.name, path.stem):
+        if key in labels:
+            return labels[key]
+    return known.get(str(path.resolve()), "")
+
+
+def build_index(
+    paths: Iterable[str | Path],
+    out: str | Path,
+    *,
+    kinds: Iterable[str] = ("motion", "qssd", "ksvd"),
+    labels: dict[str, str] | None = None,
+    skeletons: str | Path | None = None,
+    workers: int | None = None,
+    batch: int = 16,
+    progress: Callable[[int, int], None] | None = None,
+    mapper: Callable[[Callable[[ClipJob], object], list[ClipJob]], Iterator[object]] | None = None,
+) -> BuildReport:
+    """Index every motion file under ``paths`` into ``out`` (created, or extended: clips
+    already there with the same content hash are skipped).
+
+    Parameters
+    ----------
+    paths : iterable of str or Path
+        Files or folders (searched recursively, :func:`quatmotion.io.find_motion_files`).
+    out : str or Path
+        The ``.qidx`` file.
+    kinds : iterable of str
+        Feature kinds to compute (:data:`quatmotion.retrieval.methods.FEATURE_KINDS`).
+    labels : dict, optional
+        Clip (path, file name or stem) -> label; clips not in it take the catalogue's label.
+    skeletons : str or Path, optional
+        Folder holding the ASF files of the AMC clips.
+    workers : int, optional
+        Processes (default: every core; 1 computes in this process).
+    batch : int
+        Clips per committed transaction.
+    progress : callable, optional
+        Called with ``(done, total)`` after each clip.
+    mapper : callable, optional
+        ``mapper(function, jobs)`` yielding results in any order: an execution layer to use
+        instead of the process pool.
+
+    Returns
+    -------
+    BuildReport
+    """
+    from quatmotion.io import find_motion_files
+
+    files = find_motion_files(paths)
+    skeleton_dir = Path(skeletons) if skeletons is not None else None
+    labels = dict(labels or {})
+    known = catalogue_labels()
+    report = BuildReport()
+    jobs: list[ClipJob] = []
+    kinds = tuple(kinds)
+    with ClipIndex.create(out) as index:
+        for path in files:
+            try:
+                skeleton = skeleton_for(path, skeleton_dir)
+                sha = content_hash(path, skeleton)
+            except (FormatError, OSError) as error:
+                report.failed.append((str(path), _reason(error)))
+                continue
+            if index.contains(str(path), sha):
+                report.skipped += 1
+                continue
+            label = _label(path, labels, known)
+            jobs.append(ClipJob(str(path), str(skeleton) if skeleton else None, kinds, label, sha))
+        total = len(jobs)
+        if progress:
+            progress(0, total)
+        pending: list[ClipRecord] = []
+        for done, result in enumerate(_map(jobs, workers, mapper), start=1):
+            if isinstance(result, ClipRecord):
+                pending.append(result)
+            else:
+                report.failed.append(result)  # type: ignore[arg-type]
+            if len(pending) >= batch:
+                report.added += index.add(pending)
+                pending = []
+            if progress:
+                progress(done, total)
+        if pending:
+            report.added += index.add(pending)
+    return report
+
+
+def _map(
+    jobs: list[ClipJob],
+    workers: int | None,
+    mapper: Callable[[Callable[[ClipJob], object], list[ClipJob]], Iterator[object]] | None,
+) -> Iterator[object]:
+    if mapper is not None:
+        yield from mapper(_guarded, jobs)
+        return
+    n = workers if workers is not None else (os.cpu_count() or 1)
+    if n <= 1 or len(jobs) <= 1:
+        for job in jobs:
+            yield _guarded(job)
+        return
+    # spawn, not fork: the caller may already run OpenMP threads (Numba, BLAS)
+    with ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn")) as pool:
+        yield from pool.map(_guarded, jobs, chunksize=1)

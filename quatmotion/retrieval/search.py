@@ -1,0 +1,157 @@
+"""Searching an index: a query clip's features, the ranked clips, and search inside takes.
+
+The query is a :class:`~quatmotion.motion.Motion` (read from an AMC/BVH file) or a clip of the
+index itself (its stored features). Results carry the clip's name, path, label and distance;
+:func:`search_within` also the frame range of the match, in frames of the clip's file counted
+from 0 (``stop`` exclusive), as the rest of quatmotion counts frames.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from quatmotion.motion import Motion
+from quatmotion.retrieval import distances as dist
+from quatmotion.retrieval.features import clip_features, feature_step, skeleton_fingerprint
+from quatmotion.retrieval.index import ClipIndex, ClipRow
+from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, QueryFeatures
+
+__all__ = ["SearchResult", "method_keys", "query_features", "search", "search_within"]
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """One ranked clip. ``start_frame``/``stop_frame`` only for :func:`search_within`."""
+
+    rank: int
+    clip: str
+    path: str
+    label: str
+    distance: float
+    start_frame: int | None = None
+    stop_frame: int | None = None
+
+    def as_dict(self) -> dict[str, object]:
+        out: dict[str, object] = {
+            "rank": self.rank,
+            "clip": self.clip,
+            "path": self.path,
+            "label": self.label,
+            "distance": None if not np.isfinite(self.distance) else float(self.distance),
+        }
+        if self.start_frame is not None:
+            out["start_frame"] = self.start_frame
+            out["stop_frame"] = self.stop_frame
+        return out
+
+
+def method_keys(method: str) -> tuple[str, ...]:
+    """The stored feature arrays a method reads."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    keys: list[str] = []
+    for kind in METHODS[method].kinds:
+        keys += ["frames", "embedding"] if kind == "motion" else [kind]
+    return tuple(keys)
+
+
+def query_features(motion: Motion, method: str = DEFAULT_METHOD) -> QueryFeatures:
+    """The features ``method`` needs of a query clip (computed as at indexing time)."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    return QueryFeatures(
+        clip_features(motion, METHODS[method].kinds), skeleton_fingerprint(motion.skeleton)
+    )
+
+
+def _query(
+    index: ClipIndex, query: Motion | str, method: str
+) -> tuple[list[ClipRow], object, QueryFeatures, int]:
+    keys = method_keys(method)
+    rows, library = index.load(keys)
+    if not rows and len(index):
+        raise ValueError(
+            f"{index.path}: no clip has the {method} features ({', '.join(keys)}); add them with "
+            "quatmotion index build --kinds"
+        )
+    if isinstance(query, Motion):
+        return rows, library, query_features(query, method), -1
+    matches = [i for i, r in enumerate(rows) if query in (r.name, r.path)]
+    if not matches:
+        raise ValueError(
+            f"{query!r} is neither a motion file nor a clip of the index with {method} features"
+        )
+    i = matches[0]
+    return rows, library, QueryFeatures(library.features[i], rows[i].skeleton), i
+
+
+def search(
+    index: ClipIndex, query: Motion | str, *, method: str = DEFAULT_METHOD, top: int = 20
+) -> list[SearchResult]:
+    """The ``top`` clips most like ``query`` under ``method``.
+
+    Parameters
+    ----------
+    index : ClipIndex
+    query : Motion or str
+        A clip, or the name (or path) of an indexed clip (left out of its own results).
+    method : str
+        A key of :data:`~quatmotion.retrieval.methods.METHODS`.
+    top : int
+        Results wanted (fewer when the index has fewer comparable clips).
+
+    Returns
+    -------
+    list of SearchResult
+
+    Raises
+    ------
+    ValueError
+        Unknown method or clip name; a query skeleton without the 16 pose joints; for the
+        dictionary methods, no indexed clip of the query's skeleton.
+    """
+    if top < 1:
+        raise ValueError(f"top must be at least 1, got {top}")
+    rows, library, features, own = _query(index, query, method)
+    ranking = METHODS[method].rank(library, features, exclude=own)  # type: ignore[arg-type]
+    if ranking.clips.size == 0 and len(rows):
+        raise ValueError(
+            f"no indexed clip compares with the query under {method}: it compares joint "
+            "rotations, so only clips of the same skeleton (use a position-based method such "
+            f"as {DEFAULT_METHOD}, which retargets through the 16-joint pose skeleton)"
+        )
+    out = []
+    for r, (c, d) in enumerate(zip(ranking.clips[:top], ranking.distances[:top], strict=True)):
+        row = rows[int(c)]
+        out.append(SearchResult(r + 1, row.name, row.path, row.label, float(d)))
+    return out
+
+
+def search_within(index: ClipIndex, query: Motion | str, *, top: int = 20) -> list[SearchResult]:
+    """Where ``query`` matches best inside each indexed clip (subsequence DTW over the motion
+    frames), clips ranked by that match's cost.
+
+    Returns
+    -------
+    list of SearchResult
+        With ``start_frame`` / ``stop_frame`` in frames of each clip's file (from 0, stop
+        exclusive, to the resolution of the feature step).
+    """
+    if top < 1:
+        raise ValueError(f"top must be at least 1, got {top}")
+    rows, library, features, own = _query(index, query, DEFAULT_METHOD)
+    q = features.arrays["frames"]
+    hits = []
+    for i, row in enumerate(rows):
+        if i == own:
+            continue
+        cost, start, stop = dist.find_within(q, library.features[i]["frames"])  # type: ignore[attr-defined]
+        step = feature_step(row.fps)
+        hits.append((cost, i, min(start * step, row.frames), min(stop * step, row.frames)))
+    hits.sort(key=lambda h: (h[0], h[1]))
+    return [
+        SearchResult(k + 1, rows[i].name, rows[i].path, rows[i].label, float(c), int(a), int(b))
+        for k, (c, i, a, b) in enumerate(hits[:top])
+    ]

@@ -1,0 +1,170 @@
+"""The SQLite clip index and its commands: build, resume after a kill, search, bad files."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from quatmotion.cli import app
+from quatmotion.io import write_motion
+from quatmotion.motion.synthetic import generate_clip
+from quatmotion.retrieval.index import FORMAT_VERSION, ClipIndex
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def clip_folder(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("clips")
+    for kind in ("walk", "squat", "punch"):
+        for seed in range(3):
+            write_motion(generate_clip(kind, seed, n_frames=180), folder / f"{kind}_{seed}.bvh")
+    return folder
+
+
+def _build(folder: Path, out: Path, *extra: str):
+    return runner.invoke(
+        app,
+        [
+            "index",
+            "build",
+            str(folder),
+            "-o",
+            str(out),
+            "--kinds",
+            "motion",
+            "--workers",
+            "1",
+            *extra,
+        ],
+    )
+
+
+def test_build_search_json_and_twice_indexed_clip(clip_folder, tmp_path):
+    out = tmp_path / "lib.qidx"
+    result = _build(clip_folder, out)
+    assert result.exit_code == 0, result.output
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    (copy / "walk_0_again.bvh").write_bytes((clip_folder / "walk_0.bvh").read_bytes())
+    assert (
+        runner.invoke(
+            app, ["index", "add", str(out), str(copy), "--kinds", "motion", "--workers", "1"]
+        ).exit_code
+        == 0
+    )
+    result = runner.invoke(
+        app,
+        ["search", str(clip_folder / "walk_0.bvh"), "--index", str(out), "--top", "4", "--json"],
+    )
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.output)
+    assert doc["method"] == "pooled+dtw"
+    names = [r["clip"] for r in doc["results"]]
+    assert set(names[:2]) == {"walk_0", "walk_0_again"}
+    assert doc["results"][0]["distance"] == pytest.approx(0.0, abs=1e-9)
+    assert [r["rank"] for r in doc["results"]] == [1, 2, 3, 4]
+    by_name = runner.invoke(app, ["search", "squat_1", "--index", str(out), "--top", "2", "--json"])
+    assert {r["clip"] for r in json.loads(by_name.output)["results"]} == {"squat_0", "squat_2"}
+
+
+def test_bad_file_is_reported_and_skipped(clip_folder, tmp_path):
+    folder = tmp_path / "mixed"
+    folder.mkdir()
+    (folder / "broken.bvh").write_text("HIERARCHY\nROOT\n")
+    (folder / "ok.bvh").write_bytes((clip_folder / "punch_1.bvh").read_bytes())
+    result = _build(folder, tmp_path / "m.qidx")
+    assert result.exit_code == 0
+    assert "broken.bvh" in result.output and "1 clips added" in result.output
+    with ClipIndex.open(tmp_path / "m.qidx") as idx:
+        assert [c.name for c in idx.clips()] == ["ok"]
+
+
+def test_add_after_a_killed_build_completes_it_once(tmp_path):
+    folder = tmp_path / "many"
+    folder.mkdir()
+    for seed in range(16):
+        write_motion(generate_clip("wave", seed, n_frames=120), folder / f"wave_{seed:02d}.bvh")
+    out = tmp_path / "killed.qidx"
+    code = (
+        "from quatmotion.retrieval.build import build_index\n"
+        f"build_index([{str(folder)!r}], {str(out)!r}, kinds=('motion',), workers=1, batch=1)\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", code])
+    deadline = time.monotonic() + 120
+    count = 0
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            with sqlite3.connect(f"{out.resolve().as_uri()}?mode=ro", uri=True) as db:
+                count = db.execute("SELECT count(*) FROM clips").fetchone()[0]
+        except sqlite3.DatabaseError:
+            count = 0
+        if count >= 3:
+            os.kill(proc.pid, signal.SIGKILL)
+            break
+        time.sleep(0.05)
+    proc.wait()
+    with ClipIndex.open(out) as idx:  # readable after the kill
+        partial = len(idx)
+    assert partial >= 3
+    result = runner.invoke(
+        app, ["index", "add", str(out), str(folder), "--kinds", "motion", "--workers", "1"]
+    )
+    assert result.exit_code == 0, result.output
+    assert f"{partial} already indexed" in result.output or partial == 16
+    with ClipIndex.open(out) as idx:
+        names = [c.name for c in idx.clips()]
+    assert sorted(names) == [f"wave_{s:02d}" for s in range(16)]
+
+
+def test_remove_and_ls(clip_folder, tmp_path):
+    out = tmp_path / "r.qidx"
+    _build(clip_folder, out)
+    assert runner.invoke(app, ["index", "remove", str(out), "walk_1"]).exit_code == 0
+    listed = runner.invoke(app, ["index", "ls", str(out), "--json"])
+    names = {r["name"] for r in json.loads(listed.output)}
+    assert "walk_1" not in names and len(names) == 8
+
+
+@pytest.mark.parametrize("content", [None, b"not a database at all", "truncated", "newer"])
+def test_bad_index_files_exit_2_with_one_line(clip_folder, tmp_path, content):
+    path = tmp_path / "bad.qidx"
+    if content == "truncated":
+        good = tmp_path / "good.qidx"
+        _build(clip_folder, good)
+        path.write_bytes(good.read_bytes()[:3000])
+    elif content == "newer":
+        _build(clip_folder, path)
+        with sqlite3.connect(path) as db:
+            db.execute(
+                "UPDATE meta SET value = ? WHERE key = 'version'", (str(FORMAT_VERSION + 1),)
+            )
+    elif content is not None:
+        path.write_bytes(content)
+    result = runner.invoke(app, ["search", "walk_0", "--index", str(path)])
+    assert result.exit_code == 2
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:"), result.output
+    assert "Traceback" not in result.output
+
+
+def test_dictionary_method_rejects_another_skeleton(clip_folder, tmp_path):
+    from quatmotion.retrieval.search import search
+
+    bvh = clip_folder / "walk_2.bvh"
+    out = tmp_path / "d.qidx"
+    assert _build(bvh.parent, out).exit_code == 0
+    from quatmotion.io import read_motion
+
+    query = read_motion(bvh)
+    with ClipIndex.open(out) as idx, pytest.raises(ValueError, match="qssd"):
+        search(idx, query, method="paper-qssd")  # no qssd features were indexed
