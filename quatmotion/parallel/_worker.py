@@ -13,8 +13,10 @@ import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
-# One record per item: (index, succeeded, value or (message, detail), seconds of work).
-Record = tuple[int, bool, Any, float]
+# One record per item: (index, succeeded, value or (message, detail), seconds of work, start).
+# The start is time.perf_counter() in the worker: CLOCK_MONOTONIC on Linux, shared by every
+# process of the machine, so the caller can tell how long workers took to start.
+Record = tuple[int, bool, Any, float, float]
 
 # Environment read by BLAS, OpenMP and Numba when they load: one thread each, as Dask's nanny
 # does for its workers, because the parallelism of a batch is its worker processes.
@@ -70,9 +72,10 @@ def run_items(func: Callable[[Any], Any], entries: Sequence[tuple[int, Any]]) ->
             value = func(item)
         except Exception as exc:  # any error of the job is this item's failure, no other's
             detail = "".join(traceback.format_exception(exc))
-            records.append((index, False, (one_line(exc), detail), time.perf_counter() - start))
+            failed = (one_line(exc), detail)
+            records.append((index, False, failed, time.perf_counter() - start, start))
         else:
-            records.append((index, True, value, time.perf_counter() - start))
+            records.append((index, True, value, time.perf_counter() - start, start))
     return records
 
 

@@ -85,6 +85,9 @@ class Failure:
     detail: str = ""
 
     def __str__(self) -> str:
+        # A FormatError's message already starts with the file's name.
+        if self.message.startswith(str(self.item)):
+            return self.message
         return f"{self.item}: {self.message}"
 
 
@@ -136,6 +139,10 @@ class BatchStats:
         From the start of the batch to its last outcome.
     work_seconds : float
         Sum over items of the time ``func`` ran in its worker.
+    startup_seconds : float or None
+        From the start of the batch until the first item started in a worker: starting the
+        pool, or connecting to Dask and shipping the first task. Read from the workers' clock,
+        so meaningful only when they run on this machine; ``None`` if no item ran.
     """
 
     n_items: int
@@ -146,6 +153,7 @@ class BatchStats:
     workers: int
     wall_seconds: float
     work_seconds: float
+    startup_seconds: float | None = None
 
     def summary(self, noun: str = "items") -> str:
         """One line, e.g. ``"12 items in 3.1 s on local pool of 2 processes: 11 done, 1 failed"``.
@@ -208,6 +216,7 @@ class _Collector:
         self.failed = 0
         self.retried = 0
         self.work_seconds = 0.0
+        self.first_start: float | None = None
 
     def _add(self, outcome: Outcome[Any]) -> None:
         if outcome.index in self.ready or outcome.index < self.next_index:
@@ -220,7 +229,9 @@ class _Collector:
             self.progress(self.done, len(self.items))
 
     def add_records(self, records: Iterable[_worker.Record]) -> None:
-        for index, succeeded, value, seconds in records:
+        for index, succeeded, value, seconds, start in records:
+            if self.first_start is None or start < self.first_start:
+                self.first_start = start
             item = self.items[index]
             if succeeded:
                 self._add(Outcome(index, item, value, None, seconds))
@@ -320,6 +331,11 @@ class BatchStream(Generic[T]):
             workers=self._workers,
             wall_seconds=wall,
             work_seconds=c.work_seconds,
+            startup_seconds=(
+                None
+                if c.first_start is None or self._start is None
+                else max(0.0, c.first_start - self._start)
+            ),
         )
 
     def _tasks(self) -> deque[_Task]:
