@@ -272,3 +272,54 @@ def test_dask_loses_and_duplicates_no_item_when_a_worker_is_killed(
     assert os.path.exists(marker)
     assert indices == list(range(16))
     assert values == [k * k for k in range(16)]
+
+
+def test_dask_builds_the_same_pose_library_as_the_local_pool(dask_cluster: str) -> None:
+    import functools
+
+    from sklearn.decomposition import PCA
+
+    from quatmotion.bench.scale import generated_pose_clip
+    from quatmotion.pose.library import PoseLibrary
+
+    specs = [(kind, seed, 30 + 5 * seed) for seed, kind in enumerate(["walk", "kick"] * 3)]
+    specs[3] = ("moonwalk", 3, 40)  # a bad clip among good ones
+
+    def build(**where: object) -> tuple[PoseLibrary, list]:
+        return PoseLibrary.build_streamed(
+            specs,
+            functools.partial(generated_pose_clip, fps=30.0, height=170.0),
+            fit_poses=100,
+            rank=6,
+            n_unlabeled=100,
+            n_pairs=20,
+            metric=PCA(n_components=6, random_state=0),
+            flush_poses=64,
+            **where,
+        )
+
+    local, local_failures = build(workers=2)
+    dask, dask_failures = build(scheduler=dask_cluster)
+    assert [f.index for f in dask_failures] == [f.index for f in local_failures] == [3]
+    assert dask.index.to_bytes() == local.index.to_bytes()
+    assert dask.clip_names == local.clip_names
+    np.testing.assert_array_equal(dask.frame_of, local.frame_of)
+
+
+def worker_pid(_item: object) -> int:
+    time.sleep(0.05)  # long enough for both workers to take items
+    return os.getpid()
+
+
+def test_a_kept_pool_whose_worker_died_while_idle_is_replaced() -> None:
+    first = run_batch(worker_pid, range(6), workers=2)
+    # a worker of the kept pool dies between two batches (the OOM killer, say)
+    victim = first.results[0]
+    os.kill(victim, signal.SIGKILL)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and os.path.exists(f"/proc/{victim}"):
+        time.sleep(0.05)
+    time.sleep(0.5)  # for the pool's manager thread to see it
+    second = run_batch(worker_pid, range(6), workers=2)
+    assert second.ok
+    assert victim not in second.results

@@ -22,6 +22,7 @@ from quatmotion.parallel.batch import (
     Outcome,
     imap_batch,
     run_batch,
+    shutdown_pools,
 )
 from quatmotion.parallel.scheduler import (
     SCHEDULER_ENV,
@@ -44,4 +45,5 @@ __all__ = [
     "imap_batch",
     "resolve_scheduler",
     "run_batch",
+    "shutdown_pools",
 ]

@@ -13,10 +13,11 @@ import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
-# One record per item: (index, succeeded, value or (message, detail), seconds of work, start).
-# The start is time.perf_counter() in the worker: CLOCK_MONOTONIC on Linux, shared by every
-# process of the machine, so the caller can tell how long workers took to start.
-Record = tuple[int, bool, Any, float, float]
+# One record per item: (index, succeeded, value or (message, detail), seconds of work, CPU
+# seconds of the worker thread, start). The start is time.perf_counter() in the worker:
+# CLOCK_MONOTONIC on Linux, shared by every process of the machine, so the caller can tell how
+# long workers took to start.
+Record = tuple[int, bool, Any, float, float, float]
 
 # Environment read by BLAS, OpenMP and Numba when they load: one thread each, as Dask's nanny
 # does for its workers, because the parallelism of a batch is its worker processes.
@@ -67,15 +68,15 @@ def run_items(func: Callable[[Any], Any], entries: Sequence[tuple[int, Any]]) ->
     """Apply ``func`` to every ``(index, item)``; an exception fails that item only."""
     records: list[Record] = []
     for index, item in entries:
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.thread_time()
         try:
             value = func(item)
         except Exception as exc:  # any error of the job is this item's failure, no other's
-            detail = "".join(traceback.format_exception(exc))
-            failed = (one_line(exc), detail)
-            records.append((index, False, failed, time.perf_counter() - start, start))
+            succeeded, value = False, (one_line(exc), "".join(traceback.format_exception(exc)))
         else:
-            records.append((index, True, value, time.perf_counter() - start, start))
+            succeeded = True
+        seconds, cpu = time.perf_counter() - start, time.thread_time() - cpu_start
+        records.append((index, succeeded, value, seconds, cpu, start))
     return records
 
 

@@ -26,6 +26,9 @@ Conventions
 * ``progress(done, total)`` is called in the calling process: once with ``done == 0`` before
   any work, then each time an item finishes (succeeded or failed), ``done`` counting up to
   ``total``.
+* Local pools are kept for the next batch of the same size (warm workers); a worker that
+  died takes its pool down and the next batch starts a new one; :func:`shutdown_pools` ends
+  them sooner than the process's exit.
 * Memory: a stream hands out items at most ``window`` ahead of the oldest one not yet yielded,
   so no more than about ``window`` results wait in memory however long the list is.
 """
@@ -36,6 +39,7 @@ import contextlib
 import multiprocessing
 import pickle
 import sys
+import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -55,6 +59,7 @@ __all__ = [
     "Outcome",
     "imap_batch",
     "run_batch",
+    "shutdown_pools",
 ]
 
 T = TypeVar("T")
@@ -104,6 +109,8 @@ class Outcome(Generic[T]):
     failure : Failure or None
     seconds : float
         Time ``func`` ran for this item, in its worker (0 when it never ran to an end there).
+    cpu_seconds : float
+        CPU time of the worker thread meanwhile (below ``seconds`` when it waited for a core).
     """
 
     index: int
@@ -111,6 +118,7 @@ class Outcome(Generic[T]):
     value: T | None
     failure: Failure | None
     seconds: float = 0.0
+    cpu_seconds: float = 0.0
 
     @property
     def ok(self) -> bool:
@@ -229,15 +237,15 @@ class _Collector:
             self.progress(self.done, len(self.items))
 
     def add_records(self, records: Iterable[_worker.Record]) -> None:
-        for index, succeeded, value, seconds, start in records:
+        for index, succeeded, value, seconds, cpu, start in records:
             if self.first_start is None or start < self.first_start:
                 self.first_start = start
             item = self.items[index]
             if succeeded:
-                self._add(Outcome(index, item, value, None, seconds))
+                self._add(Outcome(index, item, value, None, seconds, cpu))
             else:
                 failure = Failure(index, item, *value)  # value is (message, detail)
-                self._add(Outcome(index, item, None, failure, seconds))
+                self._add(Outcome(index, item, None, failure, seconds, cpu))
 
     def fail(self, task: _Task, message: str) -> None:
         for index, item in task.entries:
@@ -396,14 +404,6 @@ class BatchStream(Generic[T]):
         # The executor itself queues one call beyond its workers; more in flight would only
         # widen the set of tasks a dead worker takes down with it.
         capacity = n + 1
-        context = multiprocessing.get_context("forkserver")
-        # Workers fork from a server process started once with these modules imported (fork
-        # itself is unsafe in a process that runs threads, as the Rich progress bar does).
-        preload = ["quatmotion.parallel._worker"]
-        module = _module_of(self._func)
-        if module:
-            preload.append(module)
-        context.set_forkserver_preload(preload)
         suspects: deque[_Task] = deque()
         deaths: dict[int, int] = {}
         in_flight: dict[Future[list[_worker.Record]], _Task] = {}
@@ -426,18 +426,24 @@ class BatchStream(Generic[T]):
         try:
             while tasks or suspects or in_flight:
                 if pool is None:
-                    pool = ProcessPoolExecutor(
-                        max_workers=n,
-                        mp_context=context,
-                        initializer=_worker.limit_threads_in_worker,
-                    )
-                if suspects:
+                    pool = _shared_pool(n, _module_of(self._func))
+                try:
+                    if suspects:
+                        if not in_flight:
+                            submit(suspects[0])
+                            suspects.popleft()
+                    else:
+                        horizon = collector.next_index + self._window
+                        while tasks and len(in_flight) < capacity and tasks[0].first < horizon:
+                            submit(tasks[0])
+                            tasks.popleft()
+                except BrokenProcessPool:
+                    # A worker died since the last look: while the kept pool was idle (start
+                    # afresh), or under a task in flight (found below, like any death).
                     if not in_flight:
-                        submit(suspects.popleft())
-                else:
-                    horizon = collector.next_index + self._window
-                    while tasks and len(in_flight) < capacity and tasks[0].first < horizon:
-                        submit(tasks.popleft())
+                        _discard_pool(n, pool, wait=True)
+                        pool = None
+                        continue
                 done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
                 crashed: list[_Task] = []
                 for future in done:
@@ -447,7 +453,7 @@ class BatchStream(Generic[T]):
                     for future, task in list(in_flight.items()):
                         settle(future, task, crashed)
                     in_flight.clear()
-                    pool.shutdown(wait=True)
+                    _discard_pool(n, pool, wait=True)
                     pool = None
                     for task in sorted(crashed, key=lambda t: t.number):
                         deaths[task.number] = deaths.get(task.number, 0) + 1
@@ -463,8 +469,50 @@ class BatchStream(Generic[T]):
                             suspects.append(task)
                 yield from collector.pop_ready()
         finally:
-            if pool is not None:
-                pool.shutdown(wait=False, cancel_futures=True)
+            if pool is not None and in_flight:
+                # Stopped early: work still running would hold up the pool's next batch.
+                for future in in_flight:
+                    future.cancel()
+                _discard_pool(n, pool, wait=False)
+
+
+# Local pools outlive their batches, one per size: a batch after the first (the second pass of a
+# pose-library build, a benchmark's repetitions) finds its workers started and warm (modules
+# imported, compiled kernels loaded). They end with the process, or with shutdown_pools().
+_pools: dict[int, ProcessPoolExecutor] = {}
+_pools_lock = threading.Lock()
+
+
+def _shared_pool(n: int, module: str | None) -> ProcessPoolExecutor:
+    with _pools_lock:
+        pool = _pools.get(n)
+        if pool is None:
+            context = multiprocessing.get_context("forkserver")
+            # Workers fork from a server process started once, with these modules imported:
+            # plain fork is unsafe in a process that runs threads (a Rich progress bar does).
+            preload = ["quatmotion.parallel._worker"] + ([module] if module else [])
+            context.set_forkserver_preload(preload)
+            pool = ProcessPoolExecutor(
+                max_workers=n, mp_context=context, initializer=_worker.limit_threads_in_worker
+            )
+            _pools[n] = pool
+        return pool
+
+
+def _discard_pool(n: int, pool: ProcessPoolExecutor, *, wait: bool) -> None:
+    with _pools_lock:
+        if _pools.get(n) is pool:
+            del _pools[n]
+    pool.shutdown(wait=wait, cancel_futures=True)
+
+
+def shutdown_pools() -> None:
+    """End the worker processes of every local pool (the next batch starts new ones)."""
+    with _pools_lock:
+        pools = list(_pools.items())
+        _pools.clear()
+    for _, pool in pools:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 @contextlib.contextmanager

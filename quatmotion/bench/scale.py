@@ -1,0 +1,468 @@
+"""Scale-out: batch throughput against workers, scheduler overhead, pose-index memory at size.
+
+``run(out, quick, seed)`` measures, on generated clips (no data folder needed):
+
+* **Throughput** of every batch job present, in clips/s and frames/s (frames of the clip
+  files), on the schedulers of :mod:`quatmotion.parallel`: ``inline``, the local process pool
+  with 1 and 2 workers, and a Dask ``LocalCluster`` on loopback with 1 and 2 worker processes.
+  Jobs: ``pose_features`` (the per-clip job of ``quatmotion pose index``: read a BVH file,
+  prepare the 16-joint poses, GPD, project by the library's model). The codec's compression
+  and the retrieval index build are looked up by :data:`JOB_HOOKS` and reported as absent
+  until their packages exist.
+* **Scheduler overhead per clip**: ``((wall - startup) * workers - work) / clips``, where
+  ``work`` is the time the job itself ran in the workers and ``startup`` the time until the
+  first clip started (pool start or Dask connection; reported apart, it is paid once per
+  batch); as a share of a clip's work (the median time of the job over the clips, which
+  leaves out the first calls in a fresh worker, reported as ``warmup_s``). The Dask cluster
+  runs one untimed batch first, as a long-lived cluster would have; the local pool starts
+  afresh for every batch, as it does in use. Per-clip CPU time is reported beside the wall
+  time: on a shared machine the difference is time spent waiting for a core.
+* **Speed-up**: 2-worker over 1-worker throughput, end to end and without the start-up.
+* **Cost model** for 100,000 clips on N workers: ``startup + clips * (work + overhead) / N``
+  from the measured per-clip numbers, against the serial HNSW insertion of ``pose index``
+  (its main process adds every pose to the graph, measured per pose below).
+* **Pose index at size**: ``PoseLibrary.build_streamed`` over 10k, 100k and 1M generated poses
+  (quick: 10k and 30k), each in a fresh subprocess that reports its peak resident memory
+  (``ru_maxrss``; its workers' sampled every 0.1 s with psutil), the HNSW graph's own size
+  (hnswlib's level-0 record per pose), build times and
+  the search latency (median and p95 of single queries, projection of the query's GPD
+  included). The distance of these libraries is a PCA projection (scikit-learn) of the same
+  rank instead of RDSR: RDSR's fit takes minutes on the sample whatever the library size, and
+  the quantities measured here (memory, streaming, search) do not depend on which linear
+  projection is learned.
+
+Figures beside ``out``: ``<stem>_throughput.png``, ``<stem>_memory.png``,
+``<stem>_cost.png``.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.util
+import json
+import os
+import pathlib
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Any
+
+import numpy as np
+
+from quatmotion._atomic import atomic_write_json
+from quatmotion.motion.synthetic import KINDS, generate_clip
+from quatmotion.parallel import available_cpus, imap_batch, run_batch
+from quatmotion.pose.data import PoseClip
+from quatmotion.pose.library import PoseLibrary, load_pose_clip, project_gpd, projected_clip
+
+FPS = 30.0
+HEIGHT_CM = 170.0
+RANK = 50
+PROBE_CLIP_FRAMES = 300  # generated clips of the memory probes: 10 s at 30 fps
+COST_MODEL_CLIPS = 100_000
+COST_MODEL_WORKERS = (1, 2, 4, 8, 16, 32, 64)
+
+# Batch jobs of other packages, measured once they exist: module, what to call it.
+JOB_HOOKS = {
+    "codec_compress": (
+        "quatmotion.codec",
+        "the per-clip encoding job of library-mode compression (issue 10)",
+    ),
+    "retrieval_index_build": (
+        "quatmotion.retrieval",
+        "the per-clip feature job of 'index build' (issue 11)",
+    ),
+}
+
+
+def generated_pose_clip(spec: tuple[str, int, int], *, fps: float, height: float) -> PoseClip:
+    """A procedural clip ``(kind, seed, n_frames)`` at ``fps``, prepared for a pose library
+    (the loader of the memory probes: module level, so batch workers can run it)."""
+    kind, seed, n_frames = spec
+    motion = generate_clip(kind, int(seed), n_frames=int(n_frames), fps=fps)
+    return PoseClip.from_motion(motion, fps=fps, height=height, name=f"{kind}_{seed}")
+
+
+def _probe_specs(n_poses: int, seed: int) -> list[tuple[str, int, int]]:
+    n_clips = -(-n_poses // PROBE_CLIP_FRAMES)
+    specs = []
+    for k in range(n_clips):
+        frames = min(PROBE_CLIP_FRAMES, n_poses - k * PROBE_CLIP_FRAMES)
+        specs.append((KINDS[k % len(KINDS)], seed * 1_000_003 + k, max(frames, 2)))
+    return specs
+
+
+def _model(dim: int, seed: int) -> dict[str, np.ndarray]:
+    """A projection of the library's shape (the cost of projecting does not depend on it)."""
+    rng = np.random.default_rng(seed)
+    return {
+        "scale": rng.uniform(0.5, 2.0, dim),
+        "offset": rng.normal(size=dim) * 0.1,
+        "W": rng.normal(size=(dim, RANK)) / np.sqrt(dim),
+    }
+
+
+def _write_clips(folder: pathlib.Path, n_clips: int, seed: int) -> tuple[list[str], int]:
+    from quatmotion.io import write_bvh
+
+    paths, frames = [], 0
+    for k in range(n_clips):
+        motion = generate_clip(KINDS[k % len(KINDS)], seed * 1000 + k, n_frames=480, fps=120.0)
+        path = folder / f"clip_{k:04d}.bvh"
+        write_bvh(motion, path)
+        paths.append(str(path))
+        frames += motion.n_frames
+    return paths, frames
+
+
+def _measure(job: Any, items: list, n_frames: int, **where: Any) -> dict[str, Any]:
+    """One batch of ``job`` over ``items``: throughput, per-clip work, start-up, overhead."""
+    seconds, cpu = [], []
+    with imap_batch(job, items, window=len(items), **where) as stream:
+        for outcome in stream:
+            if outcome.ok:
+                seconds.append(outcome.seconds)
+                cpu.append(outcome.cpu_seconds)
+        stats = stream.stats()
+    n = len(items)
+    startup = stats.startup_seconds or 0.0
+    steady = max(stats.wall_seconds - startup, 1e-9)
+    work = float(np.median(seconds))  # a clip's job once the worker is warm
+    # first calls in a fresh worker (Numba loading its cached kernels...): work above median
+    warmup = float(np.sum(seconds)) - n * work
+    # time the workers' slots held no job, per clip, once the first one started
+    overhead = (steady * stats.workers - float(np.sum(seconds))) / n
+    return {
+        "scheduler": stats.scheduler,
+        "workers": stats.workers,
+        "clips": n,
+        "failed": stats.n_failed,
+        "wall_s": stats.wall_seconds,
+        "startup_s": startup,
+        "warmup_s": warmup,
+        "clips_per_s": n / stats.wall_seconds,
+        "frames_per_s": n_frames / stats.wall_seconds,
+        "steady_clips_per_s": n / steady,
+        "steady_frames_per_s": n_frames / steady,
+        "work_per_clip_ms": 1e3 * work,
+        "cpu_per_clip_ms": 1e3 * float(np.median(cpu)),
+        "overhead_per_clip_ms": 1e3 * overhead,
+        "overhead_fraction": overhead / work,
+    }
+
+
+def _throughput(job: Any, items: list, n_frames: int, dask_ok: bool) -> dict[str, Any]:
+    rows: dict[str, Any] = {"inline": _measure(job, items, n_frames, scheduler="inline")}
+    for n in (1, 2):
+        rows[f"processes_{n}"] = _measure(job, items, n_frames, scheduler="processes", workers=n)
+    if dask_ok:
+        from distributed import LocalCluster
+
+        for n in (1, 2):
+            with LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                scheduler_port=0,
+                dashboard_address=None,
+            ) as cluster:
+                # A cluster outlives its batches: its workers import the job's modules once,
+                # in a first batch, as the batches of a long-lived cluster would have.
+                address = cluster.scheduler_address
+                run_batch(job, items[: 2 * n], scheduler=address)
+                rows[f"dask_{n}"] = _measure(job, items, n_frames, scheduler=address)
+    for kind in ("processes", "dask"):
+        one, two = rows.get(f"{kind}_1"), rows.get(f"{kind}_2")
+        if one and two:
+            rows[f"{kind}_speedup"] = {
+                "end_to_end": two["clips_per_s"] / one["clips_per_s"],
+                "steady": two["steady_clips_per_s"] / one["steady_clips_per_s"],
+            }
+    return rows
+
+
+class _TreeMemory:
+    """Peak resident memory of this process's descendants (batch workers), sampled."""
+
+    def __init__(self, every: float = 0.1) -> None:
+        import threading
+
+        self.peak_mb = 0.0
+        self.available = importlib.util.find_spec("psutil") is not None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._sample, args=(every,), daemon=True)
+
+    def _sample(self, every: float) -> None:
+        import psutil
+
+        me = psutil.Process()
+        while not self._stop.wait(every):
+            for child in me.children(recursive=True):
+                try:
+                    rss = child.memory_info().rss / 2**20
+                except psutil.Error:
+                    continue
+                self.peak_mb = max(self.peak_mb, rss)
+
+    def __enter__(self) -> _TreeMemory:
+        if self.available:
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._stop.set()
+        if self.available:
+            self._thread.join()
+
+
+def _probe(n_poses: int, seed: int, workers: int | None) -> dict[str, Any]:
+    """Build a pose library of ``n_poses`` generated poses; runs in its own process."""
+    import resource
+
+    from sklearn.decomposition import PCA
+
+    base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    specs = _probe_specs(n_poses, seed)
+    times: dict[str, float] = {}
+    marks = {"start": time.perf_counter()}
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage == "index" and "index" not in marks:
+            marks["index"] = time.perf_counter()
+
+    with _TreeMemory() as workers_memory:
+        library, failures = PoseLibrary.build_streamed(
+            specs,
+            functools.partial(generated_pose_clip, fps=FPS, height=HEIGHT_CM),
+            rank=RANK,
+            seed=seed,
+            metric=PCA(n_components=RANK, random_state=seed),
+            workers=workers,
+            progress=progress,
+        )
+    marks["end"] = time.perf_counter()
+    self_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    child_rss = workers_memory.peak_mb if workers_memory.available else None
+    times["learn_s"] = marks.get("index", marks["end"]) - marks["start"]
+    times["index_s"] = marks["end"] - marks.get("index", marks["end"])
+    index = library.index
+    # hnswlib's level-0 record per item: 2M links (4 B each) and a count, the vector, a label
+    per_item = (2 * index.M * 4 + 4) + index.dim_ * 4 + 8
+    index_mb = index.n_items_ * per_item / 2**20
+    # queries: poses of clips not in the library, GPD projected inside the timing
+    rng = np.random.default_rng(seed + 1)
+    query_clip = generated_pose_clip(("walk", 10**9 + seed, 240), fps=FPS, height=HEIGHT_CM)
+    gpd = query_clip.poses.gpd
+    rows = rng.integers(0, len(gpd), 500)
+    index.n_threads = 1
+    latencies = []
+    for r in rows:
+        start = time.perf_counter()
+        library.search(project_gpd(gpd[r : r + 1], library.model), 10)
+        latencies.append(time.perf_counter() - start)
+    lat = np.asarray(latencies) * 1e3
+    return {
+        "poses": int(index.n_items_),
+        "clips": len(library.clip_names),
+        "failed": len(failures),
+        "fit_poses": library.meta["fit_poses"],
+        "rss_after_imports_mb": base_rss,
+        "peak_rss_main_mb": self_rss,
+        "peak_rss_one_worker_mb": child_rss,
+        "hnsw_graph_mb": index_mb,
+        "peak_rss_main_minus_graph_mb": self_rss - index_mb,
+        **times,
+        "index_poses_per_s": index.n_items_ / max(times["index_s"], 1e-9),
+        "query_ms_median": float(np.median(lat)),
+        "query_ms_p95": float(np.percentile(lat, 95)),
+    }
+
+
+def _run_probe(n_poses: int, seed: int) -> dict[str, Any]:
+    code = (
+        "import json, sys; from quatmotion.bench.scale import _probe; "
+        f"print(json.dumps(_probe({n_poses}, {seed}, None)))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        return {"poses": n_poses, "error": done.stderr.strip().splitlines()[-1:]}
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _cost_model(rows: dict[str, Any], probes: list[dict[str, Any]]) -> dict[str, Any]:
+    """Hours for COST_MODEL_CLIPS clips on N workers, from the measured per-clip costs."""
+    one = rows["processes_1"]
+    work = one["work_per_clip_ms"] / 1e3
+    frames_per_clip = 480 / (120.0 / FPS)  # poses per benchmark clip after resampling
+    model: dict[str, Any] = {
+        "clips": COST_MODEL_CLIPS,
+        "work_per_clip_s": work,
+        "formula": "startup + clips * (work + overhead) / N; pose index: max(that, serial insert)",
+    }
+    insert = [p for p in probes if "index_poses_per_s" in p]
+    insert_s_per_pose = 1.0 / insert[-1]["index_poses_per_s"] if insert else None
+    for kind in ("processes", "dask"):
+        two = rows.get(f"{kind}_2")
+        if not two:
+            continue
+        overhead = max(two["overhead_per_clip_ms"], 0.0) / 1e3
+        startup = two["startup_s"]
+        hours = {
+            n: (startup + COST_MODEL_CLIPS * (work + overhead) / n) / 3600
+            for n in COST_MODEL_WORKERS
+        }
+        model[kind] = {"overhead_per_clip_s": overhead, "startup_s": startup, "hours": hours}
+    if insert_s_per_pose is not None:
+        # the index pass adds each pose to the graph in the main process, overlapping the
+        # workers: it bounds the pose index from below however many workers there are
+        model["pose_index_serial_insert_hours"] = (
+            COST_MODEL_CLIPS * frames_per_clip * insert_s_per_pose / 3600
+        )
+        model["pose_index_insert_s_per_pose"] = insert_s_per_pose
+    return model
+
+
+def _figures(out: pathlib.Path, result: dict[str, Any]) -> list[str]:
+    from quatmotion.viz.figures import pyplot, save_figure
+
+    plt = pyplot()
+    names = []
+    rows = result["throughput"]["pose_features"]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for kind, marker in (("processes", "o"), ("dask", "s")):
+        pts = [(n, rows[f"{kind}_{n}"]) for n in (1, 2) if f"{kind}_{n}" in rows]
+        if pts:
+            label = "local process pool" if kind == "processes" else "Dask LocalCluster (loopback)"
+            ax.plot(
+                [n for n, _ in pts],
+                [r["clips_per_s"] for _, r in pts],
+                marker=marker,
+                label=f"{label}, end to end",
+            )
+            ax.plot(
+                [n for n, _ in pts],
+                [r["steady_clips_per_s"] for _, r in pts],
+                marker=marker,
+                linestyle="--",
+                label=f"{label}, without start-up",
+            )
+    base = rows["inline"]["clips_per_s"]
+    ax.plot([1, 2], [base, 2 * base], color="grey", linestyle=":", label="linear from inline")
+    ax.set_xticks([1, 2])
+    ax.set_xlabel("workers")
+    ax.set_ylabel("clips per second")
+    ax.set_title("pose index feature job: throughput against workers")
+    ax.legend(fontsize=7)
+    names.append(save_figure(fig, out.with_name(f"{out.stem}_throughput.png")).name)
+
+    probes = [p for p in result["pose_index_memory"] if "peak_rss_main_mb" in p]
+    if probes:
+        fig, ax = plt.subplots(figsize=(6, 4))
+        x = [p["poses"] for p in probes]
+        ax.plot(x, [p["peak_rss_main_mb"] for p in probes], "o-", label="main process peak RSS")
+        ax.plot(x, [p["hnsw_graph_mb"] for p in probes], "s--", label="HNSW graph itself")
+        ax.plot(
+            x,
+            [p["peak_rss_main_minus_graph_mb"] for p in probes],
+            "^-",
+            label="peak RSS minus graph",
+        )
+        if probes[0]["peak_rss_one_worker_mb"] is not None:
+            ax.plot(
+                x,
+                [p["peak_rss_one_worker_mb"] for p in probes],
+                "v:",
+                label="largest worker process, peak RSS (sampled)",
+            )
+        ax.set_xscale("log")
+        ax.set_xlabel("poses indexed")
+        ax.set_ylabel("memory (MiB)")
+        ax.set_title("pose index build (streamed): peak memory against library size")
+        ax.legend(fontsize=7)
+        names.append(save_figure(fig, out.with_name(f"{out.stem}_memory.png")).name)
+
+    cost = result["cost_model"]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for kind, label in (("processes", "local pools"), ("dask", "Dask")):
+        if kind in cost:
+            hours = cost[kind]["hours"]
+            ax.plot([int(n) for n in hours], list(hours.values()), "o-", label=label)
+    if "pose_index_serial_insert_hours" in cost:
+        ax.axhline(
+            cost["pose_index_serial_insert_hours"],
+            color="k",
+            linestyle="--",
+            label="pose index: serial HNSW insertion",
+        )
+    ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ax.set_xlabel("workers (one core each)")
+    ax.set_ylabel("hours")
+    ax.set_title(f"model: pose features of {COST_MODEL_CLIPS:,} clips (4 s each)")
+    ax.legend(fontsize=7)
+    names.append(save_figure(fig, out.with_name(f"{out.stem}_cost.png")).name)
+    return names
+
+
+def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
+    """Measure batch throughput, scheduler overhead and pose-index memory; write JSON to ``out``.
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        JSON destination; the figures go beside it.
+    quick : bool
+        12 clips instead of 48 for throughput; memory probes at 10k and 30k poses instead of
+        10k, 100k and 1M.
+    seed : int
+        Seeds the generated clips.
+
+    Returns
+    -------
+    dict
+        ``throughput`` (per job, per scheduler: ``clips_per_s``, ``frames_per_s``,
+        ``overhead_per_clip_ms``, ``overhead_fraction``..., and ``*_speedup``), ``jobs_absent``,
+        ``cost_model``, ``pose_index_memory`` (per size: ``peak_rss_main_mb``,
+        ``hnsw_graph_mb``, ``query_ms_median``...).
+    """
+    out = pathlib.Path(out)
+    dask_ok = importlib.util.find_spec("distributed") is not None
+    n_clips = 12 if quick else 48
+    result: dict[str, Any] = {
+        "benchmark": "scale",
+        "quick": quick,
+        "seed": seed,
+        "machine": {
+            "python": platform.python_version(),
+            "cpus_available": available_cpus(),
+            "processor": platform.processor() or platform.machine(),
+            "load_average": os.getloadavg(),
+        },
+        "dask_available": dask_ok,
+    }
+    with tempfile.TemporaryDirectory() as folder:
+        paths, n_frames = _write_clips(pathlib.Path(folder), n_clips, seed)
+        gpd_dim = generated_pose_clip(("walk", 0, 4), fps=FPS, height=HEIGHT_CM).poses.gpd.shape[1]
+        job = functools.partial(
+            projected_clip,
+            load=functools.partial(load_pose_clip, fps=FPS, height=HEIGHT_CM),
+            model=_model(gpd_dim, seed),
+        )
+        result["throughput"] = {"pose_features": _throughput(job, paths, n_frames, dask_ok)}
+    result["throughput_clips"] = {"clips": n_clips, "frames_per_clip": 480, "file_fps": 120}
+    result["jobs_absent"] = {
+        name: {"module": module, "job": what}
+        for name, (module, what) in JOB_HOOKS.items()
+        if importlib.util.find_spec(module) is None
+    }
+    sizes = (10_000, 30_000) if quick else (10_000, 100_000, 1_000_000)
+    result["pose_index_memory"] = [_run_probe(n, seed) for n in sizes]
+    result["cost_model"] = _cost_model(
+        result["throughput"]["pose_features"], result["pose_index_memory"]
+    )
+    result["figures"] = _figures(out, result)
+    atomic_write_json(out, result)
+    return result
