@@ -323,3 +323,25 @@ def test_a_kept_pool_whose_worker_died_while_idle_is_replaced() -> None:
     second = run_batch(worker_pid, range(6), workers=2)
     assert second.ok
     assert victim not in second.results
+
+
+def touch_marker(arg: tuple[int, str]) -> int:
+    seed, folder = arg
+    time.sleep(0.05)
+    pathlib.Path(folder, str(seed)).touch()
+    return seed
+
+
+def test_a_stream_closed_early_runs_no_more_items_and_the_pool_serves_again(
+    tmp_path: pathlib.Path,
+) -> None:
+    items = [(k, str(tmp_path)) for k in range(40)]
+    with imap_batch(touch_marker, items, workers=2) as stream:
+        for outcome in stream:
+            if outcome.index == 2:
+                break
+    time.sleep(0.5)
+    started = len(list(tmp_path.iterdir()))
+    assert 3 <= started <= 3 + 3  # what was yielded, plus at most workers + 1 in flight
+    again = run_batch(touch_marker, items[:6], workers=2)
+    assert again.ok and again.results == list(range(6))

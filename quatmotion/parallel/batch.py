@@ -281,8 +281,8 @@ def _module_of(func: Callable[[Any], Any]) -> str | None:
 class BatchStream(Generic[T]):
     """An iterator of :class:`Outcome`, in input order, over a running batch.
 
-    Made by :func:`imap_batch`. Close it (or use it as a context manager) to stop early: the
-    pool is shut down and queued work cancelled. :meth:`stats` gives the counts at any time.
+    Made by :func:`imap_batch`. Close it (or use it as a context manager) to stop early:
+    queued work is cancelled. :meth:`stats` gives the counts at any time.
     """
 
     def __init__(
@@ -317,7 +317,7 @@ class BatchStream(Generic[T]):
         return next(self._generator)
 
     def close(self) -> None:
-        """Stop the batch: shut the pool down, cancel what has not started."""
+        """Stop the batch: cancel what has not started (the local pool is kept for reuse)."""
         self._generator.close()
 
     def __enter__(self) -> BatchStream[T]:
@@ -469,11 +469,10 @@ class BatchStream(Generic[T]):
                             suspects.append(task)
                 yield from collector.pop_ready()
         finally:
-            if pool is not None and in_flight:
-                # Stopped early: work still running would hold up the pool's next batch.
-                for future in in_flight:
-                    future.cancel()
-                _discard_pool(n, pool, wait=False)
+            # Stopped early: what has not started is cancelled; the few tasks already running
+            # (at most workers + 1) finish unread, and the warm pool stays for the next batch.
+            for future in in_flight:
+                future.cancel()
 
 
 # Local pools outlive their batches, one per size: a batch after the first (the second pass of a
