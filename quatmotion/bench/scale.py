@@ -21,10 +21,11 @@
 * **Cost model** for 100,000 clips on N workers: ``startup + clips * (work + overhead) / N``
   from the measured per-clip numbers, against the serial HNSW insertion of ``pose index``
   (its main process adds every pose to the graph, measured per pose below).
-* **Pose index at size**: ``PoseLibrary.build_streamed`` over 10k, 100k and 1M generated poses
-  (quick: 10k and 30k), each in a fresh subprocess that reports its peak resident memory
-  (``ru_maxrss``; its workers' sampled every 0.1 s with psutil), the HNSW graph's own size
-  (hnswlib's level-0 record per pose), build times and
+* **Pose index at size**: ``PoseLibrary.build_streamed``, then ``save``, over 10k, 100k and
+  1M generated poses (quick: 10k and 30k), each in a fresh subprocess that reports its peak
+  resident memory (``ru_maxrss`` over the whole build and save; per phase, and its largest
+  worker, sampled every 0.05 s with psutil), the HNSW graph's own size (hnswlib's level-0
+  record per pose), build and save times and
   the search latency (median and p95 of single queries, projection of the query's GPD
   included). The distance of these libraries is a PCA projection (scikit-learn) of the same
   rank instead of RDSR: RDSR's fit takes minutes on the sample whatever the library size, and
@@ -148,6 +149,8 @@ def _measure(job: Any, items: list, n_frames: int, **where: Any) -> dict[str, An
         "steady_frames_per_s": n_frames / steady,
         "work_per_clip_ms": 1e3 * work,
         "cpu_per_clip_ms": 1e3 * float(np.median(cpu)),
+        # below 1 when the job waited for a core (other processes on a shared machine)
+        "core_share": float(np.sum(cpu) / np.sum(seconds)),
         "overhead_per_clip_ms": 1e3 * overhead,
         "overhead_fraction": overhead / work,
     }
@@ -184,13 +187,16 @@ def _throughput(job: Any, items: list, n_frames: int, dask_ok: bool) -> dict[str
     return rows
 
 
-class _TreeMemory:
-    """Peak resident memory of this process's descendants (batch workers), sampled."""
+class _MemorySampler:
+    """Peak resident memory of this process per phase, and of its largest descendant (a batch
+    worker), sampled with psutil every ``every`` seconds."""
 
-    def __init__(self, every: float = 0.1) -> None:
+    def __init__(self, every: float = 0.05) -> None:
         import threading
 
-        self.peak_mb = 0.0
+        self.phase = "learn"
+        self.peak_mb: dict[str, float] = {}
+        self.worker_peak_mb = 0.0
         self.available = importlib.util.find_spec("psutil") is not None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._sample, args=(every,), daemon=True)
@@ -200,14 +206,15 @@ class _TreeMemory:
 
         me = psutil.Process()
         while not self._stop.wait(every):
-            for child in me.children(recursive=True):
-                try:
-                    rss = child.memory_info().rss / 2**20
-                except psutil.Error:
-                    continue
-                self.peak_mb = max(self.peak_mb, rss)
+            try:
+                rss = me.memory_info().rss / 2**20
+                self.peak_mb[self.phase] = max(self.peak_mb.get(self.phase, 0.0), rss)
+                for child in me.children(recursive=True):
+                    self.worker_peak_mb = max(self.worker_peak_mb, child.memory_info().rss / 2**20)
+            except psutil.Error:
+                continue
 
-    def __enter__(self) -> _TreeMemory:
+    def __enter__(self) -> _MemorySampler:
         if self.available:
             self._thread.start()
         return self
@@ -219,21 +226,21 @@ class _TreeMemory:
 
 
 def _probe(n_poses: int, seed: int, workers: int | None) -> dict[str, Any]:
-    """Build a pose library of ``n_poses`` generated poses; runs in its own process."""
+    """Build and save a pose library of ``n_poses`` generated poses; runs in its own process."""
     import resource
 
     from sklearn.decomposition import PCA
 
     base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     specs = _probe_specs(n_poses, seed)
-    times: dict[str, float] = {}
     marks = {"start": time.perf_counter()}
+    with _MemorySampler() as memory, tempfile.TemporaryDirectory() as folder:
 
-    def progress(stage: str, done: int, total: int) -> None:
-        if stage == "index" and "index" not in marks:
-            marks["index"] = time.perf_counter()
+        def progress(stage: str, done: int, total: int) -> None:
+            if stage == "index" and "index" not in marks:
+                marks["index"] = time.perf_counter()
+                memory.phase = "index"
 
-    with _TreeMemory() as workers_memory:
         library, failures = PoseLibrary.build_streamed(
             specs,
             functools.partial(generated_pose_clip, fps=FPS, height=HEIGHT_CM),
@@ -243,39 +250,46 @@ def _probe(n_poses: int, seed: int, workers: int | None) -> dict[str, Any]:
             workers=workers,
             progress=progress,
         )
-    marks["end"] = time.perf_counter()
-    self_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    child_rss = workers_memory.peak_mb if workers_memory.available else None
-    times["learn_s"] = marks.get("index", marks["end"]) - marks["start"]
-    times["index_s"] = marks["end"] - marks.get("index", marks["end"])
+        marks["built"] = time.perf_counter()
+        memory.phase = "save"
+        library.save(pathlib.Path(folder) / "poses.idx")
+        marks["saved"] = time.perf_counter()
+        file_mb = (pathlib.Path(folder) / "poses.idx").stat().st_size / 2**20
+        memory.phase = "search"
+    peak_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     index = library.index
     # hnswlib's level-0 record per item: 2M links (4 B each) and a count, the vector, a label
     per_item = (2 * index.M * 4 + 4) + index.dim_ * 4 + 8
-    index_mb = index.n_items_ * per_item / 2**20
-    # queries: poses of clips not in the library, GPD projected inside the timing
+    graph_mb = index.n_items_ * per_item / 2**20
+    # queries: poses of a clip not in the library, the GPD projected inside the timing
     rng = np.random.default_rng(seed + 1)
     query_clip = generated_pose_clip(("walk", 10**9 + seed, 240), fps=FPS, height=HEIGHT_CM)
     gpd = query_clip.poses.gpd
-    rows = rng.integers(0, len(gpd), 500)
     index.n_threads = 1
     latencies = []
-    for r in rows:
+    for r in rng.integers(0, len(gpd), 500):
         start = time.perf_counter()
         library.search(project_gpd(gpd[r : r + 1], library.model), 10)
         latencies.append(time.perf_counter() - start)
     lat = np.asarray(latencies) * 1e3
+    phases = {f"peak_rss_{k}_mb": v for k, v in memory.peak_mb.items()}
+    index_s = marks["built"] - marks.get("index", marks["built"])
     return {
         "poses": int(index.n_items_),
         "clips": len(library.clip_names),
         "failed": len(failures),
         "fit_poses": library.meta["fit_poses"],
         "rss_after_imports_mb": base_rss,
-        "peak_rss_main_mb": self_rss,
-        "peak_rss_one_worker_mb": child_rss,
-        "hnsw_graph_mb": index_mb,
-        "peak_rss_main_minus_graph_mb": self_rss - index_mb,
-        **times,
-        "index_poses_per_s": index.n_items_ / max(times["index_s"], 1e-9),
+        "peak_rss_main_mb": peak_rss,
+        **phases,
+        "peak_rss_one_worker_mb": memory.worker_peak_mb if memory.available else None,
+        "hnsw_graph_mb": graph_mb,
+        "peak_rss_index_minus_graph_mb": memory.peak_mb.get("index", float("nan")) - graph_mb,
+        "library_file_mb": file_mb,
+        "learn_s": marks.get("index", marks["built"]) - marks["start"],
+        "index_s": index_s,
+        "save_s": marks["saved"] - marks["built"],
+        "index_poses_per_s": index.n_items_ / max(index_s, 1e-9),
         "query_ms_median": float(np.median(lat)),
         "query_ms_p95": float(np.percentile(lat, 95)),
     }
@@ -362,21 +376,16 @@ def _figures(out: pathlib.Path, result: dict[str, Any]) -> list[str]:
     if probes:
         fig, ax = plt.subplots(figsize=(6, 4))
         x = [p["poses"] for p in probes]
-        ax.plot(x, [p["peak_rss_main_mb"] for p in probes], "o-", label="main process peak RSS")
-        ax.plot(x, [p["hnsw_graph_mb"] for p in probes], "s--", label="HNSW graph itself")
-        ax.plot(
-            x,
-            [p["peak_rss_main_minus_graph_mb"] for p in probes],
-            "^-",
-            label="peak RSS minus graph",
-        )
-        if probes[0]["peak_rss_one_worker_mb"] is not None:
-            ax.plot(
-                x,
-                [p["peak_rss_one_worker_mb"] for p in probes],
-                "v:",
-                label="largest worker process, peak RSS (sampled)",
-            )
+        for key, style, label in (
+            ("peak_rss_main_mb", "o-", "main process, whole build and save (ru_maxrss)"),
+            ("peak_rss_learn_mb", "^:", "main process, learning on the sample"),
+            ("peak_rss_index_mb", "s-", "main process, indexing pass"),
+            ("peak_rss_index_minus_graph_mb", "D--", "indexing pass minus the HNSW graph"),
+            ("hnsw_graph_mb", "x--", "HNSW graph itself"),
+            ("peak_rss_one_worker_mb", "v:", "largest worker process"),
+        ):
+            if all(p.get(key) is not None for p in probes):
+                ax.plot(x, [p[key] for p in probes], style, label=label)
         ax.set_xscale("log")
         ax.set_xlabel("poses indexed")
         ax.set_ylabel("memory (MiB)")

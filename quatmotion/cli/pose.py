@@ -64,6 +64,12 @@ def index_command(
         int | None,
         typer.Option(help="Worker processes (default: one per CPU; 1 runs in this process)."),
     ] = None,
+    index_threads: Annotated[
+        int,
+        typer.Option(
+            help="Threads inserting poses into the HNSW graph (1: the same file every run)."
+        ),
+    ] = 1,
     scheduler: Annotated[
         str | None,
         typer.Option(
@@ -94,6 +100,7 @@ def index_command(
                 n_pairs=pairs,
                 seed=seed,
                 scheduler=where,
+                index_threads=index_threads,
                 progress=_StageBars(bar),
                 log=lambda message: bar.console.print(message, markup=False, highlight=False),
             )

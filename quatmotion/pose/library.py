@@ -177,6 +177,7 @@ class PoseLibrary:
         scheduler: str | Scheduler | None = None,
         chunk_size: int = 1,
         flush_poses: int = 4096,
+        index_threads: int = 1,
         progress: Callable[[str, int, int], None] | None = None,
         log: Callable[[str], None] | None = None,
     ) -> tuple[PoseLibrary, list[Failure]]:
@@ -212,6 +213,11 @@ class PoseLibrary:
             Where and how the clips are prepared: :func:`quatmotion.parallel.imap_batch`.
         flush_poses : int
             Vectors per insertion into the HNSW graph.
+        index_threads : int
+            Threads inserting into the graph, in this process. One keeps the library the
+            same bytes whatever the scheduler; more insert faster (the insertion is the part
+            of the build that does not spread over workers), but the graph then depends on
+            thread timing (its search results barely).
         progress : callable, optional
             ``progress(stage, done, total)`` with stage ``"learn"`` (clips loaded for the
             sample, out of all clips; stops when the sample is complete) or ``"index"``.
@@ -234,7 +240,11 @@ class PoseLibrary:
         sources = list(sources)
         if not sources:
             raise ValueError("no clips to index")
-        for name, value in (("fit_poses", fit_poses), ("flush_poses", flush_poses)):
+        for name, value in (
+            ("fit_poses", fit_poses),
+            ("flush_poses", flush_poses),
+            ("index_threads", index_threads),
+        ):
             if value < 1:
                 raise ValueError(f"{name} must be at least 1, got {value}")
         batch = {"workers": workers, "scheduler": scheduler, "chunk_size": chunk_size}
@@ -279,7 +289,9 @@ class PoseLibrary:
         # 2. every clip projected in a worker, inserted in input order
         kept = [i for i in range(len(sources)) if i not in failed]
         job = functools.partial(projected_clip, load=load, model=model)
-        index = HNSWIndex(M=M, ef_construction=ef_construction, n_threads=1, random_state=seed)
+        index = HNSWIndex(
+            M=M, ef_construction=ef_construction, n_threads=index_threads, random_state=seed
+        )
         names: list[str] = []
         lengths: list[int] = []
         steps: list[int] = []
