@@ -192,8 +192,9 @@ class PoseLibrary:
            ``fit_poses`` gets the model :meth:`build` would give it.
         2. *Index*: every clip is loaded again in a worker, described and projected there; the
            vectors (float32, ``rank`` per pose) come back in input order and go into the
-           HNSW graph ``flush_poses`` at a time, on one thread, so the library is the same
-           whatever the scheduler and the number of workers.
+           HNSW graph ``flush_poses`` at a time, on ``index_threads`` threads: with one (the
+           default) the library is the same bytes whatever the scheduler and the number of
+           workers.
 
         Memory holds the sample, a window of projected clips and the index itself; neither
         all poses nor their GPD features are ever in one array.
