@@ -175,7 +175,7 @@ class PoseLibrary:
         metric: Any = None,
         workers: int | None = None,
         scheduler: str | Scheduler | None = None,
-        chunk_size: int = 1,
+        chunk_size: int | None = None,
         flush_poses: int = 4096,
         index_threads: int = 1,
         progress: Callable[[str, int, int], None] | None = None,
@@ -210,8 +210,12 @@ class PoseLibrary:
             Poses the distance is learned on (the sample grows a clip at a time to this).
         rank, n_unlabeled, n_pairs, seed, M, ef_construction, metric
             As for :meth:`build`.
-        workers, scheduler, chunk_size
-            Where and how the clips are prepared: :func:`quatmotion.parallel.imap_batch`.
+        workers, scheduler
+            Where the clips are prepared: :func:`quatmotion.parallel.imap_batch`.
+        chunk_size : int, optional
+            Clips per task of the index pass. Each task carries the projection model (about
+            0.7 MB at rank 50), so by default eight clips share one once there are at least
+            64 clips, else every clip is a task. The learn pass sends clips one by one.
         flush_poses : int
             Vectors per insertion into the HNSW graph.
         index_threads : int
@@ -248,7 +252,7 @@ class PoseLibrary:
         ):
             if value < 1:
                 raise ValueError(f"{name} must be at least 1, got {value}")
-        batch = {"workers": workers, "scheduler": scheduler, "chunk_size": chunk_size}
+        batch = {"workers": workers, "scheduler": scheduler}
 
         def stage(name: str) -> Callable[[int, int], None] | None:
             return None if progress is None else functools.partial(progress, name)
@@ -290,6 +294,9 @@ class PoseLibrary:
         # 2. every clip projected in a worker, inserted in input order
         kept = [i for i in range(len(sources)) if i not in failed]
         job = functools.partial(projected_clip, load=load, model=model)
+        if chunk_size is None:
+            chunk_size = 8 if len(kept) >= 64 else 1
+        expected_poses = int(1.05 * n_sample_poses / n_fit_clips * len(kept))
         index = HNSWIndex(
             M=M, ef_construction=ef_construction, n_threads=index_threads, random_state=seed
         )
@@ -299,7 +306,13 @@ class PoseLibrary:
         pending: list[NDArray[np.float32]] = []
         n_pending = 0
         t0 = time.perf_counter()
-        with imap_batch(job, [sources[i] for i in kept], progress=stage("index"), **batch) as st:
+        with imap_batch(
+            job,
+            [sources[i] for i in kept],
+            progress=stage("index"),
+            chunk_size=chunk_size,
+            **batch,
+        ) as st:
             for outcome in st:
                 where = kept[outcome.index]
                 if outcome.failure is not None:
@@ -319,10 +332,10 @@ class PoseLibrary:
                 pending.append(clip.vectors)
                 n_pending += len(clip.vectors)
                 if n_pending >= flush_poses:
-                    index.partial_fit(np.concatenate(pending))
+                    index.partial_fit(np.concatenate(pending), capacity=expected_poses)
                     pending, n_pending = [], 0
         if pending:
-            index.partial_fit(np.concatenate(pending))
+            index.partial_fit(np.concatenate(pending), capacity=expected_poses)
         if not names:
             raise ValueError(_none_read(len(sources), failed))
         seconds = time.perf_counter() - t0
