@@ -10,7 +10,11 @@
   prepare the 16-joint poses, GPD, project by the library's model). The codec's compression
   and the retrieval index build are looked up by :data:`JOB_HOOKS` and reported as absent
   until their packages exist.
-* **Scheduler overhead per clip**: ``((wall - startup) * workers - work) / clips``, where
+* **Scheduler overhead per clip**, in CPU time: the CPU of the whole process tree (this
+  process: dispatch, and a LocalCluster's scheduler; the workers: unpickling, pickling,
+  waiting loops) beyond the jobs' own CPU, per clip, and as a share of a clip's CPU
+  (``cpu_overhead_*``; CPU time is not stretched by the other jobs of a shared machine).
+  In wall time too: ``((wall - startup) * workers - work) / clips``, where
   ``work`` is the time the job itself ran in the workers and ``startup`` the time until the
   first clip started (pool start or Dask connection; reported apart, it is paid once per
   batch); as a share of a clip's work (the median time of the job over the clips, which
@@ -136,13 +140,20 @@ def _measure(job: Any, items: list, n_frames: int, **where: Any) -> dict[str, An
 def _measure_once(job: Any, items: list, n_frames: int, **where: Any) -> dict[str, Any]:
     """One batch of ``job`` over ``items``: throughput, per-clip work, start-up, overhead."""
     seconds, cpu = [], []
+    before = _tree_cpu_seconds()
     with imap_batch(job, items, window=len(items), **where) as stream:
         for outcome in stream:
             if outcome.ok:
                 seconds.append(outcome.seconds)
                 cpu.append(outcome.cpu_seconds)
         stats = stream.stats()
+    after = _tree_cpu_seconds()
     n = len(items)
+    # CPU of this process (dispatch; a LocalCluster's scheduler too) and of its descendants
+    # (the workers) beyond the jobs' own: what running the batch cost on top of the work. CPU
+    # time, unlike wall time, is not stretched by other jobs of a shared machine.
+    tree_cpu = sum(after.get(pid, 0.0) - before.get(pid, 0.0) for pid in after)
+    cpu_overhead = (tree_cpu - float(np.sum(cpu))) / n if after else None
     startup = stats.startup_seconds or 0.0
     steady = max(stats.wall_seconds - startup, 1e-9)
     work = float(np.median(seconds))  # a clip's job once the worker is warm
@@ -168,7 +179,29 @@ def _measure_once(job: Any, items: list, n_frames: int, **where: Any) -> dict[st
         "core_share": float(np.sum(cpu) / np.sum(seconds)),
         "overhead_per_clip_ms": 1e3 * overhead,
         "overhead_fraction": overhead / work,
+        "cpu_overhead_per_clip_ms": None if cpu_overhead is None else 1e3 * cpu_overhead,
+        "cpu_overhead_fraction": (
+            None if cpu_overhead is None else cpu_overhead / float(np.median(cpu))
+        ),
     }
+
+
+def _tree_cpu_seconds() -> dict[int, float]:
+    """CPU seconds (user + system) of this process and each descendant, by pid; empty
+    without psutil."""
+    if importlib.util.find_spec("psutil") is None:
+        return {}
+    import psutil
+
+    me = psutil.Process()
+    cpu = {}
+    for proc in [me, *me.children(recursive=True)]:
+        try:
+            times = proc.cpu_times()
+        except psutil.Error:
+            continue
+        cpu[proc.pid] = times.user + times.system
+    return cpu
 
 
 def _throughput(job: Any, items: list, n_frames: int, dask_ok: bool) -> dict[str, Any]:
