@@ -27,9 +27,10 @@
   every task carries the projection model). Local pools are measured warm (kept from a first
   batch, as the second pass of ``pose index`` finds them); ``cold_start`` gives the seconds a
   fresh pool (forkserver, workers, first imports) or a fresh Dask cluster costs.
-* **Cost model** for 100,000 clips on N workers: ``startup + clips * (work + overhead) / N``
-  from the measured per-clip numbers, against the serial HNSW insertion of ``pose index``
-  (its main process adds every pose to the graph, measured per pose below).
+* **Cost model** for 100,000 clips on N workers with a core each:
+  ``startup + clips * (work + overhead) / N`` from the measured per-clip CPU times (job and
+  overhead, eight clips per task), against the serial HNSW insertion of ``pose index`` (its
+  main process adds every pose to the graph, measured per pose below).
 * **Pose index at size**: ``PoseLibrary.build_streamed``, then ``save``, over 10k, 100k and
   1M generated poses (quick: 10k and 30k), each in a fresh subprocess that reports its peak
   resident memory (``ru_maxrss`` over the whole build and save; per phase, and its largest
@@ -373,35 +374,41 @@ def _run_probe(n_poses: int, seed: int) -> dict[str, Any]:
 
 
 def _cost_model(rows: dict[str, Any], probes: list[dict[str, Any]]) -> dict[str, Any]:
-    """Hours for COST_MODEL_CLIPS clips on N workers, from the measured per-clip costs."""
+    """Hours for COST_MODEL_CLIPS clips on N workers with a core each, from measured per-clip
+    CPU costs (a dedicated core runs a clip in its CPU time; wall times here are stretched by
+    the other jobs of the shared machine)."""
     one = rows["processes_1_chunk8"]  # pose index sends 8 clips per task in large libraries
-    work = one["work_per_clip_ms"] / 1e3
-    frames_per_clip = 480 / (120.0 / FPS)  # poses per benchmark clip after resampling
+    work = one["cpu_per_clip_ms"] / 1e3
+    poses_per_clip = 480 / (120.0 / FPS)  # the benchmark clips after resampling
     model: dict[str, Any] = {
         "clips": COST_MODEL_CLIPS,
         "work_per_clip_s": work,
-        "formula": "startup + clips * (work + overhead) / N; pose index: max(that, serial insert)",
+        "formula": (
+            "startup + clips * (cpu work + cpu overhead) / N; pose index: at least the serial "
+            "HNSW insertion of clips * poses per clip"
+        ),
     }
-    insert = [p for p in probes if "index_poses_per_s" in p]
-    insert_s_per_pose = 1.0 / insert[-1]["index_poses_per_s"] if insert else None
     for kind in ("processes", "dask"):
         two = rows.get(f"{kind}_2_chunk8")
         if not two:
             continue
-        overhead = max(two["overhead_per_clip_ms"], 0.0) / 1e3
+        overhead = max(two.get("cpu_overhead_per_clip_ms") or two["overhead_per_clip_ms"], 0) / 1e3
         startup = rows["cold_start"][f"{kind}_2_s"]
         hours = {
             n: (startup + COST_MODEL_CLIPS * (work + overhead) / n) / 3600
             for n in COST_MODEL_WORKERS
         }
         model[kind] = {"overhead_per_clip_s": overhead, "startup_s": startup, "hours": hours}
-    if insert_s_per_pose is not None:
-        # the index pass adds each pose to the graph in the main process, overlapping the
-        # workers: it bounds the pose index from below however many workers there are
+    insert = [p for p in probes if "index_poses_per_s" in p]
+    if insert:
+        # The index pass adds every pose to the graph in the main process, overlapping the
+        # workers: however many workers, pose index takes at least this long (measured at the
+        # largest size, wall time, so on a loaded machine an upper estimate).
+        seconds_per_pose = 1.0 / insert[-1]["index_poses_per_s"]
+        model["pose_index_insert_s_per_pose"] = seconds_per_pose
         model["pose_index_serial_insert_hours"] = (
-            COST_MODEL_CLIPS * frames_per_clip * insert_s_per_pose / 3600
+            COST_MODEL_CLIPS * poses_per_clip * seconds_per_pose / 3600
         )
-        model["pose_index_insert_s_per_pose"] = insert_s_per_pose
     return model
 
 
