@@ -3,12 +3,16 @@
 ``index`` reads every ``.amc`` and ``.bvh`` file under the given folders (ASF skeletons found
 as :func:`quatmotion.io.read_amc` finds them), prepares each clip
 (:meth:`quatmotion.pose.data.PoseClip.from_motion`: resampled to ``--fps``, scaled to
-``--height`` cm) and builds a :class:`~quatmotion.pose.library.PoseLibrary`. ``search`` answers
+``--height`` cm) and builds a :class:`~quatmotion.pose.library.PoseLibrary` with
+:meth:`~quatmotion.pose.library.PoseLibrary.build_streamed`: clips prepared in parallel
+(``--workers``, ``--scheduler``; :mod:`quatmotion.parallel`), a bar counting finished clips,
+unreadable files listed at the end and exit code 1 when there were any. ``search`` answers
 with the nearest poses: clip, frame number in the clip's file, time in seconds and distance.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import sys
 import time
@@ -16,9 +20,17 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.progress import Progress, TaskID
 
 from quatmotion.cli._app import app
-from quatmotion.cli._common import CliInputError, read_clip, user_errors
+from quatmotion.cli._common import (
+    CliInputError,
+    error_console,
+    progress_bar,
+    read_clip,
+    user_errors,
+)
+from quatmotion.parallel import SCHEDULER_ENV
 
 pose_app = typer.Typer(
     help="Index a motion library's poses and search it under a learned pose distance.",
@@ -50,36 +62,82 @@ def index_command(
         int, typer.Option(help="Transition pairs wanted (similar, and as many dissimilar for LMS).")
     ] = 500,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    fit_poses: Annotated[
+        int, typer.Option(help="Poses (of clips drawn at random) the distance is learned on.")
+    ] = 20_000,
+    workers: Annotated[
+        int | None,
+        typer.Option(help="Worker processes (default: one per CPU; 1 runs in this process)."),
+    ] = None,
+    index_threads: Annotated[
+        int,
+        typer.Option(
+            help="Threads inserting poses into the HNSW graph (1: the same file every run)."
+        ),
+    ] = 1,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help=f"Dask scheduler, tcp://HOST:PORT (default: ${SCHEDULER_ENV}, else local).",
+        ),
+    ] = None,
 ) -> None:
-    """Learn a pose distance on the library and index every pose of it."""
+    """Learn a pose distance on the library and index every pose of it.
+
+    Clips are read and described in parallel; a file that cannot be read is reported and
+    skipped, and the command then exits with code 1 after writing the library of the others.
+    """
     from quatmotion.io import find_motion_files
-    from quatmotion.pose.data import PoseClip
-    from quatmotion.pose.library import METRICS, PoseLibrary
+    from quatmotion.parallel import resolve_scheduler
+    from quatmotion.pose.library import METRICS, PoseLibrary, load_pose_clip
 
     with user_errors():
         if metric not in METRICS:
             raise CliInputError(f"unknown --metric {metric!r}; choose from {', '.join(METRICS)}")
         files = find_motion_files(paths)
-        clips = []
-        for f in files:
-            try:
-                clips.append(
-                    PoseClip.from_motion(read_clip(f), fps=fps, height=height, name=str(f))
-                )
-            except Exception as exc:  # noqa: BLE001 - one unreadable file must not stop a build
-                _echo(f"skipping {f}: {exc}")
-        _echo(f"read {len(clips)} of {len(files)} clips")
-        library = PoseLibrary.build(
-            clips,
-            rank=rank,
-            n_unlabeled=unlabeled,
-            n_pairs=pairs,
-            seed=seed,
-            metric_name=metric,
-            log=_echo,
-        )
+        where = resolve_scheduler(scheduler, workers=workers)
+        _echo(f"{len(files)} clips, prepared on {where.describe()}")
+        with progress_bar(error_console) as bar:
+            library, failures = PoseLibrary.build_streamed(
+                files,
+                functools.partial(load_pose_clip, fps=fps, height=height),
+                fit_poses=fit_poses,
+                rank=rank,
+                n_unlabeled=unlabeled,
+                n_pairs=pairs,
+                seed=seed,
+                metric_name=metric,
+                scheduler=where,
+                index_threads=index_threads,
+                progress=_StageBars(bar),
+                log=lambda message: bar.console.print(message, markup=False, highlight=False),
+            )
         library.save(output)
-    _echo(f"wrote {output}: {len(library.clip_of)} poses of {len(library.clip_names)} clips")
+    for failure in failures:
+        error_console.print(f"skipped {failure}", markup=False, highlight=False, soft_wrap=True)
+    _echo(
+        f"wrote {output}: {len(library.clip_of)} poses of {len(library.clip_names)} clips; "
+        f"{len(failures)} of {len(files)} clips failed"
+    )
+    if failures:
+        raise typer.Exit(code=1)
+
+
+class _StageBars:
+    """``progress(stage, done, total)`` of a build drawn as one bar per stage."""
+
+    _TEXT = {"learn": "reading a sample to learn the distance", "index": "indexing clips"}
+
+    def __init__(self, bar: Progress) -> None:
+        self.bar = bar
+        self.tasks: dict[str, TaskID] = {}
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if stage not in self.tasks:
+            for task in self.tasks.values():  # an earlier stage stopped where it was: complete
+                self.bar.update(task, total=self.bar.tasks[task].completed)
+            self.tasks[stage] = self.bar.add_task(self._TEXT.get(stage, stage), total=total)
+        self.bar.update(self.tasks[stage], completed=done, total=total)
 
 
 @pose_app.command("search")

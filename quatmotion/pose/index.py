@@ -110,6 +110,54 @@ class HNSWIndex:
         self.dim_ = arr.shape[1]
         return self
 
+    def partial_fit(self, X: ArrayLike, *, capacity: int | None = None) -> HNSWIndex:
+        """Add the rows of ``X`` as the next items (``n_items_``, ``n_items_ + 1``, ...).
+
+        For indexes built in chunks that never sit in memory all at once. The first call
+        creates the graph with the rows' dimension; later ones grow its capacity by half again
+        when needed, so adding stays amortised linear. Items go in in row order on
+        ``n_threads`` threads; with one thread the graph is a function of the rows, their
+        chunking and ``random_state`` alone.
+
+        Parameters
+        ----------
+        X : array_like, shape (N, D)
+            ``D`` must match the vectors already indexed.
+        capacity : int, optional
+            Items to make room for at once (the expected total): growing the graph copies it,
+            so a good guess saves time and the memory of the copy.
+
+        Returns
+        -------
+        self
+        """
+        self._check_params()
+        arr = self._as_vectors(X, getattr(self, "dim_", None))
+        room = max(int(capacity or 0), 0)
+        if not hasattr(self, "_index"):
+            if len(arr) == 0:
+                raise ValueError("cannot start an index with zero vectors")
+            index = hnswlib.Index(space="l2", dim=arr.shape[1])
+            index.init_index(
+                max_elements=max(len(arr), room),
+                M=int(self.M),
+                ef_construction=int(self.ef_construction),
+                random_seed=int(self.random_state),
+            )
+            index.set_ef(int(self.ef_search))
+            self._index = index
+            self.n_items_ = 0
+            self.dim_ = arr.shape[1]
+        needed = self.n_items_ + len(arr)
+        capacity = self._index.get_max_elements()
+        if needed > capacity:
+            self._index.resize_index(max(needed, room, capacity + capacity // 2))
+        if len(arr):
+            ids = np.arange(self.n_items_, needed)
+            self._index.add_items(arr, ids, num_threads=int(self.n_threads))
+        self.n_items_ = needed
+        return self
+
     def _check_fitted(self) -> None:
         if not hasattr(self, "_index"):
             raise ValueError("this HNSWIndex is not built yet: call fit first")

@@ -30,6 +30,8 @@ Conventions
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import json
 import os
 import pathlib
@@ -45,6 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 from quatmotion._atomic import atomic_output
 from quatmotion.errors import FormatError
 from quatmotion.motion import Motion
+from quatmotion.parallel import Failure, Scheduler, imap_batch
 from quatmotion.pose import labels
 from quatmotion.pose.baselines import LMS
 from quatmotion.pose.data import PoseClip, PoseData
@@ -52,7 +55,15 @@ from quatmotion.pose.index import HNSWIndex
 from quatmotion.pose.metric import RDSR
 from quatmotion.pose.scaler import MinMaxUnitScaler
 
-__all__ = ["DEFAULT_METRIC", "METRICS", "PoseLibrary"]
+__all__ = [
+    "DEFAULT_METRIC",
+    "METRICS",
+    "PoseLibrary",
+    "ProjectedClip",
+    "load_pose_clip",
+    "project_gpd",
+    "projected_clip",
+]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -147,68 +158,231 @@ class PoseLibrary:
         PoseLibrary
         """
         say = log or (lambda _msg: None)
-        if metric_name not in METRICS:
-            raise ValueError(
-                f"unknown pose metric {metric_name!r}; choose from {', '.join(METRICS)}"
-            )
         if not clips:
             raise ValueError("no clips to index")
-        for name, value in (("rank", rank), ("n_unlabeled", n_unlabeled), ("n_pairs", n_pairs)):
-            if value < 1:
-                raise ValueError(f"{name} must be at least 1, got {value}")
-        fps, height = clips[0].fps, clips[0].height
-        if any(c.fps != fps or c.height != height for c in clips):
-            raise ValueError("every clip must be prepared at the same frame rate and height")
-        rng = np.random.default_rng(seed)
-        poses = PoseData.concat([c.poses for c in clips])
-        clip_offsets = labels.ClipOffsets(np.array([len(c) for c in clips]))
-        t0 = time.perf_counter()
-        raw = poses.gpd
-        say(f"GPD of {len(poses)} poses: {time.perf_counter() - t0:.1f} s")
-        lms = metric_name == "GPD+LMS"
-        pairs, similar, pairs_from = _labelled_pairs(
-            clips, clip_offsets, n_pairs, rng, say, dissimilar=lms
+        model, meta, X = _learn_projection(
+            clips,
+            rank=rank,
+            n_unlabeled=n_unlabeled,
+            n_pairs=n_pairs,
+            seed=seed,
+            metric=metric,
+            metric_name=metric_name,
+            say=say,
         )
-        unlabeled = rng.permutation(len(poses))[:n_unlabeled]
-        scaler = MinMaxUnitScaler().fit(raw[np.unique(np.r_[unlabeled, pairs.ravel()])])
-        X = scaler.transform(raw)
         t0 = time.perf_counter()
-        if lms:
-            weights = LMS(power=2).fit(None, X[pairs[:, 0]], X[pairs[:, 1]], similar).weights_
-            kept = np.flatnonzero(weights > 0)
-            W = np.zeros((X.shape[1], kept.size))
-            W[kept, np.arange(kept.size)] = np.sqrt(weights[kept])
-            rank = kept.size
-        else:
-            rank = min(rank, X.shape[1])
-            positive = pairs[similar]
-            learner = RDSR(n_components=rank, random_state=seed) if metric is None else metric
-            learner.fit(X[unlabeled], np.stack([X[positive[:, 0]], X[positive[:, 1]]], axis=1))
-            W = learner.components_.T
-        say(f"{metric_name} metric of rank {rank}: {time.perf_counter() - t0:.1f} s")
-        t0 = time.perf_counter()
-        index = HNSWIndex(M=M, ef_construction=ef_construction, random_state=seed).fit(X @ W)
+        index = HNSWIndex(M=M, ef_construction=ef_construction, random_state=seed)
+        index.fit(X @ model["W"])
         say(f"HNSW index of {len(X)} poses: {time.perf_counter() - t0:.1f} s")
-        steps = np.repeat([c.step for c in clips], clip_offsets.lengths)
+        offsets = labels.ClipOffsets(np.array([len(c) for c in clips]))
+        steps = np.repeat([c.step for c in clips], offsets.lengths)
         return cls(
             index=index,
             clip_names=[c.name for c in clips],
-            clip_of=clip_offsets.clip_of(),
-            frame_of=clip_offsets.frame_of() * steps,
-            model={"scale": scaler.scale_, "offset": scaler.offset_, "W": W},
+            clip_of=offsets.clip_of(),
+            frame_of=offsets.frame_of() * steps,
+            model=model,
+            meta={**meta, "file_fps": [c.fps * c.step for c in clips]},
+        )
+
+    @classmethod
+    def build_streamed(
+        cls,
+        sources: Sequence[Any],
+        load: Callable[[Any], PoseClip],
+        *,
+        fit_poses: int = 20_000,
+        rank: int = 50,
+        n_unlabeled: int = 5000,
+        n_pairs: int = 500,
+        seed: int = 0,
+        M: int = 16,
+        ef_construction: int = 100,
+        metric: Any = None,
+        metric_name: str = DEFAULT_METRIC,
+        workers: int | None = None,
+        scheduler: str | Scheduler | None = None,
+        chunk_size: int | None = None,
+        flush_poses: int = 4096,
+        index_threads: int = 1,
+        progress: Callable[[str, int, int], None] | None = None,
+        log: Callable[[str], None] | None = None,
+    ) -> tuple[PoseLibrary, list[Failure]]:
+        """Build a library of any size in bounded memory, the clips prepared in parallel.
+
+        Two passes over ``sources``, each a batch of :mod:`quatmotion.parallel` (local process
+        pool, or Dask with ``scheduler``):
+
+        1. *Learn*: clips are loaded in a seeded random order until they hold ``fit_poses``
+           poses (at least two clips); the distance is learned on that sample exactly as
+           :meth:`build` learns it on all clips (in input order), so a library smaller than
+           ``fit_poses`` gets the model :meth:`build` would give it.
+        2. *Index*: every clip is loaded again in a worker, described and projected there; the
+           vectors (float32, ``rank`` per pose) come back in input order and go into the
+           HNSW graph ``flush_poses`` at a time, on ``index_threads`` threads: with one (the
+           default) the library is the same bytes whatever the scheduler and the number of
+           workers.
+
+        Memory holds the sample, a window of projected clips and the index itself; neither
+        all poses nor their GPD features are ever in one array.
+
+        Parameters
+        ----------
+        sources : sequence
+            One item per clip, passed to ``load`` (file paths, generator specs...).
+        load : callable
+            ``load(source) -> PoseClip``, module-level (picklable), every clip at the same
+            frame rate and height; an exception skips that clip (reported, never fatal).
+        fit_poses : int
+            Poses the distance is learned on (the sample grows a clip at a time to this).
+        rank, n_unlabeled, n_pairs, seed, M, ef_construction, metric, metric_name
+            As for :meth:`build`.
+        workers, scheduler
+            Where the clips are prepared: :func:`quatmotion.parallel.imap_batch`.
+        chunk_size : int, optional
+            Clips per task of the index pass. Each task carries the projection model (about
+            0.7 MB at rank 50), so by default eight clips share one once there are at least
+            64 clips, else every clip is a task. The learn pass sends clips one by one.
+        flush_poses : int
+            Vectors per insertion into the HNSW graph.
+        index_threads : int
+            Threads inserting into the graph, in this process. One keeps the library the
+            same bytes whatever the scheduler; more insert faster (the insertion is the part
+            of the build that does not spread over workers), but the graph then depends on
+            thread timing (its search results barely).
+        progress : callable, optional
+            ``progress(stage, done, total)`` with stage ``"learn"`` (clips loaded for the
+            sample, out of all clips; stops when the sample is complete) or ``"index"``.
+        log : callable, optional
+            Called with progress messages.
+
+        Returns
+        -------
+        library : PoseLibrary
+            Over the clips that could be read, in input order (their failures left out).
+        failures : list of Failure
+            Clips skipped, in input order, each with a one-line reason.
+
+        Raises
+        ------
+        ValueError
+            No clip could be read, or the parameters are out of range.
+        """
+        say = log or (lambda _msg: None)
+        sources = list(sources)
+        if not sources:
+            raise ValueError("no clips to index")
+        for name, value in (
+            ("fit_poses", fit_poses),
+            ("flush_poses", flush_poses),
+            ("index_threads", index_threads),
+        ):
+            if value < 1:
+                raise ValueError(f"{name} must be at least 1, got {value}")
+        batch = {"workers": workers, "scheduler": scheduler}
+
+        def stage(name: str) -> Callable[[int, int], None] | None:
+            return None if progress is None else functools.partial(progress, name)
+
+        # 1. the sample, in a seeded order, loaded until it holds fit_poses poses
+        order = np.random.default_rng([seed, len(sources)]).permutation(len(sources))
+        failed: dict[int, Failure] = {}
+        sample: list[tuple[int, PoseClip]] = []
+        n_sample_poses = 0
+        with imap_batch(
+            load, [sources[i] for i in order], progress=stage("learn"), **batch
+        ) as stream:
+            for outcome in stream:
+                where = int(order[outcome.index])
+                if outcome.failure is not None:
+                    failed[where] = dataclasses.replace(outcome.failure, index=where)
+                    continue
+                sample.append((where, outcome.value))
+                n_sample_poses += len(outcome.value)
+                if n_sample_poses >= fit_poses and len(sample) >= 2:
+                    break
+        if not sample:
+            raise ValueError(_none_read(len(sources), failed))
+        sample.sort(key=lambda pair: pair[0])
+        clips = [clip for _, clip in sample]
+        say(f"learning the distance on {len(clips)} clips ({n_sample_poses} poses)")
+        model, meta, _ = _learn_projection(
+            clips,
+            rank=rank,
+            n_unlabeled=n_unlabeled,
+            n_pairs=n_pairs,
+            seed=seed,
+            metric=metric,
+            metric_name=metric_name,
+            say=say,
+        )
+        fps, height, n_fit_clips = clips[0].fps, clips[0].height, len(clips)
+        del sample, clips
+
+        # 2. every clip projected in a worker, inserted in input order
+        kept = [i for i in range(len(sources)) if i not in failed]
+        job = functools.partial(projected_clip, load=load, model=model)
+        if chunk_size is None:
+            chunk_size = 8 if len(kept) >= 64 else 1
+        expected_poses = int(1.05 * n_sample_poses / n_fit_clips * len(kept))
+        index = HNSWIndex(
+            M=M, ef_construction=ef_construction, n_threads=index_threads, random_state=seed
+        )
+        names: list[str] = []
+        lengths: list[int] = []
+        steps: list[int] = []
+        pending: list[NDArray[np.float32]] = []
+        n_pending = 0
+        t0 = time.perf_counter()
+        with imap_batch(
+            job,
+            [sources[i] for i in kept],
+            progress=stage("index"),
+            chunk_size=chunk_size,
+            **batch,
+        ) as st:
+            for outcome in st:
+                where = kept[outcome.index]
+                if outcome.failure is not None:
+                    failed[where] = dataclasses.replace(outcome.failure, index=where)
+                    continue
+                clip = outcome.value
+                if clip.fps != fps or clip.height != height:
+                    message = (
+                        f"prepared at {clip.fps:g} fps and height {clip.height}, the library at "
+                        f"{fps:g} fps and height {height} (its file rate is no multiple of it)"
+                    )
+                    failed[where] = Failure(where, sources[where], message)
+                    continue
+                names.append(clip.name)
+                lengths.append(len(clip.vectors))
+                steps.append(clip.step)
+                pending.append(clip.vectors)
+                n_pending += len(clip.vectors)
+                if n_pending >= flush_poses:
+                    index.partial_fit(np.concatenate(pending), capacity=expected_poses)
+                    pending, n_pending = [], 0
+        if pending:
+            index.partial_fit(np.concatenate(pending), capacity=expected_poses)
+        if not names:
+            raise ValueError(_none_read(len(sources), failed))
+        seconds = time.perf_counter() - t0
+        say(f"indexed {index.n_items_} poses of {len(names)} clips: {seconds:.1f} s")
+        offsets = labels.ClipOffsets(np.array(lengths))
+        library = cls(
+            index=index,
+            clip_names=names,
+            clip_of=offsets.clip_of(),
+            frame_of=offsets.frame_of() * np.repeat(steps, offsets.lengths),
+            model=model,
             meta={
-                "fps": fps,
-                "height_cm": height,
-                "file_fps": [c.fps * c.step for c in clips],
-                "rank": rank,
-                "n_unlabeled": len(unlabeled),
-                "metric": metric_name,
-                "n_positive_pairs": int(similar.sum()),
-                "n_negative_pairs": int((~similar).sum()),
-                "positive_pairs_from": pairs_from,
-                "seed": seed,
+                **meta,
+                "file_fps": [fps * s for s in steps],
+                "fit_clips": n_fit_clips,
+                "fit_poses": n_sample_poses,
             },
         )
+        return library, [failed[i] for i in sorted(failed)]
 
     def prepare_query(self, motion: Motion) -> PoseClip:
         """``motion`` prepared as the indexed clips were (same frame rate and body height)."""
@@ -226,11 +400,7 @@ class PoseLibrary:
         -------
         ndarray, shape (N, r)
         """
-        x = np.asarray(raw_gpd, dtype=np.float64)
-        x = x * self.model["scale"] + self.model["offset"]
-        norm = np.linalg.norm(x, axis=1, keepdims=True)
-        x = x / np.where(norm > 0, norm, 1.0)
-        return x @ self.model["W"]
+        return project_gpd(raw_gpd, self.model)
 
     def find(self, clip: str | int, frame: int) -> int:
         """Catalogue number of the indexed pose nearest in time to ``frame`` of ``clip``.
@@ -381,3 +551,149 @@ def _labelled_pairs(
     both = np.concatenate((pairs, apart))
     similar = np.r_[np.ones(len(pairs), dtype=bool), np.zeros(len(apart), dtype=bool)]
     return both, similar, f"consecutive frames; poses {_FAR_APART_S:g} s apart as dissimilar"
+
+
+def _learn_projection(
+    clips: Sequence[PoseClip],
+    *,
+    rank: int,
+    n_unlabeled: int,
+    n_pairs: int,
+    seed: int,
+    metric: Any,
+    metric_name: str,
+    say: Callable[[str], None],
+) -> tuple[dict[str, FloatArray], dict[str, Any], FloatArray]:
+    """The GPD scaling and the metric's projection learned on ``clips``.
+
+    Returns the model (``scale``, ``offset``, ``W``), the settings for the library's ``meta``
+    and the scaled GPD of every pose, shape
+    ``(N, D)``.
+    """
+    if metric_name not in METRICS:
+        raise ValueError(f"unknown pose metric {metric_name!r}; choose from {', '.join(METRICS)}")
+    for name, value in (("rank", rank), ("n_unlabeled", n_unlabeled), ("n_pairs", n_pairs)):
+        if value < 1:
+            raise ValueError(f"{name} must be at least 1, got {value}")
+    fps, height = clips[0].fps, clips[0].height
+    if any(c.fps != fps or c.height != height for c in clips):
+        raise ValueError("every clip must be prepared at the same frame rate and height")
+    rng = np.random.default_rng(seed)
+    poses = PoseData.concat([c.poses for c in clips])
+    clip_offsets = labels.ClipOffsets(np.array([len(c) for c in clips]))
+    t0 = time.perf_counter()
+    raw = poses.gpd
+    say(f"GPD of {len(poses)} poses: {time.perf_counter() - t0:.1f} s")
+    lms = metric_name == "GPD+LMS"
+    pairs, similar, pairs_from = _labelled_pairs(
+        clips, clip_offsets, n_pairs, rng, say, dissimilar=lms
+    )
+    unlabeled = rng.permutation(len(poses))[:n_unlabeled]
+    scaler = MinMaxUnitScaler().fit(raw[np.unique(np.r_[unlabeled, pairs.ravel()])])
+    X = scaler.transform(raw)
+    del raw
+    t0 = time.perf_counter()
+    if lms:
+        weights = LMS(power=2).fit(None, X[pairs[:, 0]], X[pairs[:, 1]], similar).weights_
+        kept = np.flatnonzero(weights > 0)
+        W = np.zeros((X.shape[1], kept.size))
+        W[kept, np.arange(kept.size)] = np.sqrt(weights[kept])
+        rank = kept.size
+    else:
+        rank = min(rank, X.shape[1])
+        positive = pairs[similar]
+        learner = RDSR(n_components=rank, random_state=seed) if metric is None else metric
+        learner.fit(X[unlabeled], np.stack([X[positive[:, 0]], X[positive[:, 1]]], axis=1))
+        W = learner.components_.T
+    say(f"{metric_name} metric of rank {rank}: {time.perf_counter() - t0:.1f} s")
+    model = {"scale": scaler.scale_, "offset": scaler.offset_, "W": W}
+    meta = {
+        "fps": fps,
+        "height_cm": height,
+        "rank": rank,
+        "n_unlabeled": len(unlabeled),
+        "metric": metric_name,
+        "n_positive_pairs": int(similar.sum()),
+        "n_negative_pairs": int((~similar).sum()),
+        "positive_pairs_from": pairs_from,
+        "seed": seed,
+    }
+    return model, meta, X
+
+
+def _none_read(n_sources: int, failed: dict[int, Failure]) -> str:
+    """The error when every clip failed: its distinct reasons (a few), in input order."""
+    reasons = list(dict.fromkeys(str(failed[i]) for i in sorted(failed)))
+    more = f"; and {len(reasons) - 3} other reasons" if len(reasons) > 3 else ""
+    return f"none of the {n_sources} clips could be read: {'; '.join(reasons[:3])}{more}"
+
+
+def project_gpd(raw_gpd: ArrayLike, model: dict[str, FloatArray]) -> FloatArray:
+    """Raw GPD features mapped to a library's index space: ``unit(scale * gpd + offset) @ W``.
+
+    Parameters
+    ----------
+    raw_gpd : array_like, shape (N, D)
+    model : dict
+        ``scale`` and ``offset`` of shape (D,), ``W`` of shape (D, r).
+
+    Returns
+    -------
+    ndarray, shape (N, r)
+    """
+    x = np.asarray(raw_gpd, dtype=np.float64)
+    x = x * model["scale"] + model["offset"]
+    norm = np.linalg.norm(x, axis=1, keepdims=True)
+    x = x / np.where(norm > 0, norm, 1.0)
+    return x @ model["W"]
+
+
+@dataclass(frozen=True)
+class ProjectedClip:
+    """A clip as the index pass of :meth:`PoseLibrary.build_streamed` needs it.
+
+    Attributes
+    ----------
+    name : str
+    fps : float
+        Frame rate after resampling.
+    step : int
+        File frames per kept frame.
+    height : float or None
+        Stature the body was scaled to, centimetres.
+    vectors : ndarray of float32, shape (T, r)
+        Every pose projected into the index space.
+    """
+
+    name: str
+    fps: float
+    step: int
+    height: float | None
+    vectors: NDArray[np.float32]
+
+
+def projected_clip(source: Any, *, load: Callable[[Any], PoseClip], model: dict) -> ProjectedClip:
+    """Load one clip and project its poses (the per-clip job run by batch workers)."""
+    clip = load(source)
+    vectors = project_gpd(clip.poses.gpd, model).astype(np.float32)
+    return ProjectedClip(clip.name, clip.fps, clip.step, clip.height, vectors)
+
+
+def load_pose_clip(path: str | os.PathLike[str], *, fps: float, height: float) -> PoseClip:
+    """Read a motion file and prepare it for a pose library (a batch job: module level).
+
+    Parameters
+    ----------
+    path : str or Path
+        An ``.amc`` (its ASF found by :func:`quatmotion.io.read_amc`'s rules) or ``.bvh``.
+    fps, height : float
+        As for :meth:`PoseClip.from_motion`.
+
+    Returns
+    -------
+    PoseClip
+        Named by ``str(path)``.
+    """
+    from quatmotion.io import read_motion
+
+    return PoseClip.from_motion(read_motion(path), fps=fps, height=height, name=str(path))

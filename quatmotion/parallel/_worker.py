@@ -1,0 +1,86 @@
+"""What runs inside a worker: a task (a few items) through the job function, errors caught.
+
+Kept apart and small because a worker imports it to unpickle every task.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from typing import Any
+
+# One record per item: (index, succeeded, value or (message, detail), seconds of work, CPU
+# seconds of the worker thread, start). The start is time.perf_counter() in the worker:
+# CLOCK_MONOTONIC on Linux, shared by every process of the machine, so the caller can tell how
+# long workers took to start.
+Record = tuple[int, bool, Any, float, float, float]
+
+# Environment read by BLAS, OpenMP and Numba when they load: one thread each, as Dask's nanny
+# does for its workers, because the parallelism of a batch is its worker processes.
+SINGLE_THREAD_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
+}
+
+_process_limited = False
+_thread_state = threading.local()
+
+
+def one_line(exc: BaseException) -> str:
+    """``"TypeName: first line of the message"`` (the message alone for a FormatError, which
+    already names its file and line)."""
+    text = str(exc).strip()
+    first = text.splitlines()[0] if text else ""
+    name = type(exc).__name__
+    if name == "FormatError" and first:
+        return first
+    return f"{name}: {first}" if first else name
+
+
+def limit_threads_in_worker() -> None:
+    """Make this worker process (and the calling thread, for Numba) single-threaded.
+
+    Process-wide settings are made once per process; Numba's thread count is per thread, so it
+    is set for every thread that runs tasks (Dask runs them in a thread pool).
+    """
+    global _process_limited
+    if not _process_limited:
+        for key, value in SINGLE_THREAD_ENV.items():
+            os.environ[key] = value
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(limits=1)
+        _process_limited = True
+    if "numba" in sys.modules and not getattr(_thread_state, "numba_limited", False):
+        import numba
+
+        numba.set_num_threads(1)
+        _thread_state.numba_limited = True
+
+
+def run_items(func: Callable[[Any], Any], entries: Sequence[tuple[int, Any]]) -> list[Record]:
+    """Apply ``func`` to every ``(index, item)``; an exception fails that item only."""
+    records: list[Record] = []
+    for index, item in entries:
+        start, cpu_start = time.perf_counter(), time.thread_time()
+        try:
+            value = func(item)
+        except Exception as exc:  # any error of the job is this item's failure, no other's
+            succeeded, value = False, (one_line(exc), "".join(traceback.format_exception(exc)))
+        else:
+            succeeded = True
+        seconds, cpu = time.perf_counter() - start, time.thread_time() - cpu_start
+        records.append((index, succeeded, value, seconds, cpu, start))
+    return records
+
+
+def run_task(func: Callable[[Any], Any], entries: Sequence[tuple[int, Any]]) -> list[Record]:
+    """The task a pool or a Dask worker runs: single-threaded, then :func:`run_items`."""
+    limit_threads_in_worker()
+    return run_items(func, entries)

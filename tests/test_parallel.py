@@ -1,0 +1,347 @@
+"""Tests of the execution layer: the same results in input order on every scheduler, a bad item
+reported while the rest complete, a killed worker's item retried without loss or duplicate.
+
+The Dask tests start a real ``distributed.LocalCluster`` (2 worker processes, loopback, free
+ports) inside the test process and close it at the end.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import pickle
+import signal
+import socket
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from quatmotion.errors import FormatError
+from quatmotion.parallel import (
+    SCHEDULER_ENV,
+    Scheduler,
+    SchedulerError,
+    imap_batch,
+    resolve_scheduler,
+    run_batch,
+)
+
+# --- job functions: module level, so that worker processes can unpickle them -----------------
+
+
+def clip_features(seed: int) -> np.ndarray:
+    """A deterministic stand-in for a clip job; earlier items take longer, so workers finish
+    them in another order than the input's."""
+    time.sleep(0.002 * (8 - seed % 8))
+    rng = np.random.default_rng(seed)
+    frames = rng.standard_normal((40 + seed % 7, 12))
+    return frames @ frames.T  # BLAS, whose thread count the layer fixes
+
+
+def features_or_format_error(arg: tuple[int, str]) -> int:
+    seed, path = arg
+    if path.endswith("bad.amc"):
+        raise FormatError("frame 3 has 61 values, expected 62\nmore detail", path, line=7)
+    return seed * seed
+
+
+def die_on_first_attempt(arg: tuple[int, str, int]) -> int:
+    """Kill this worker process the first time the victim item runs (a marker file says it
+    ran), as the OOM killer or a crash in C code would."""
+    seed, marker, victim = arg
+    if seed == victim and not os.path.exists(marker):
+        pathlib.Path(marker).touch()
+        os.kill(os.getpid(), signal.SIGKILL)
+    time.sleep(0.01)
+    return seed * seed
+
+
+def die_always(arg: tuple[int, int]) -> int:
+    seed, victim = arg
+    if seed == victim:
+        os.kill(os.getpid(), signal.SIGKILL)
+    time.sleep(0.01)
+    return seed
+
+
+def thread_counts(_item: object) -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [info["num_threads"] for info in threadpool_info()]
+
+
+def results_bytes(results: list) -> list[bytes]:
+    # Each result pickled on its own: a pickled *list* also encodes which of its arrays share a
+    # dtype object, which differs between arrays made here and arrays received from workers.
+    return [pickle.dumps(r) for r in results]
+
+
+@pytest.fixture(scope="module")
+def dask_cluster() -> Iterator[str]:
+    """A 2-process Dask cluster on 127.0.0.1 (free ports, no dashboard), closed afterwards."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        scheduler_port=0,
+        dashboard_address=None,
+    ) as cluster:
+        yield cluster.scheduler_address
+
+
+# --- scheduler names -----------------------------------------------------------------------
+
+
+def test_scheduler_names_resolve_and_the_environment_is_the_fallback() -> None:
+    assert resolve_scheduler(workers=1, environ={}) == Scheduler("inline")
+    assert resolve_scheduler(workers=3, environ={}) == Scheduler("processes", workers=3)
+    assert resolve_scheduler(environ={}).n_workers >= 1
+    dask = resolve_scheduler("127.0.0.1:8786", environ={})
+    assert dask == Scheduler("dask", address="tcp://127.0.0.1:8786")
+    assert resolve_scheduler("tls://[::1]:9000").address == "tls://[::1]:9000"
+    from_env = resolve_scheduler(workers=1, environ={SCHEDULER_ENV: "tcp://head:8786"})
+    assert from_env.address == "tcp://head:8786" and from_env.workers == 1
+    # an explicit option wins over the environment
+    explicit = resolve_scheduler("processes", environ={SCHEDULER_ENV: "tcp://head:8786"})
+    assert explicit.kind == "processes"
+    assert "2 processes" in Scheduler("processes", workers=2).describe()
+
+
+@pytest.mark.parametrize(
+    ("name", "expected"),
+    [
+        ("http://head:8786", "unsupported protocol 'http'"),
+        ("tcp://head", "'tcp://head' is not HOST:PORT"),
+        ("tcp://head:99999", "'tcp://head:99999' is not a scheduler address"),
+        ("tcp://:8786", "is not HOST:PORT"),
+        ("threads", "'threads' is not HOST:PORT"),
+    ],
+)
+def test_bad_scheduler_addresses_are_named_in_one_line(name: str, expected: str) -> None:
+    with pytest.raises(SchedulerError, match=expected) as info:
+        resolve_scheduler(name)
+    assert "\n" not in str(info.value)
+    with pytest.raises(SchedulerError, match=f"{SCHEDULER_ENV} '{name}'"):
+        resolve_scheduler(environ={SCHEDULER_ENV: name})
+
+
+def test_bad_worker_counts_and_unpicklable_jobs_are_refused() -> None:
+    with pytest.raises(SchedulerError, match="workers must be a positive integer, got 0"):
+        run_batch(clip_features, [1], workers=0)
+    with pytest.raises(SchedulerError, match="inline scheduler runs one item at a time"):
+        run_batch(clip_features, [1], workers=2, scheduler="inline")
+    with pytest.raises(TypeError, match="cannot be pickled"):
+        run_batch(lambda x: x, [1], workers=2)
+    with pytest.raises(ValueError, match="chunk_size"):
+        run_batch(clip_features, [1], chunk_size=0)
+
+
+def test_an_unreachable_dask_scheduler_is_a_clear_error() -> None:
+    pytest.importorskip("distributed")
+    with socket.socket() as probe:  # a free loopback port nothing listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    start = time.perf_counter()
+    with pytest.raises(SchedulerError, match=f"cannot reach the Dask scheduler at {address}"):
+        run_batch(clip_features, [1, 2], scheduler=address, connect_timeout=1.0)
+    assert time.perf_counter() - start < 15
+
+
+# --- local execution -----------------------------------------------------------------------
+
+
+def test_inline_and_local_pools_give_the_same_bytes_in_input_order() -> None:
+    seeds = list(range(24))
+    expected = [clip_features(s) for s in seeds]
+    inline = run_batch(clip_features, seeds, workers=1)
+    assert inline.stats.scheduler.startswith("inline")
+    one = run_batch(clip_features, seeds, scheduler="processes", workers=1)
+    two = run_batch(clip_features, seeds, workers=2)
+    chunked = run_batch(clip_features, seeds, workers=2, chunk_size=5)
+    for result in (inline, one, two, chunked):
+        assert result.ok and result.stats.n_done == len(seeds) == result.stats.n_items
+        assert results_bytes(result.results) == results_bytes(expected)
+    assert two.stats.workers == 2
+    assert two.stats.work_seconds > 0
+
+
+def test_progress_counts_every_finished_item_once() -> None:
+    calls: list[tuple[int, int]] = []
+    items = [(k, "bad.amc" if k == 4 else f"{k}.amc") for k in range(10)]
+    result = run_batch(
+        features_or_format_error, items, workers=2, progress=lambda d, t: calls.append((d, t))
+    )
+    assert calls == [(d, 10) for d in range(11)]
+    assert result.stats.n_done == 10
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_bad_item_is_reported_in_one_line_and_the_rest_complete(workers: int) -> None:
+    items = [(k, "clips/bad.amc" if k == 3 else f"clips/{k:02d}.amc") for k in range(8)]
+    result = run_batch(features_or_format_error, items, workers=workers)
+    assert not result.ok
+    assert result.results == [k * k if k != 3 else None for k in range(8)]
+    [failure] = result.failures
+    assert failure.index == 3 and failure.item == items[3]
+    assert failure.message == "clips/bad.amc:7: frame 3 has 61 values, expected 62"
+    assert "Traceback" in failure.detail
+    assert result.stats.n_failed == 1
+    assert "7 done, 1 failed" in result.stats.summary()
+
+
+def test_workers_run_single_threaded() -> None:
+    result = run_batch(thread_counts, range(4), workers=2)
+    assert result.ok
+    assert all(count == 1 for counts in result.results for count in counts)
+
+
+def test_a_killed_worker_loses_and_duplicates_no_item(tmp_path: pathlib.Path) -> None:
+    marker = str(tmp_path / "killed")
+    items = [(k, marker, 5) for k in range(16)]
+    indices = []
+    with imap_batch(die_on_first_attempt, items, workers=2) as stream:
+        values = []
+        for outcome in stream:
+            indices.append(outcome.index)
+            values.append(outcome.value)
+        stats = stream.stats()
+    assert os.path.exists(marker)  # the worker really died
+    assert indices == list(range(16))
+    assert values == [k * k for k in range(16)]
+    assert stats.n_failed == 0 and stats.retried >= 1
+
+
+def test_an_item_that_always_kills_its_worker_fails_alone(tmp_path: pathlib.Path) -> None:
+    items = [(k, 6) for k in range(12)]
+    result = run_batch(die_always, items, workers=2, retries=1)
+    assert result.results == [k if k != 6 else None for k in range(12)]
+    [failure] = result.failures
+    assert failure.index == 6
+    assert "worker process died running it (2 times; gave up)" in failure.message
+
+
+def test_a_stream_holds_at_most_window_items_ahead() -> None:
+    window = 3
+    done = 0
+
+    def count(d: int, _total: int) -> None:
+        nonlocal done
+        done = d
+
+    ahead = []
+    stream = imap_batch(clip_features, range(30), workers=2, window=window, progress=count)
+    for outcome in stream:
+        ahead.append(done - outcome.index)
+    assert max(ahead) <= window
+    assert stream.stats().n_done == 30
+
+
+# --- Dask -----------------------------------------------------------------------------------
+
+
+def test_dask_gives_the_local_bytes_in_input_order_and_reports_bad_items(dask_cluster: str) -> None:
+    seeds = list(range(24))
+    local = run_batch(clip_features, seeds, workers=2)
+    dask = run_batch(clip_features, seeds, scheduler=dask_cluster)
+    assert dask.ok and dask.stats.workers == 2
+    assert results_bytes(dask.results) == results_bytes(local.results)
+    assert dask.stats.retried is None
+    items = [(k, "clips/bad.amc" if k == 3 else f"clips/{k:02d}.amc") for k in range(8)]
+    mixed = run_batch(features_or_format_error, items, scheduler=dask_cluster, chunk_size=2)
+    assert mixed.results == [k * k if k != 3 else None for k in range(8)]
+    assert [f.message for f in mixed.failures] == [
+        "clips/bad.amc:7: frame 3 has 61 values, expected 62"
+    ]
+
+
+def test_dask_loses_and_duplicates_no_item_when_a_worker_is_killed(
+    dask_cluster: str, tmp_path: pathlib.Path
+) -> None:
+    marker = str(tmp_path / "killed")
+    items = [(k, marker, 5) for k in range(16)]
+    indices = []
+    values = []
+    for outcome in imap_batch(die_on_first_attempt, items, scheduler=dask_cluster):
+        indices.append(outcome.index)
+        values.append(outcome.value)
+    assert os.path.exists(marker)
+    assert indices == list(range(16))
+    assert values == [k * k for k in range(16)]
+
+
+def test_dask_builds_the_same_pose_library_as_the_local_pool(dask_cluster: str) -> None:
+    import functools
+
+    from sklearn.decomposition import PCA
+
+    from quatmotion.bench.scale import generated_pose_clip
+    from quatmotion.pose.library import PoseLibrary
+
+    specs = [(kind, seed, 30 + 5 * seed) for seed, kind in enumerate(["walk", "kick"] * 3)]
+    specs[3] = ("moonwalk", 3, 40)  # a bad clip among good ones
+
+    def build(**where: object) -> tuple[PoseLibrary, list]:
+        return PoseLibrary.build_streamed(
+            specs,
+            functools.partial(generated_pose_clip, fps=30.0, height=170.0),
+            fit_poses=100,
+            rank=6,
+            n_unlabeled=100,
+            n_pairs=20,
+            metric=PCA(n_components=6, random_state=0),
+            flush_poses=64,
+            **where,
+        )
+
+    local, local_failures = build(workers=2)
+    dask, dask_failures = build(scheduler=dask_cluster)
+    assert [f.index for f in dask_failures] == [f.index for f in local_failures] == [3]
+    assert dask.index.to_bytes() == local.index.to_bytes()
+    assert dask.clip_names == local.clip_names
+    np.testing.assert_array_equal(dask.frame_of, local.frame_of)
+
+
+def worker_pid(_item: object) -> int:
+    time.sleep(0.05)  # long enough for both workers to take items
+    return os.getpid()
+
+
+def test_a_kept_pool_whose_worker_died_while_idle_is_replaced() -> None:
+    first = run_batch(worker_pid, range(6), workers=2)
+    # a worker of the kept pool dies between two batches (the OOM killer, say)
+    victim = first.results[0]
+    os.kill(victim, signal.SIGKILL)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and os.path.exists(f"/proc/{victim}"):
+        time.sleep(0.05)
+    time.sleep(0.5)  # for the pool's manager thread to see it
+    second = run_batch(worker_pid, range(6), workers=2)
+    assert second.ok
+    assert victim not in second.results
+
+
+def touch_marker(arg: tuple[int, str]) -> int:
+    seed, folder = arg
+    time.sleep(0.05)
+    pathlib.Path(folder, str(seed)).touch()
+    return seed
+
+
+def test_a_stream_closed_early_runs_no_more_items_and_the_pool_serves_again(
+    tmp_path: pathlib.Path,
+) -> None:
+    items = [(k, str(tmp_path)) for k in range(40)]
+    with imap_batch(touch_marker, items, workers=2) as stream:
+        for outcome in stream:
+            if outcome.index == 2:
+                break
+    time.sleep(0.5)
+    started = len(list(tmp_path.iterdir()))
+    assert 3 <= started <= 3 + 3  # what was yielded, plus at most workers + 1 in flight
+    again = run_batch(touch_marker, items[:6], workers=2)
+    assert again.ok and again.results == list(range(6))
