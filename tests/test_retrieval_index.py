@@ -83,7 +83,7 @@ def test_bad_file_is_reported_and_skipped(clip_folder, tmp_path):
     (folder / "broken.bvh").write_text("HIERARCHY\nROOT\n")
     (folder / "ok.bvh").write_bytes((clip_folder / "punch_1.bvh").read_bytes())
     result = _build(folder, tmp_path / "m.qidx")
-    assert result.exit_code == 0
+    assert result.exit_code == 1  # the others are indexed; the failure is in the exit code
     assert "broken.bvh" in result.output and "1 clips added" in result.output
     with ClipIndex.open(tmp_path / "m.qidx") as idx:
         assert [c.name for c in idx.clips()] == ["ok"]
@@ -168,3 +168,32 @@ def test_dictionary_method_rejects_another_skeleton(clip_folder, tmp_path):
     query = read_motion(bvh)
     with ClipIndex.open(out) as idx, pytest.raises(ValueError, match="qssd"):
         search(idx, query, method="paper-qssd")  # no qssd features were indexed
+
+
+def _rows(path: Path) -> list[tuple]:
+    with sqlite3.connect(path) as db:
+        tables = [r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")]
+        return [
+            (table, *row)
+            for table in sorted(tables)
+            for row in db.execute(f"SELECT * FROM {table} ORDER BY 1")  # noqa: S608 (our tables)
+        ]
+
+
+def test_bad_file_is_skipped_and_the_pool_builds_the_same_index(clip_folder, tmp_path):
+    folder = tmp_path / "mixed"
+    folder.mkdir()
+    for name in ("walk_0.bvh", "squat_1.bvh", "punch_2.bvh"):
+        (folder / name).write_bytes((clip_folder / name).read_bytes())
+    (folder / "broken.bvh").write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n")
+    inline, pooled = tmp_path / "inline.qidx", tmp_path / "pooled.qidx"
+    result = _build(folder, inline)  # --workers 1: in this process
+    assert result.exit_code == 1, result.output
+    assert "broken.bvh" in result.output and "3 clips added" in result.output
+    result = runner.invoke(
+        app,
+        ["index", "build", str(folder), "-o", str(pooled), "--kinds", "motion", "--workers", "2"],
+    )
+    assert result.exit_code == 1, result.output
+    # The same rows, features included, whichever ran the per-clip jobs.
+    assert _rows(inline) == _rows(pooled)

@@ -7,9 +7,10 @@
   with 1 and 2 workers, and a Dask ``LocalCluster`` on loopback with 1 and 2 worker processes.
   Each is the fastest of 3 runs (other jobs of a shared machine only slow a run down).
   Jobs: ``pose_features`` (the per-clip job of ``quatmotion pose index``: read a BVH file,
-  prepare the 16-joint poses, GPD, project by the library's model). The codec's compression
-  and the retrieval index build are looked up by :data:`JOB_HOOKS` and reported as absent
-  until their packages exist.
+  prepare the 16-joint poses, GPD, project by the library's model) and
+  ``retrieval_index_build`` (the per-clip job of ``quatmotion index build``: read the file,
+  its motion features). The codec's compression is looked up by :data:`JOB_HOOKS` and
+  reported as absent until its package exists.
 * **Scheduler overhead per clip**, in CPU time: the CPU of the whole process tree (this
   process: dispatch, and a LocalCluster's scheduler; the workers: unpickling, pickling,
   waiting loops) beyond the jobs' own CPU, per clip, and as a share of a clip's CPU
@@ -53,7 +54,6 @@ import importlib.util
 import json
 import os
 import pathlib
-import platform
 import subprocess
 import sys
 import tempfile
@@ -63,10 +63,13 @@ from typing import Any
 import numpy as np
 
 from quatmotion._atomic import atomic_write_json
+from quatmotion.bench import provenance
 from quatmotion.motion.synthetic import KINDS, generate_clip
 from quatmotion.parallel import available_cpus, imap_batch, run_batch, shutdown_pools
 from quatmotion.pose.data import PoseClip
 from quatmotion.pose.library import PoseLibrary, load_pose_clip, project_gpd, projected_clip
+from quatmotion.retrieval.build import ClipJob, index_clip
+from quatmotion.retrieval.index import ClipRecord
 
 FPS = 30.0
 HEIGHT_CM = 170.0
@@ -83,11 +86,13 @@ JOB_HOOKS = {
         "quatmotion.codec",
         "the per-clip encoding job of library-mode compression (issue 10)",
     ),
-    "retrieval_index_build": (
-        "quatmotion.retrieval",
-        "the per-clip feature job of 'index build' (issue 11)",
-    ),
 }
+
+
+def retrieval_features(path: str) -> ClipRecord:
+    """The per-clip job of ``quatmotion index build`` on one BVH file (the default method's
+    motion features), as the index build runs it."""
+    return index_clip(ClipJob(str(path), None, ("motion",), "", ""))
 
 
 def generated_pose_clip(spec: tuple[str, int, int], *, fps: float, height: float) -> PoseClip:
@@ -510,15 +515,9 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     dask_ok = importlib.util.find_spec("distributed") is not None
     n_clips = 24 if quick else 96
     result: dict[str, Any] = {
-        "benchmark": "scale",
-        "quick": quick,
-        "seed": seed,
-        "machine": {
-            "python": platform.python_version(),
-            "cpus_available": available_cpus(),
-            "processor": platform.processor() or platform.machine(),
-            "load_average": os.getloadavg(),
-        },
+        **provenance("scale", out, quick, seed),
+        "cpus_available": available_cpus(),
+        "load_average": os.getloadavg(),
         "dask_available": dask_ok,
     }
     with tempfile.TemporaryDirectory() as folder:
@@ -529,7 +528,10 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
             load=functools.partial(load_pose_clip, fps=FPS, height=HEIGHT_CM),
             model=_model(gpd_dim, seed),
         )
-        result["throughput"] = {"pose_features": _throughput(job, paths, n_frames, dask_ok)}
+        result["throughput"] = {
+            "pose_features": _throughput(job, paths, n_frames, dask_ok),
+            "retrieval_index_build": _throughput(retrieval_features, paths, n_frames, dask_ok),
+        }
     result["throughput_clips"] = {"clips": n_clips, "frames_per_clip": 480, "file_fps": 120}
     result["jobs_absent"] = {
         name: {"module": module, "job": what}

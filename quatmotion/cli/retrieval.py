@@ -26,6 +26,7 @@ from quatmotion.cli._common import (
     require_file,
     user_errors,
 )
+from quatmotion.parallel import SCHEDULER_ENV
 
 index_app = typer.Typer(
     help="Build and maintain a clip index (.qidx) for `quatmotion search`.", no_args_is_help=True
@@ -33,6 +34,7 @@ index_app = typer.Typer(
 app.add_typer(index_app, name="index")
 
 _KINDS_HELP = "Feature kinds to compute: motion, qssd, ksvd (comma-separated)."
+_SCHEDULER_HELP = f"Dask scheduler, tcp://HOST:PORT (default: ${SCHEDULER_ENV}, else local)."
 
 
 def _kinds(text: str) -> tuple[str, ...]:
@@ -54,7 +56,9 @@ def _build(
     skeletons: Path | None,
     kinds: str,
     workers: int | None,
+    scheduler: str | None,
 ) -> None:
+    from quatmotion.parallel import resolve_scheduler
     from quatmotion.retrieval.build import build_index, read_labels_csv
 
     with user_errors():
@@ -75,6 +79,7 @@ def _build(
                 labels=label_map,
                 skeletons=skeletons,
                 workers=workers,
+                scheduler=resolve_scheduler(scheduler, workers=workers),
                 progress=advance,
             )
     for path, reason in report.failed:
@@ -88,6 +93,8 @@ def _build(
         highlight=False,
         soft_wrap=True,
     )
+    if report.failed:
+        raise typer.Exit(code=1)
 
 
 @index_app.command("build")
@@ -100,9 +107,14 @@ def build_command(
     ] = None,
     kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
     workers: Annotated[int | None, typer.Option(help="Processes (default: every core).")] = None,
+    scheduler: Annotated[str | None, typer.Option(help=_SCHEDULER_HELP)] = None,
 ) -> None:
-    """Index clips (a new file, or resume one: clips already indexed are skipped)."""
-    _build(paths, output, labels, skeletons, kinds, workers)
+    """Index clips (a new file, or resume one: clips already indexed are skipped).
+
+    A file that cannot be read is reported and skipped; the command then exits with code 1
+    after committing the others.
+    """
+    _build(paths, output, labels, skeletons, kinds, workers, scheduler)
 
 
 @index_app.command("add")
@@ -115,13 +127,14 @@ def add_command(
     ] = None,
     kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
     workers: Annotated[int | None, typer.Option(help="Processes (default: every core).")] = None,
+    scheduler: Annotated[str | None, typer.Option(help=_SCHEDULER_HELP)] = None,
 ) -> None:
     """Add clips to an existing index (skipping those already in it with the same content)."""
     from quatmotion.retrieval.index import ClipIndex
 
     with user_errors():
         ClipIndex.open(index).close()
-    _build(paths, index, labels, skeletons, kinds, workers)
+    _build(paths, index, labels, skeletons, kinds, workers, scheduler)
 
 
 @index_app.command("remove")

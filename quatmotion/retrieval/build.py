@@ -2,23 +2,22 @@
 clips, one writer committing in batches.
 
 ``index_clip`` reads a clip and computes its features; it depends on nothing but its
-arguments, so any executor can map it (here a process pool over all cores; the execution
-layer of ``quatmotion.parallel`` can take its place). The writer, in the calling process,
-stores finished clips in transactions of ``batch`` clips, so a killed build keeps every batch
-already committed and the next build skips those clips (same path and content hash).
+arguments, so the execution layer (:mod:`quatmotion.parallel`) maps it over the clips: a local
+process pool over all cores by default, or a Dask cluster. Results come back in input order,
+and the writer, in the calling process, stores them in transactions of ``batch`` clips, so the
+index holds the same rows whatever ran the jobs, a killed build keeps every batch already
+committed, and the next build skips those clips (same path and content hash).
 """
 
 from __future__ import annotations
 
 import csv
-import os
-from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from multiprocessing import get_context
 from pathlib import Path
 
 from quatmotion.errors import FormatError
+from quatmotion.parallel import Scheduler, imap_batch
 from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
 from quatmotion.retrieval.index import ClipIndex, ClipRecord, content_hash
 
@@ -163,9 +162,9 @@ def build_index(
     labels: dict[str, str] | None = None,
     skeletons: str | Path | None = None,
     workers: int | None = None,
+    scheduler: str | Scheduler | None = None,
     batch: int = 16,
     progress: Callable[[int, int], None] | None = None,
-    mapper: Callable[[Callable[[ClipJob], object], list[ClipJob]], Iterator[object]] | None = None,
 ) -> BuildReport:
     """Index every motion file under ``paths`` into ``out`` (created, or extended: clips
     already there with the same content hash are skipped).
@@ -184,13 +183,13 @@ def build_index(
         Folder holding the ASF files of the AMC clips.
     workers : int, optional
         Processes (default: every core; 1 computes in this process).
+    scheduler : str or Scheduler, optional
+        Where the features are computed: :func:`quatmotion.parallel.resolve_scheduler` (a Dask
+        address ``tcp://HOST:PORT``; ``$QUATMOTION_SCHEDULER`` when None).
     batch : int
         Clips per committed transaction.
     progress : callable, optional
-        Called with ``(done, total)`` after each clip.
-    mapper : callable, optional
-        ``mapper(function, jobs)`` yielding results in any order: an execution layer to use
-        instead of the process pool.
+        Called with ``(done, total)`` as clips finish.
 
     Returns
     -------
@@ -218,38 +217,20 @@ def build_index(
                 continue
             label = _label(path, labels, known)
             jobs.append(ClipJob(str(path), str(skeleton) if skeleton else None, kinds, label, sha))
-        total = len(jobs)
-        if progress:
-            progress(0, total)
         pending: list[ClipRecord] = []
-        for done, result in enumerate(_map(jobs, workers, mapper), start=1):
-            if isinstance(result, ClipRecord):
-                pending.append(result)
-            else:
-                report.failed.append(result)  # type: ignore[arg-type]
-            if len(pending) >= batch:
-                report.added += index.add(pending)
-                pending = []
-            if progress:
-                progress(done, total)
+        stream = imap_batch(_guarded, jobs, workers=workers, scheduler=scheduler, progress=progress)
+        with stream:
+            for outcome in stream:
+                result = outcome.value
+                if outcome.failure is not None:  # its worker died, on every attempt
+                    report.failed.append((outcome.item.path, outcome.failure.message))
+                elif isinstance(result, ClipRecord):
+                    pending.append(result)
+                else:
+                    report.failed.append(result)  # type: ignore[arg-type]
+                if len(pending) >= batch:
+                    report.added += index.add(pending)
+                    pending = []
         if pending:
             report.added += index.add(pending)
     return report
-
-
-def _map(
-    jobs: list[ClipJob],
-    workers: int | None,
-    mapper: Callable[[Callable[[ClipJob], object], list[ClipJob]], Iterator[object]] | None,
-) -> Iterator[object]:
-    if mapper is not None:
-        yield from mapper(_guarded, jobs)
-        return
-    n = workers if workers is not None else (os.cpu_count() or 1)
-    if n <= 1 or len(jobs) <= 1:
-        for job in jobs:
-            yield _guarded(job)
-        return
-    # spawn, not fork: the caller may already run OpenMP threads (Numba, BLAS)
-    with ProcessPoolExecutor(max_workers=n, mp_context=get_context("spawn")) as pool:
-        yield from pool.map(_guarded, jobs, chunksize=1)
