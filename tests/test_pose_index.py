@@ -78,7 +78,7 @@ def test_library_round_trip_and_projection(tmp_path: pathlib.Path) -> None:
         meta={"fps": 30.0},
     )
     vectors = lib.project(raw)
-    x = raw * model["scale"] + model["offset"]
+    x = np.clip(raw * model["scale"] + model["offset"], 0.0, 1.0)  # the library's range
     np.testing.assert_allclose(vectors, (x / np.linalg.norm(x, axis=1, keepdims=True)) @ model["W"])
     lib.index.fit(vectors)
     path = tmp_path / "lib.idx"
@@ -212,3 +212,32 @@ def test_library_file_checks_its_format_version(tmp_path: pathlib.Path) -> None:
     path.write_bytes(b"not a library at all")
     with pytest.raises(FormatError, match="pose library"):
         PoseLibrary.load(path)
+
+
+def test_a_query_far_outside_the_library_range_does_not_swamp_its_pose() -> None:
+    """Issue 9 (1): a feature of a query far outside the library's range (a body unlike the
+    library's) is clipped to the range instead of dominating the unit-length vector."""
+    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.pose.data import PoseClip
+
+    class _Projection:  # linear, RDSR's interface; the scaling is under test, not RDSR
+        def __init__(self, n_components: int, random_state: int = 0) -> None:
+            self.n_components = n_components
+
+        def fit(self, X: np.ndarray, pairs: np.ndarray) -> _Projection:
+            self.components_ = np.linalg.svd(X - X.mean(0), full_matrices=False)[2][:20]
+            return self
+
+    clips = [
+        PoseClip.from_motion(generate_clip(kind, 1, n_frames=240), fps=30, height=170)
+        for kind in ("walk", "squat", "wave")
+    ]
+    lib = PoseLibrary.build(clips, rank=20, n_unlabeled=200, n_pairs=20, metric=_Projection(20))
+    raw = np.concatenate([c.poses.gpd for c in clips])
+    scale, offset = lib.model["scale"], lib.model["offset"]
+    varying = np.flatnonzero(scale > 0)
+    far = raw.copy()
+    for j in varying[:: len(varying) // 5][:5]:  # five features, each 50 ranges too high
+        far[:, j] = (50.0 - offset[j]) / scale[j]
+    ids, _ = lib.search(lib.project(far), 1)
+    assert np.mean(ids[:, 0] == np.arange(len(raw))) > 0.8

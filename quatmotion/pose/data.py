@@ -339,14 +339,14 @@ class PoseClip:
     step : int
         File frames per kept frame (frame ``i`` here is frame ``i * step`` of the file).
     world : ndarray, shape (T, 16, 3)
-        World positions of the 16 pose joints, centimetres, scaled.
+        World positions of the 16 pose joints on the canonical body, centimetres.
     local : ndarray, shape (T, 16, 3)
         The same in the body frame, the Hip at ``(0, hip height, 0)`` (see
         :func:`quatmotion.pose.skeleton16.to_body_frame` with ``keep_height=True``).
     poses : PoseData
         The ``T`` poses with their time derivatives.
     height : float or None
-        The stature the body was scaled to, centimetres (``None``: the file's own size).
+        The stature of the canonical body, centimetres (``None``: the skeleton's own).
     """
 
     name: str
@@ -366,7 +366,7 @@ class PoseClip:
         height: float | None = None,
         name: str | None = None,
     ) -> PoseClip:
-        """Resample ``motion`` to about ``fps``, scale its body to ``height`` and describe it.
+        """Resample ``motion`` to about ``fps``, put it on the canonical body and describe it.
 
         Parameters
         ----------
@@ -376,8 +376,9 @@ class PoseClip:
             Target frame rate: every ``round(motion.fps / fps)``-th frame is kept (at least
             every frame). ``None`` keeps every frame.
         height : float, optional
-            Stature to scale the body to, centimetres (:func:`skeleton16.height_scale`);
-            ``None`` keeps the file's size.
+            Stature of the body the poses are put on, centimetres: every clip goes onto the
+            canonical body (:func:`skeleton16.canonical_positions16`), so that poses of
+            different skeletons compare. ``None`` keeps the skeleton's own stature.
         name : str, optional
             Default ``motion.name``.
 
@@ -390,8 +391,7 @@ class PoseClip:
         step = 1 if fps is None else max(1, int(round(motion.fps / fps)))
         if step > 1:
             motion = motion.slice(step=step)
-        scale = 1.0 if height is None else skeleton16.height_scale(motion.skeleton, height)
-        world = skeleton16.world_positions16(motion) * scale
+        world = skeleton16.canonical_positions16(motion, height)
         local = skeleton16.to_body_frame(world, keep_height=True)
         return cls(
             name=motion.name if name is None else name,

@@ -1,9 +1,9 @@
 """A saved, searchable pose library: "poses like frame F of clip C".
 
-Every pose of a motion library is described by the GPD, scaled (min-max, then unit length),
-projected by a learned metric ``W`` (RDSR by default, rank 50), and put in an HNSW graph
-(:class:`~quatmotion.pose.index.HNSWIndex`). In the projected space the learned distance
-``sqrt((x - y)^T W W^T (x - y))`` is plain Euclidean distance, so an L2 index answers
+Every pose of a motion library is described by the GPD, scaled (min-max, clipped to the library's
+range, then unit length), projected by a learned metric ``W`` (RDSR by default, rank 50), and put
+in an HNSW graph (:class:`~quatmotion.pose.index.HNSWIndex`). In the projected space the learned
+distance ``sqrt((x - y)^T W W^T (x - y))`` is plain Euclidean distance, so an L2 index answers
 learned-metric queries. :meth:`PoseLibrary.build` learns the metric from the library itself:
 positive pairs are good transitions labelled by Kovar's windowed point-cloud distance, the
 unlabeled poses a random sample. A library of a single clip has no cross-clip pairs: then
@@ -11,8 +11,13 @@ consecutive frames serve as the positive pairs.
 
 Conventions
 -----------
-* Clips are prepared by :meth:`PoseClip.from_motion` (resampled, scaled to one body height);
-  queries go through :meth:`PoseLibrary.prepare_query`, so they are described alike.
+* Clips are prepared by :meth:`PoseClip.from_motion` (resampled, put on the canonical body of
+  one stature); queries go through :meth:`PoseLibrary.prepare_query`, so they are described
+  alike whatever their skeleton.
+* Features are clipped to the library's range after the min-max step: a query from another
+  body or motion may exceed the range in a few features (nearly constant ones, such as the
+  spread of a rigid pelvis), and unclipped they would dominate its unit-length vector, so that
+  every such query lands on the same few poses.
 * Frame numbers count from 0 in the clip's file, before any resampling.
 * A library file is one ``.npz`` holding the serialised HNSW graph, the projection model and the
   pose catalogue (clip names, frame numbers, fps), with a ``meta`` record naming the format
@@ -50,7 +55,7 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 _FORMAT = "quatmotion-pose-library"
-_VERSION = 1
+_VERSION = 2  # 2: poses on the canonical body, features clipped to the library's range
 # Fewer transition pairs than this teach a metric too little: use consecutive frames instead.
 _MIN_TRANSITION_PAIRS = 10
 
@@ -72,7 +77,7 @@ class PoseLibrary:
     model : dict of str to ndarray
         The projection: ``scale`` and ``offset`` (shape (D,), the GPD normalisation of Eq. 38),
         ``W`` (shape (D, r), the metric's projection); poses map to
-        ``unit(scale * gpd + offset) @ W``.
+        ``unit(clip(scale * gpd + offset, 0, 1)) @ W``.
     meta : dict
         JSON-serialisable settings (fps, frame step, height, method, labels used...).
     """
@@ -102,7 +107,7 @@ class PoseLibrary:
 
         The steps: GPD of every pose; positive pairs (good transitions by Kovar's windowed
         point-cloud distance, :func:`~quatmotion.pose.labels.transition_labels`, or
-        consecutive frames when the clips yield fewer than 10); the min-max + unit-length
+        consecutive frames when the clips yield fewer than 10); the min-max (clipped) + unit-length
         scaling fitted on the unlabeled sample and the pairs; the metric learned from them;
         every pose projected by it into an HNSW index.
 
@@ -146,7 +151,8 @@ class PoseLibrary:
         say(f"GPD of {len(poses)} poses: {time.perf_counter() - t0:.1f} s")
         positive, pairs_from = _positive_pairs(clips, clip_offsets, n_pairs, rng, say)
         unlabeled = rng.permutation(len(poses))[:n_unlabeled]
-        scaler = MinMaxUnitScaler().fit(raw[np.unique(np.r_[unlabeled, positive.ravel()])])
+        sample = np.unique(np.r_[unlabeled, positive.ravel()])
+        scaler = MinMaxUnitScaler(clip=True).fit(raw[sample])
         X = scaler.transform(raw)
         rank = min(rank, X.shape[1])
         t0 = time.perf_counter()
@@ -193,7 +199,7 @@ class PoseLibrary:
         ndarray, shape (N, r)
         """
         x = np.asarray(raw_gpd, dtype=np.float64)
-        x = x * self.model["scale"] + self.model["offset"]
+        x = np.clip(x * self.model["scale"] + self.model["offset"], 0.0, 1.0)
         norm = np.linalg.norm(x, axis=1, keepdims=True)
         x = x / np.where(norm > 0, norm, 1.0)
         return x @ self.model["W"]
