@@ -4,9 +4,11 @@ file. Organised by command; each test names the issue item it covers."""
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -264,3 +266,151 @@ def test_generate_bounds_its_arguments(tmp_path, option, value, needle):
     out = tmp_path / "big.bvh"
     _assert_bad_input(_invoke("generate", "walk", out, option, value), needle)
     assert not out.exists()
+
+
+# --- pose index and pose search: frames (2), --skeleton (6), options (11), bad values (12),
+# --- wrong files (13), clip names and -k (14), --json ------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def pose_library(tmp_path_factory):
+    """A small library of generated clips (one BVH per kind) and its folder."""
+    folder = tmp_path_factory.mktemp("poses")
+    clips = folder / "clips"
+    for kind in ("walk", "squat", "jumping_jack"):
+        assert _invoke("generate", kind, clips / f"{kind}.bvh", "--frames", "120").exit_code == 0
+    library = folder / "poses.idx"
+    result = _invoke(
+        "pose", "index", clips, "-o", library, "--rank", "8", "--unlabeled", "200", "--pairs", "40"
+    )
+    assert result.exit_code == 0, result.output
+    return library, clips
+
+
+def test_pose_search_frames_count_from_zero_and_out_of_range_is_an_error(pose_library):
+    library, clips = pose_library
+    for where in (("--clip", "walk"), ("--file", clips / "walk.bvh")):
+        for frame in ("5000", "120", "-1"):
+            _assert_bad_input(
+                _invoke("pose", "search", library, *where, "--frame", frame), "0 to 119"
+            )
+        result = _invoke("pose", "search", library, *where, "--frame", "0", "-k", "1", "--json")
+        assert result.exit_code == 0, result.output
+        assert json.loads(result.stdout)["query"]["frame"] == 0
+    table = _invoke("pose", "search", library, "--clip", "walk", "--frame", "4")
+    assert "count from 0" in table.stdout
+    assert "count from 0" in _invoke("pose", "search", "--help").stdout
+
+
+def test_pose_search_json_has_the_search_document_shape(pose_library):
+    library, _ = pose_library
+    result = _invoke("pose", "search", library, "--clip", "squat", "--frame", "60", "--json")
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)
+    assert {"query", "method", "results"} <= set(doc)
+    assert doc["query"]["clip"] == "squat" and doc["query"]["frame"] == 60
+    first = doc["results"][0]
+    assert {"rank", "clip", "path", "label", "distance", "frame", "seconds"} <= set(first)
+    assert first["rank"] == 1 and first["clip"] == "squat" and first["frame"] == 60
+    assert first["path"].endswith("squat.bvh") and first["distance"] < 1e-4
+    assert [r["rank"] for r in doc["results"]] == list(range(1, 11))
+
+
+def test_pose_search_clip_names_numbers_and_k(pose_library):
+    library, _ = pose_library
+    number = _invoke("pose", "search", library, "--clip", "1", "--frame", "0", "-k", "1", "--json")
+    assert number.exit_code == 0, number.output
+    names = [json.loads(number.stdout)["results"][0]["clip"]]
+    by_name = _invoke("pose", "search", library, "--clip", names[0], "--frame", "0", "--json")
+    assert json.loads(by_name.stdout)["query"]["clip"] == names[0]
+    _assert_bad_input(_invoke("pose", "search", library, "--clip", "7", "--frame", "0"), "0 to 2")
+    _assert_bad_input(
+        _invoke("pose", "search", library, "--clip", "jumpingjack", "--frame", "0"),
+        "jumping_jack",
+    )
+    n_poses = 3 * 30  # 120 frames at 120 fps indexed at 30 fps
+    for k in ("0", str(n_poses + 1)):
+        _assert_bad_input(
+            _invoke("pose", "search", library, "--clip", "walk", "--frame", "0", "-k", k),
+            f"1 to {n_poses}",
+        )
+    others = _invoke(
+        "pose", "search", library, "--clip", "walk", "--frame", "0", "--other-clips", "-k", "61"
+    )
+    _assert_bad_input(others, "1 to 60")
+
+
+def test_pose_commands_take_skeleton_and_units(pose_library, tmp_path):
+    library, _ = pose_library
+    amc = tmp_path / "walk_01.amc"
+    assert _invoke("generate", "walk", amc, "--frames", "60").exit_code == 0
+    amc.with_suffix(".asf").rename(tmp_path / "body.asf")
+    _assert_bad_input(
+        _invoke("pose", "search", library, "--file", amc, "--frame", "0"), "--skeleton"
+    )
+    found = _invoke(
+        "pose", "search", library, "--file", amc, "--skeleton", tmp_path / "body.asf",
+        "--frame", "0", "-k", "1",
+    )  # fmt: skip
+    assert found.exit_code == 0, found.output
+    bvh = tmp_path / "w.bvh"
+    assert _invoke("generate", "walk", bvh, "--frames", "60").exit_code == 0
+    found = _invoke("pose", "search", library, "--file", bvh, "--units", "cm", "--frame", "0")
+    assert found.exit_code == 0, found.output
+    out = tmp_path / "amc.idx"
+    index = _invoke(
+        "pose", "index", amc, bvh, "-o", out, "--skeleton", tmp_path / "body.asf",
+        "--rank", "4", "--unlabeled", "50", "--pairs", "10",
+    )  # fmt: skip
+    assert index.exit_code == 0, index.output
+    assert "read 2 of 2 clips" in index.stderr
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [("--fps", "0"), ("--fps", "nan"), ("--height", "-170"), ("--rank", "0"),
+     ("--unlabeled", "0"), ("--pairs", "0"), ("--seed", "-3")],
+)  # fmt: skip
+def test_pose_index_checks_its_options_before_reading(tmp_path, option, value):
+    missing = tmp_path / "no-such-folder"
+    result = _invoke("pose", "index", missing, "-o", tmp_path / "x.idx", option, value)
+    _assert_bad_input(result, option)
+
+
+def test_pose_index_skips_absurd_clips_quietly_and_keeps_its_inputs(tmp_path, pose_library):
+    _, clips = pose_library
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    for name in ("walk.bvh", "squat.bvh"):
+        (folder / name).write_bytes((clips / name).read_bytes())
+    _stick_bvh(folder / "far.bvh", 175.0, root_x=1e308)
+    (folder / "x.bvh").mkdir()  # a folder named like a clip is not a clip
+    out = tmp_path / "lib.idx"
+    args = ("pose", "index", folder, "-o", out, "--rank", "4", "--unlabeled", "50", "--pairs", "10")
+    result = _invoke(*args)
+    assert result.exit_code == 0, result.output
+    assert "Warning" not in result.stderr and "RuntimeWarning" not in result.output
+    assert re.search(r"skipping .*far\.bvh: .*1 km", result.stderr), result.stderr
+    assert "read 2 of 3 clips" in result.stderr
+    _assert_bad_input(_invoke(*args), "lib.idx", "--force")
+    assert _invoke(*args, "--force").exit_code == 0
+    walk = folder / "walk.bvh"
+    before = walk.read_bytes()
+    _assert_bad_input(_invoke("pose", "index", folder, "-o", walk, "--force"), "input")
+    assert walk.read_bytes() == before
+
+
+def test_pose_search_names_a_file_that_is_not_a_library(tmp_path):
+    pickled = tmp_path / "objects.npy"
+    np.save(pickled, np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    text = tmp_path / "notes.idx"
+    text.write_text("not a library\n")
+    other = tmp_path / "other.npz"
+    np.savez(other, x=np.zeros(3))
+    for path in (pickled, text, other):
+        message = _assert_bad_input(
+            _invoke("pose", "search", path, "--clip", "0", "--frame", "0"),
+            path.name, "not a quatmotion pose library", "version 2",
+        )  # fmt: skip
+        assert "pickle" not in message
+    _assert_bad_input(_invoke("pose", "search", tmp_path, "--clip", "0", "--frame", "0"))

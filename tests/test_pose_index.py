@@ -102,6 +102,43 @@ def test_library_round_trip_and_projection(tmp_path: pathlib.Path) -> None:
         PoseLibrary.load(bad)
 
 
+def _named_library(names: list[str], frames: int = 10) -> PoseLibrary:
+    n = len(names) * frames
+    return PoseLibrary(
+        index=HNSWIndex(random_state=0).fit(np.random.default_rng(0).normal(size=(n, 3))),
+        clip_names=names,
+        clip_of=np.repeat(np.arange(len(names)), frames),
+        frame_of=np.tile(np.arange(frames) * 4, len(names)),
+        model={},
+        meta={"file_frames": [4 * frames - 2] * len(names)},
+    )
+
+
+def test_clips_are_found_by_name_path_end_stem_or_number() -> None:
+    lib = _named_library(["a/run.bvh", "b/01_01.amc", "c/11_01.amc", "3.bvh", "d/walk.bvh"])
+    assert lib.clip_number("d/walk.bvh") == 4 and lib.clip_number("walk.bvh") == 4
+    assert lib.clip_number("walk") == 4 and lib.clip_number(1) == 1
+    assert lib.clip_number("01_01.amc") == 1  # a whole file name: not the end of "11_01.amc"
+    assert lib.clip_number("2") == 2  # a number: no clip is named "2"
+    assert lib.clip_number("3") == 3  # a name first: "3.bvh" (which is also clip 3 here)
+    with pytest.raises(ValueError, match="0 to 4"):
+        lib.clip_number("7")
+    with pytest.raises(ValueError, match="close names: walk"):
+        lib.clip_number("wlak")
+    twice = _named_library(["a/walk.bvh", "b/walk.bvh"])
+    with pytest.raises(ValueError, match=r"matches 2 indexed clips \(a/walk.bvh, b/walk.bvh\)"):
+        twice.clip_number("walk")
+    assert twice.clip_number("b/walk.bvh") == 1
+
+
+def test_frames_outside_a_clip_are_refused_with_its_range() -> None:
+    lib = _named_library(["a/run.bvh"])  # 38 frames in the file, every 4th indexed
+    assert lib.find("run", 37) == 9  # the last indexed frame, 36, is the nearest
+    for frame in (38, 5000, -1):
+        with pytest.raises(ValueError, match="0 to 37"):
+            lib.find("run", frame)
+
+
 @pytest.mark.skipif(not (DATA / "cmu").is_dir(), reason=f"mocap data folder {DATA} is absent")
 def test_cli_index_then_search_returns_the_query_pose(
     tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch
@@ -153,7 +190,7 @@ def test_cli_index_then_search_returns_the_query_pose(
     found = json.loads(res.stdout[res.stdout.index("{") :])
     first = found["results"][0]
     assert (
-        first["clip"].endswith("02_01.amc") and first["frame"] == 120 and first["distance"] < 1e-4
+        first["path"].endswith("02_01.amc") and first["frame"] == 120 and first["distance"] < 1e-4
     )
     assert len(found["results"]) == 5
     res = runner.invoke(
@@ -173,14 +210,14 @@ def test_cli_index_then_search_returns_the_query_pose(
         ],
     )
     others = json.loads(res.stdout[res.stdout.index("{") :])["results"]
-    assert all(not r["clip"].endswith("02_01.amc") for r in others)
+    assert all(not r["path"].endswith("02_01.amc") for r in others)
     # a query read from a file goes through the same features and projection as the index
     res = runner.invoke(
         app, ["pose", "search", str(out), "--file", files[1], "--frame", "40", "-k", "1", "--json"]
     )
     assert res.exit_code == 0, res.output
     hit = json.loads(res.stdout[res.stdout.index("{") :])["results"][0]
-    assert hit["clip"].endswith("02_02.amc") and hit["frame"] == 40 and hit["distance"] < 1e-4
+    assert hit["path"].endswith("02_02.amc") and hit["frame"] == 40 and hit["distance"] < 1e-4
     res = runner.invoke(app, ["pose", "search", str(out), "--clip", "nope", "--frame", "1"])
     assert res.exit_code == 2
 

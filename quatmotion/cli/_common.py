@@ -154,7 +154,9 @@ SkeletonOption = Annotated[
 ForceOption = Annotated[bool, typer.Option("--force", help="Replace existing output files.")]
 
 
-def read_clip(path: Path, skeleton: Path | None = None, units: str | None = None) -> Motion:
+def read_clip(
+    path: Path, skeleton: Path | None = None, units: str | None = None, *, strict: bool = False
+) -> Motion:
     """Read a motion file given on the command line, warning about doubtful content.
 
     Parameters
@@ -165,6 +167,9 @@ def read_clip(path: Path, skeleton: Path | None = None, units: str | None = None
         The ASF of an AMC (else found as :func:`quatmotion.io.find_asf_for_amc` finds it).
     units : str, optional
         Length unit of a BVH (:data:`quatmotion.io.BVH_UNITS`); ``None`` guesses it.
+    strict : bool
+        Refuse (:class:`CliInputError`) a clip with coordinates beyond a kilometre instead of
+        warning about it: for commands that compute on world positions.
     """
     from quatmotion.io import MOTION_SUFFIXES, implausible_values, read_motion
 
@@ -181,9 +186,11 @@ def read_clip(path: Path, skeleton: Path | None = None, units: str | None = None
     if units is not None and path.suffix.lower() != ".bvh":
         raise CliInputError(f"{path}: --units applies to BVH input only (an ASF states its unit)")
     motion = read_motion(path, skeleton, units=units)
-    for message in implausible_values(motion):
-        hint = "; give the unit with --units" if "unit" in message else ""
-        warn(f"{path}: {message}{hint}")
+    for doubt in implausible_values(motion):
+        if strict and doubt.kind == "far":
+            raise CliInputError(f"{path}: {doubt.message}: not human motion capture")
+        hint = "; give the unit with --units" if doubt.kind == "unit" else ""
+        warn(f"{path}: {doubt.message}{hint}")
     return motion
 
 

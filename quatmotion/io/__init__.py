@@ -25,6 +25,7 @@ from quatmotion.io.bvh import (
 from quatmotion.io.files import (
     FAR_CM,
     MOTION_SUFFIXES,
+    Doubt,
     find_motion_files,
     implausible_values,
     posed_size_cm,
@@ -35,6 +36,7 @@ from quatmotion.io.files import (
 __all__ = [
     "BVH_UNITS",
     "FAR_CM",
+    "Doubt",
     "MOTION_SUFFIXES",
     "PLAUSIBLE_FIGURE_CM",
     "asf_bone_end_positions",

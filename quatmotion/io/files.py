@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Literal, NamedTuple
 
 import numpy as np
 
@@ -18,6 +19,7 @@ from quatmotion.motion import Motion, Skeleton, forward_kinematics
 __all__ = [
     "FAR_CM",
     "MOTION_SUFFIXES",
+    "Doubt",
     "find_motion_files",
     "implausible_values",
     "posed_size_cm",
@@ -146,7 +148,16 @@ def write_motion(motion: Motion, path: str | Path) -> None:
         )
 
 
-def implausible_values(motion: Motion) -> list[str]:
+class Doubt(NamedTuple):
+    """Something unlikely in a clip that was read without error."""
+
+    kind: Literal["unit", "far"]
+    """``"unit"``: a guessed unit makes an implausible figure; ``"far"``: beyond 1 km."""
+    message: str
+    """One sentence, without the file name."""
+
+
+def implausible_values(motion: Motion) -> list[Doubt]:
     """What in a clip that was read without error is unlikely for human motion capture.
 
     Two checks: a BVH length unit that was guessed and makes the posed figure's size (the median
@@ -161,10 +172,10 @@ def implausible_values(motion: Motion) -> list[str]:
 
     Returns
     -------
-    list of str
-        One sentence each, without the file name; empty when nothing is doubtful.
+    list of Doubt
+        Empty when nothing is doubtful.
     """
-    messages = []
+    doubts = []
     sk = motion.skeleton
     with np.errstate(over="ignore", invalid="ignore"):
         root = float(np.max(np.abs(motion.root_translation), initial=0.0))
@@ -172,9 +183,9 @@ def implausible_values(motion: Motion) -> list[str]:
         if motion.joint_translations is not None:
             bones = max(bones, float(np.max(np.abs(motion.joint_translations))))
     if root > FAR_CM:
-        messages.append(f"the root is {root:.3g} cm from the origin, over 1 km")
+        doubts.append(Doubt("far", f"the root is {root:.3g} cm from the origin, over 1 km"))
     if bones > FAR_CM:
-        messages.append(f"a bone is {bones:.3g} cm long, over 1 km")
+        doubts.append(Doubt("far", f"a bone is {bones:.3g} cm long, over 1 km"))
     if sk.extras.get("bvh_unit_guessed") and bones <= FAR_CM:
         size = posed_size_cm(motion)
         low, high = PLAUSIBLE_FIGURE_CM
@@ -186,12 +197,15 @@ def implausible_values(motion: Motion) -> list[str]:
                 if other != cm and low <= size / cm * other <= high
             ]
             alternatives = f"; it would be {' or '.join(others)}" if others else ""
-            messages.append(
-                f"the figure is {size:.3g} cm tall or long with the length unit guessed as "
-                f"{sk.extras.get('bvh_unit') or f'{cm:g} cm'}; a human figure is {low:g} to "
-                f"{high:g} cm{alternatives}"
+            unit = sk.extras.get("bvh_unit") or f"{cm:g} cm"
+            doubts.append(
+                Doubt(
+                    "unit",
+                    f"the figure is {size:.3g} cm tall or long with the length unit guessed as "
+                    f"{unit}; a human figure is {low:g} to {high:g} cm{alternatives}",
+                )
             )
-    return messages
+    return doubts
 
 
 def posed_size_cm(motion: Motion, n_frames: int = 30) -> float:

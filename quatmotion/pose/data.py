@@ -347,6 +347,9 @@ class PoseClip:
         The ``T`` poses with their time derivatives.
     height : float or None
         The stature of the canonical body, centimetres (``None``: the skeleton's own).
+    file_frames : int or None
+        Frames of the clip's file (before resampling), so frame numbers can be checked;
+        ``None`` when unknown.
     """
 
     name: str
@@ -356,6 +359,7 @@ class PoseClip:
     local: NDArray[np.float64]
     poses: PoseData
     height: float | None = None
+    file_frames: int | None = None
 
     @classmethod
     def from_motion(
@@ -388,6 +392,7 @@ class PoseClip:
         """
         if fps is not None and not (np.isfinite(fps) and fps > 0):
             raise ValueError(f"fps must be positive and finite, got {fps}")
+        file_frames = motion.n_frames
         step = 1 if fps is None else max(1, int(round(motion.fps / fps)))
         if step > 1:
             motion = motion.slice(step=step)
@@ -401,6 +406,7 @@ class PoseClip:
             local=local,
             poses=PoseData.from_clip(local, motion.fps),
             height=height,
+            file_frames=file_frames,
         )
 
     def __len__(self) -> int:

@@ -18,7 +18,9 @@ Conventions
   body or motion may exceed the range in a few features (nearly constant ones, such as the
   spread of a rigid pelvis), and unclipped they would dominate its unit-length vector, so that
   every such query lands on the same few poses.
-* Frame numbers count from 0 in the clip's file, before any resampling.
+* Frame numbers count from 0 in the clip's file, before any resampling (an AMC file's frame 1
+  is frame 0). Asking for a frame outside a clip, or a clip that is not there, is an error
+  naming what there is.
 * A library file is one ``.npz`` holding the serialised HNSW graph, the projection model and the
   pose catalogue (clip names, frame numbers, fps), with a ``meta`` record naming the format
   (``quatmotion-pose-library``) and its version; it is written to a temporary file and then
@@ -28,6 +30,7 @@ Conventions
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 import pathlib
@@ -56,6 +59,10 @@ IntArray = NDArray[np.int64]
 
 _FORMAT = "quatmotion-pose-library"
 _VERSION = 2  # 2: poses on the canonical body, features clipped to the library's range
+_NOT_A_LIBRARY = (
+    f"not a quatmotion pose library (expected a file written by 'quatmotion pose index': "
+    f"format {_FORMAT}, version {_VERSION})"
+)
 # Fewer transition pairs than this teach a metric too little: use consecutive frames instead.
 _MIN_TRANSITION_PAIRS = 10
 
@@ -174,6 +181,7 @@ class PoseLibrary:
                 "fps": fps,
                 "height_cm": height,
                 "file_fps": [c.fps * c.step for c in clips],
+                "file_frames": [c.file_frames for c in clips],
                 "rank": rank,
                 "n_unlabeled": len(unlabeled),
                 "n_positive_pairs": len(positive),
@@ -210,33 +218,79 @@ class PoseLibrary:
         Parameters
         ----------
         clip : str or int
-            Clip number, full name, or a unique suffix of the name (e.g. the file name).
+            See :meth:`clip_number`.
         frame : int
-            Frame number in the clip's file.
+            Frame number in the clip's file, from 0.
+
+        Raises
+        ------
+        ValueError
+            For a clip that is not there (naming close names) or a frame outside the clip
+            (naming its frames).
         """
-        c = self._clip_number(clip)
+        c = self.clip_number(clip)
+        n_frames = self.file_frames(c)
+        if not 0 <= frame < n_frames:
+            raise ValueError(
+                f"frame {frame} is out of range: {self.clip_names[c]} has frames 0 to "
+                f"{n_frames - 1} (frames count from 0; an AMC file's frame 1 is frame 0)"
+            )
         rows = np.flatnonzero(self.clip_of == c)
         if len(rows) == 0:
             raise ValueError(f"clip {self.clip_names[c]!r} has no indexed pose")
         return int(rows[np.argmin(np.abs(self.frame_of[rows] - frame))])
 
-    def _clip_number(self, clip: str | int) -> int:
+    def file_frames(self, clip: int) -> int:
+        """Frames of clip number ``clip``'s file (its last indexed frame + 1 in libraries that
+        did not record it)."""
+        recorded = self.meta.get("file_frames")
+        if recorded and recorded[clip] is not None:
+            return int(recorded[clip])
+        return int(self.frame_of[self.clip_of == clip].max(initial=-1)) + 1
+
+    def clip_number(self, clip: str | int) -> int:
+        """The number of an indexed clip.
+
+        Parameters
+        ----------
+        clip : str or int
+            The clip's name (its path as indexed), a unique end of it (the file name, its stem,
+            or trailing folders), or its number from 0; digits are read as a number only when
+            no clip is named so.
+
+        Raises
+        ------
+        ValueError
+            Naming up to five close names when none matches, or the matches when several do.
+        """
+        names = self.clip_names
         if isinstance(clip, (int, np.integer)):
-            if not 0 <= clip < len(self.clip_names):
-                raise ValueError(f"clip number {clip} out of range 0..{len(self.clip_names) - 1}")
+            if not 0 <= clip < len(names):
+                raise ValueError(f"clip number {clip} is out of range 0 to {len(names) - 1}")
             return int(clip)
-        matches = [i for i, n in enumerate(self.clip_names) if n == clip]
+        text = str(clip)
+        matches = [i for i, n in enumerate(names) if n == text]
         if not matches:
-            matches = [
-                i
-                for i, n in enumerate(self.clip_names)
-                if n.endswith(clip) or pathlib.Path(n).stem == clip
-            ]
-        if len(matches) != 1:
+            matches = [i for i, n in enumerate(names) if _names_end(n, text)]
+        if not matches and text.isdigit():
+            return self.clip_number(int(text))
+        if len(matches) == 1:
+            return matches[0]
+        if matches:
+            listed = ", ".join(names[i] for i in matches[:5])
+            more = f" and {len(matches) - 5} more" if len(matches) > 5 else ""
             raise ValueError(
-                f"clip {clip!r} matches {len(matches)} indexed clips; give a longer name"
+                f"clip {text!r} matches {len(matches)} indexed clips ({listed}{more}); "
+                "give more of the path"
             )
-        return matches[0]
+        stems = [pathlib.PurePath(n).stem for n in names]
+        close = [m for m in stems if text.lower() in m.lower()][:5]
+        close = close or difflib.get_close_matches(text, stems, n=5, cutoff=0.5)
+        hint = f"; close names: {', '.join(close)}" if close else ""
+        raise ValueError(
+            f"no indexed clip is named {text!r} ({len(names)} clips, numbered 0 to "
+            f"{len(names) - 1}){hint}"
+        )
 
     def search(self, vectors: ArrayLike, k: int = 10) -> tuple[IntArray, FloatArray]:
         """Approximate nearest indexed poses of projected query vectors, ``(Q, k)`` each."""
@@ -271,7 +325,7 @@ class PoseLibrary:
             with np.load(path, allow_pickle=False) as data:
                 meta = json.loads(str(data["meta"]))
                 if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
-                    raise FormatError(f"not a quatmotion pose library (expected {_FORMAT})", path)
+                    raise FormatError(_NOT_A_LIBRARY, path)
                 version = meta.get("version")
                 if version != _VERSION:
                     newer = isinstance(version, int) and version > _VERSION
@@ -295,11 +349,18 @@ class PoseLibrary:
                 )
         except FormatError:
             raise
+        except (IsADirectoryError, FileNotFoundError, PermissionError):
+            raise
         except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-            # np.load raises ValueError (pickled or unknown content), OSError, BadZipFile...
-            raise FormatError(
-                f"not a readable quatmotion pose library ({type(exc).__name__}: {exc})", path
-            ) from exc
+            # np.load's own message (pickled data, a bad zip...) says nothing about what the
+            # file should have been.
+            raise FormatError(_NOT_A_LIBRARY, path) from exc
+
+
+def _names_end(name: str, text: str) -> bool:
+    """Whether ``text`` is the end of path ``name`` (whole components) or its file's stem."""
+    path, tail = pathlib.PurePath(name), pathlib.PurePath(text)
+    return path.stem == text or path.parts[-len(tail.parts) :] == tail.parts
 
 
 def _positive_pairs(
