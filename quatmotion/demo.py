@@ -203,7 +203,9 @@ def run_demo(
 
 def _clip_table(clips: list[tuple[Motion, str]], source: str) -> Table:
     table = Table(title=f"{len(clips)} clips ({source})", title_justify="left")
-    for column in ("clip", "label", "frames", "fps", "seconds", "joints", "standing cm"):
+    # the median over frames of the figure's vertical extent: its height only when it stands
+    columns = ("clip", "label", "frames", "fps", "seconds", "joints", "median vertical extent cm")
+    for column in columns:
         table.add_column(column, justify="left" if column in ("clip", "label") else "right")
     for motion, label in clips:
         table.add_row(

@@ -414,3 +414,36 @@ def test_pose_search_names_a_file_that_is_not_a_library(tmp_path):
         )  # fmt: skip
         assert "pickle" not in message
     _assert_bad_input(_invoke("pose", "search", tmp_path, "--clip", "0", "--frame", "0"))
+
+
+# --- bench, demo, datasets: the same policies ------------------------------------------------
+
+
+def test_bench_out_is_a_json_file_never_a_folder_or_an_existing_file(tmp_path):
+    _assert_bad_input(_invoke("bench", "io", "--out", tmp_path), "json")
+    folder = tmp_path / "results.json"
+    folder.mkdir()
+    _assert_bad_input(_invoke("bench", "io", "--out", folder), "folder")
+    existing = tmp_path / "io.json"
+    existing.write_text("{}")
+    _assert_bad_input(_invoke("bench", "io", "--out", existing), "--force")
+    assert existing.read_text() == "{}"
+    _assert_bad_input(
+        _invoke("bench", "io", "--out", tmp_path / "x.json", "--seed", "-1"), "--seed"
+    )
+
+
+def test_demo_keeps_an_earlier_summary_unless_forced(tmp_path):
+    out = tmp_path / "demo"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")
+    _assert_bad_input(_invoke("demo", "--quick", "--out", out), "summary.json", "--force")
+    assert (out / "summary.json").read_text() == "{}"
+    a_file = tmp_path / "file"
+    a_file.write_text("x")
+    _assert_bad_input(_invoke("demo", "--quick", "--out", a_file), "folder")
+
+
+def test_datasets_options_are_checked():
+    _assert_bad_input(_invoke("datasets", "list", "--limit", "-1"), "--limit")
+    assert "--force" in _invoke("datasets", "fetch", "--help").stdout

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from quatmotion.cli._app import app
-from quatmotion.cli._common import console, user_errors
+from quatmotion.cli._common import CliInputError, ForceOption, check_outputs, console, user_errors
 
 
 @app.command()
@@ -22,9 +22,15 @@ def demo(
     ),
     seed: Annotated[int, typer.Option(help="Seed of the generated library and the learners.")] = 0,
     quick: Annotated[bool, typer.Option(help="Fewer clips and iterations.")] = False,
+    force: ForceOption = False,
 ) -> None:
     """Generate (or load) clips, show them, and compress them with QSSD vs K-SVD."""
     from quatmotion.demo import run_demo
 
     with user_errors():
+        if out.exists() and not out.is_dir():
+            raise CliInputError(f"{out}: --out names a folder, this is a file")
+        if seed < 0:
+            raise CliInputError(f"--seed must be at least 0, got {seed}")
+        check_outputs([out / "summary.json"], force=force)
         run_demo(paths or [], out_dir=out, seed=seed, quick=quick, console=console)
