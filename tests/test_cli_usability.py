@@ -447,3 +447,15 @@ def test_demo_keeps_an_earlier_summary_unless_forced(tmp_path):
 def test_datasets_options_are_checked():
     _assert_bad_input(_invoke("datasets", "list", "--limit", "-1"), "--limit")
     assert "--force" in _invoke("datasets", "fetch", "--help").stdout
+
+
+def test_units_and_skeleton_reach_the_demo_and_batch_convert(tmp_path):
+    child = _stick_bvh(tmp_path / "child.bvh", 90.0)
+    _assert_bad_input(_invoke("demo", child, "--units", "furlong", "--out", tmp_path), "furlong")
+    amc = tmp_path / "w.amc"
+    assert _invoke("generate", "walk", amc, "--frames", "5").exit_code == 0
+    out = tmp_path / "both"
+    result = _invoke("convert", child, amc, out, "--units", "cm")  # --units: for the BVH
+    assert result.exit_code == 0, result.output
+    written = io.read_motion(out / "child.bvh", units="cm")  # the numbers of the input
+    assert written.skeleton.height() == pytest.approx(90.0)

@@ -244,7 +244,10 @@ def convert(
         with progress_bar() as progress:
             task = progress.add_task("reading", total=len(inputs))
             for path in inputs:
-                motions.append(read_clip(path, skeleton, units))
+                # In a batch, --skeleton is for its AMC files and --units for its BVH files.
+                bvh, alone = path.suffix.lower() == ".bvh", len(inputs) == 1
+                sk = skeleton if alone or not bvh else None
+                motions.append(read_clip(path, sk, units if alone or bvh else None))
                 progress.advance(task)
         planned = [_outputs_for(t, m.skeleton) for m, t in zip(motions, targets, strict=True)]
         check_outputs([f for files in planned for f in files], inputs, force=force)
