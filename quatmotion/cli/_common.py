@@ -22,7 +22,6 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import shutil
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -296,11 +295,8 @@ class Outputs:
             with contextlib.suppress(OSError):
                 path.unlink()
         for folder in reversed(self._folders):  # deepest first
-            with contextlib.suppress(OSError):
-                if folder.is_dir() and not any(folder.iterdir()):
-                    folder.rmdir()
-                elif folder.is_dir() and not any(f.is_file() for f in folder.rglob("*")):
-                    shutil.rmtree(folder)
+            with contextlib.suppress(OSError):  # not empty: something else is in it, keep it
+                folder.rmdir()
 
 
 def progress_bar(target: Console | None = None) -> Progress:
