@@ -19,27 +19,12 @@ from quatmotion import io
 from quatmotion.datasets import data_root
 from quatmotion.motion import Motion
 from quatmotion.motion.synthetic import generate_clip
-from quatmotion.pose import skeleton16 as s16
-from quatmotion.pose.data import PoseClip, PoseData
+from quatmotion.pose.data import PoseClip
 from quatmotion.pose.library import PoseLibrary
 
 DATA = data_root(must_exist=False)
 HDM = DATA / "hdm05" / "clips"
 BANDAI = DATA / "bandai1" / "clips"
-
-_SWAP = [
-    s16.JOINTS_16.index(("R" if n[0] == "L" else "L") + n[1:]) if n[0] in "LR" else k
-    for k, n in enumerate(s16.JOINTS_16)
-]
-
-
-def _mirrored(clip: PoseClip) -> PoseClip:
-    """The clip's mirror image (left and right swapped): the Bandai performer kicks with the
-    right leg, HDM05's kickLFront with the left, and a pose distance is not mirror-invariant."""
-    world = clip.world[:, _SWAP] * np.array([-1.0, 1.0, 1.0])
-    local = s16.to_body_frame(world, keep_height=True)
-    poses = PoseData.from_clip(local, clip.fps)
-    return PoseClip(clip.name, clip.fps, clip.step, world, local, poses, clip.height)
 
 
 def _library(files: list[tuple[Path, str]]) -> tuple[PoseLibrary, np.ndarray, np.ndarray]:
@@ -79,7 +64,9 @@ def _mean_nearest(library, query: PoseClip, rows: np.ndarray) -> dict[str, float
 
 def _nearest_kind(library, motion: Motion, mirror: bool = False, peak: bool = False) -> str:
     query = library[0].prepare_query(motion)
-    query = _mirrored(query) if mirror else query
+    # The Bandai performer kicks with the right leg, HDM05's kickLFront with the left, and a
+    # pose distance is not mirror-invariant: the kicks are compared mirrored.
+    query = query.mirrored() if mirror else query
     rows = np.arange(len(query))
     if peak:  # the kick itself: the frames where a foot is highest
         rows = np.argsort(-np.maximum(query.local[:, 12, 1], query.local[:, 15, 1]))[:10]

@@ -259,3 +259,16 @@ def test_a_skeleton_whose_mapped_joints_coincide_is_refused() -> None:
     motion = Motion(sk, 30.0, np.array([[0.0, 95.0, 0.0]] * 3), quat.identity((3, 16)))
     with pytest.raises(ValueError, match=r"narrow.*Hip-LHip.*one point"):
         s16.canonical_positions16(motion)
+
+
+def test_a_mirrored_clip_swaps_left_and_right() -> None:
+    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.pose.data import PoseClip
+
+    clip = PoseClip.from_motion(generate_clip("wave", 2, n_frames=40), fps=30, height=170)
+    mirror = clip.mirrored()
+    left, right = s16.JOINTS_16.index("LHand"), s16.JOINTS_16.index("RHand")
+    flip = np.array([-1.0, 1.0, 1.0])
+    np.testing.assert_allclose(mirror.local[:, left], clip.local[:, right] * flip, atol=1e-9)
+    np.testing.assert_allclose(mirror.local[:, right], clip.local[:, left] * flip, atol=1e-9)
+    np.testing.assert_allclose(mirror.mirrored().poses.gpd, clip.poses.gpd, atol=1e-9)

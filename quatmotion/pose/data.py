@@ -409,5 +409,25 @@ class PoseClip:
             file_frames=file_frames,
         )
 
+    def mirrored(self) -> PoseClip:
+        """The clip's mirror image: left and right swapped (a left kick becomes a right one).
+
+        A pose distance is not mirror-invariant; this lets a search or a test compare a motion
+        with the same motion done on the other side. World X is negated, so the body frame of
+        the mirrored clip is the mirror of the original's.
+        """
+        world = self.world[:, list(skeleton16.MIRROR_16)] * np.array([-1.0, 1.0, 1.0])
+        local = skeleton16.to_body_frame(world, keep_height=True)
+        return PoseClip(
+            name=self.name,
+            fps=self.fps,
+            step=self.step,
+            world=world,
+            local=local,
+            poses=PoseData.from_clip(local, self.fps),
+            height=self.height,
+            file_frames=self.file_frames,
+        )
+
     def __len__(self) -> int:
         return self.local.shape[0]
