@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/quatmotion demo $(DEMO_ARGS)
+	$(BIN)/quatmotion demo --force $(DEMO_ARGS)
 
 test: $(STAMP)
 	$(BIN)/ruff check .
@@ -28,7 +28,7 @@ browser: $(STAMP)
 	tools/install-browser
 
 bench: $(STAMP)
-	$(BIN)/quatmotion bench io --out bench-io.json
+	$(BIN)/quatmotion bench io --out bench-io.json --force
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -106,12 +106,17 @@ def plot_stick_figure(motion: Motion, path: str | Path, n_poses: int = 8) -> Pat
     return save_figure(fig, path, dpi=90)
 
 
-def _load(paths: Sequence[Path], seed: int, quick: bool) -> list[tuple[Motion, str]]:
+def _load(
+    paths: Sequence[Path], seed: int, quick: bool, units: str | None = None
+) -> list[tuple[Motion, str]]:
     if paths:
         from quatmotion.io import find_motion_files, read_motion
 
         files = find_motion_files(paths)[:_MAX_USER_CLIPS]
-        return [(read_motion(p), p.parent.name) for p in files]
+        return [
+            (read_motion(p, units=units if p.suffix.lower() == ".bvh" else None), p.parent.name)
+            for p in files
+        ]
     from quatmotion.motion.synthetic import generate_library
 
     return generate_library(1 if quick else 2, seed=seed)
@@ -156,6 +161,7 @@ def run_demo(
     seed: int = 0,
     quick: bool = False,
     console: Console | None = None,
+    units: str | None = None,
 ) -> dict[str, Any]:
     """Run the demo and print a Rich summary; returns what it wrote to ``summary.json``.
 
@@ -171,6 +177,9 @@ def run_demo(
     quick : bool
         Fewer clips, atoms and iterations.
     console : rich.console.Console, optional
+    units : str, optional
+        Length unit of the BVH clips given (see :func:`quatmotion.io.read_motion`); ``None``
+        guesses it.
 
     Returns
     -------
@@ -180,7 +189,7 @@ def run_demo(
     console = console or Console()
     out_dir = Path(out_dir)
     start = time.perf_counter()
-    clips = _load(list(paths), seed, quick)
+    clips = _load(list(paths), seed, quick, units)
     source = "given clips" if paths else "generated library"
     console.print(_clip_table(clips, source))
     figure = plot_stick_figure(clips[0][0], out_dir / f"stick_{clips[0][0].name}.png")
@@ -203,7 +212,9 @@ def run_demo(
 
 def _clip_table(clips: list[tuple[Motion, str]], source: str) -> Table:
     table = Table(title=f"{len(clips)} clips ({source})", title_justify="left")
-    for column in ("clip", "label", "frames", "fps", "seconds", "joints", "standing cm"):
+    # the median over frames of the figure's vertical extent: its height only when it stands
+    columns = ("clip", "label", "frames", "fps", "seconds", "joints", "median vertical extent cm")
+    for column in columns:
         table.add_column(column, justify="left" if column in ("clip", "label") else "right")
     for motion, label in clips:
         table.add_row(

@@ -260,3 +260,12 @@ def test_truncated_and_binary_bvh(tmp_path: Path):
     with pytest.raises(FormatError, match="not a text file") as info:
         read_bvh(path)
     assert info.value.line == _line_of(TINY_BVH, "Frames")
+
+
+def test_a_byte_order_mark_is_ignored(tiny: Path, tmp_path: Path):
+    """Issue 9: files saved by Windows editors start with a UTF-8 byte-order mark."""
+    marked = tmp_path / "marked.bvh"
+    marked.write_bytes(b"\xef\xbb\xbf" + tiny.read_bytes())
+    a, b = read_bvh(tiny), read_bvh(marked)
+    np.testing.assert_array_equal(a.rotations, b.rotations)
+    assert a.skeleton.joint_names == b.skeleton.joint_names

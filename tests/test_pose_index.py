@@ -78,7 +78,7 @@ def test_library_round_trip_and_projection(tmp_path: pathlib.Path) -> None:
         meta={"fps": 30.0},
     )
     vectors = lib.project(raw)
-    x = raw * model["scale"] + model["offset"]
+    x = np.clip(raw * model["scale"] + model["offset"], 0.0, 1.0)  # the library's range
     np.testing.assert_allclose(vectors, (x / np.linalg.norm(x, axis=1, keepdims=True)) @ model["W"])
     lib.index.fit(vectors)
     path = tmp_path / "lib.idx"
@@ -100,6 +100,43 @@ def test_library_round_trip_and_projection(tmp_path: pathlib.Path) -> None:
     np.savez(bad, x=np.zeros(3))
     with pytest.raises(ValueError, match="pose library"):
         PoseLibrary.load(bad)
+
+
+def _named_library(names: list[str], frames: int = 10) -> PoseLibrary:
+    n = len(names) * frames
+    return PoseLibrary(
+        index=HNSWIndex(random_state=0).fit(np.random.default_rng(0).normal(size=(n, 3))),
+        clip_names=names,
+        clip_of=np.repeat(np.arange(len(names)), frames),
+        frame_of=np.tile(np.arange(frames) * 4, len(names)),
+        model={},
+        meta={"file_frames": [4 * frames - 2] * len(names)},
+    )
+
+
+def test_clips_are_found_by_name_path_end_stem_or_number() -> None:
+    lib = _named_library(["a/run.bvh", "b/01_01.amc", "c/11_01.amc", "3.bvh", "d/walk.bvh"])
+    assert lib.clip_number("d/walk.bvh") == 4 and lib.clip_number("walk.bvh") == 4
+    assert lib.clip_number("walk") == 4 and lib.clip_number(1) == 1
+    assert lib.clip_number("01_01.amc") == 1  # a whole file name: not the end of "11_01.amc"
+    assert lib.clip_number("2") == 2  # a number: no clip is named "2"
+    assert lib.clip_number("3") == 3  # a name first: "3.bvh" (which is also clip 3 here)
+    with pytest.raises(ValueError, match="0 to 4"):
+        lib.clip_number("7")
+    with pytest.raises(ValueError, match="close names: walk"):
+        lib.clip_number("wlak")
+    twice = _named_library(["a/walk.bvh", "b/walk.bvh"])
+    with pytest.raises(ValueError, match=r"matches 2 indexed clips \(a/walk.bvh, b/walk.bvh\)"):
+        twice.clip_number("walk")
+    assert twice.clip_number("b/walk.bvh") == 1
+
+
+def test_frames_outside_a_clip_are_refused_with_its_range() -> None:
+    lib = _named_library(["a/run.bvh"])  # 38 frames in the file, every 4th indexed
+    assert lib.find("run", 37) == 9  # the last indexed frame, 36, is the nearest
+    for frame in (38, 5000, -1):
+        with pytest.raises(ValueError, match="0 to 37"):
+            lib.find("run", frame)
 
 
 @pytest.mark.skipif(not (DATA / "cmu").is_dir(), reason=f"mocap data folder {DATA} is absent")
@@ -155,7 +192,7 @@ def test_cli_index_then_search_returns_the_query_pose(
     found = json.loads(res.stdout[res.stdout.index("{") :])
     first = found["results"][0]
     assert (
-        first["clip"].endswith("02_01.amc") and first["frame"] == 120 and first["distance"] < 1e-4
+        first["path"].endswith("02_01.amc") and first["frame"] == 120 and first["distance"] < 1e-4
     )
     assert len(found["results"]) == 5
     res = runner.invoke(
@@ -175,14 +212,14 @@ def test_cli_index_then_search_returns_the_query_pose(
         ],
     )
     others = json.loads(res.stdout[res.stdout.index("{") :])["results"]
-    assert all(not r["clip"].endswith("02_01.amc") for r in others)
+    assert all(not r["path"].endswith("02_01.amc") for r in others)
     # a query read from a file goes through the same features and projection as the index
     res = runner.invoke(
         app, ["pose", "search", str(out), "--file", files[1], "--frame", "40", "-k", "1", "--json"]
     )
     assert res.exit_code == 0, res.output
     hit = json.loads(res.stdout[res.stdout.index("{") :])["results"][0]
-    assert hit["clip"].endswith("02_02.amc") and hit["frame"] == 40 and hit["distance"] < 1e-4
+    assert hit["path"].endswith("02_02.amc") and hit["frame"] == 40 and hit["distance"] < 1e-4
     res = runner.invoke(app, ["pose", "search", str(out), "--clip", "nope", "--frame", "1"])
     assert res.exit_code == 2
 
@@ -236,3 +273,39 @@ def test_default_metric_is_gpd_lms_with_a_diagonal_projection(n_clips: int) -> N
     ids, dist = library.search(library.project(clips[-1].poses.gpd[row : row + 1]), k=1)
     assert library.frame_of[ids[0, 0]] == 48 and dist[0, 0] < 1e-4
     assert library.clip_of[ids[0, 0]] == n_clips - 1
+
+
+def test_a_query_far_outside_the_library_range_does_not_swamp_its_pose() -> None:
+    """Issue 9 (1): a feature of a query far outside the library's range (a body unlike the
+    library's) is clipped to the range instead of dominating the unit-length vector."""
+    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.pose.data import PoseClip
+
+    class _Projection:  # linear, RDSR's interface; the scaling is under test, not RDSR
+        def __init__(self, n_components: int, random_state: int = 0) -> None:
+            self.n_components = n_components
+
+        def fit(self, X: np.ndarray, pairs: np.ndarray) -> _Projection:
+            self.components_ = np.linalg.svd(X - X.mean(0), full_matrices=False)[2][:20]
+            return self
+
+    clips = [
+        PoseClip.from_motion(generate_clip(kind, 1, n_frames=240), fps=30, height=170)
+        for kind in ("walk", "squat", "wave")
+    ]
+    lib = PoseLibrary.build(
+        clips,
+        rank=20,
+        n_unlabeled=200,
+        n_pairs=20,
+        metric=_Projection(20),
+        metric_name="GPD+RDSR",
+    )
+    raw = np.concatenate([c.poses.gpd for c in clips])
+    scale, offset = lib.model["scale"], lib.model["offset"]
+    varying = np.flatnonzero(scale > 0)
+    far = raw.copy()
+    for j in varying[:: len(varying) // 5][:5]:  # five features, each 50 ranges too high
+        far[:, j] = (50.0 - offset[j]) / scale[j]
+    ids, _ = lib.search(lib.project(far), 1)
+    assert np.mean(ids[:, 0] == np.arange(len(raw))) > 0.8

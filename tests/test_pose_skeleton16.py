@@ -203,3 +203,72 @@ def test_bandai_bvh_positions_match_independent_reference() -> None:
     expected = r["positions_file_units"][:, [names.index(n) for n in s16._JOINT_MAPS["bandai"]]]
     got = s16.world_positions16(motion)[: len(expected)]
     np.testing.assert_allclose(got, expected, atol=1e-3)
+
+
+def _reproportioned(motion: Motion, factors: dict[str, float], default: float) -> Motion:
+    """``motion`` on a skeleton whose bones are scaled (``factors`` by joint, whose offset is
+    its parent bone), the root carried by ``default`` too, as a body of those legs would be."""
+    sk = motion.skeleton
+    scale = np.array([factors.get(name, default) for name in sk.joint_names])
+    skeleton = Skeleton(
+        joint_names=sk.joint_names,
+        parents=sk.parents,
+        offsets=sk.offsets * scale[:, None],
+        channels=sk.channels,
+        euler=sk.euler,
+        axes=sk.axes,
+        site_names=sk.site_names,
+        site_parents=sk.site_parents,
+        site_offsets=sk.site_offsets * default,
+        name="reproportioned",
+        extras=dict(sk.extras),
+    )
+    return Motion(skeleton, motion.fps, motion.root_translation * default, motion.rotations)
+
+
+def test_a_pose_on_a_body_of_other_proportions_gets_the_same_description() -> None:
+    """Issue 9 (1): the same motion on a body with 1.3x legs and trunk, 0.7x arms and a neck
+    twice as long is described exactly as on the original body."""
+    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.pose.data import PoseClip
+
+    motion = generate_clip("jumping_jack", 5, n_frames=60)
+    arms = {n: 0.7 for n in ("lradius", "lwrist", "rradius", "rwrist")}
+    other = _reproportioned(motion, {**arms, "upperneck": 2.0, "head": 2.0}, default=1.3)
+    a = PoseClip.from_motion(motion, fps=30, height=170)
+    b = PoseClip.from_motion(other, fps=30, height=170)
+    np.testing.assert_allclose(b.world, a.world, atol=1e-8)
+    np.testing.assert_allclose(b.poses.gpd, a.poses.gpd, atol=1e-6)
+    # the canonical body's bones, whatever the file's
+    lengths = np.linalg.norm(a.world[:, 1:] - a.world[:, list(s16.PARENTS_16[1:])], axis=-1)
+    np.testing.assert_allclose(lengths, np.broadcast_to(s16.canonical_bone_lengths(170)[1:],
+                                                        lengths.shape), atol=1e-9)  # fmt: skip
+
+
+def test_a_skeleton_whose_mapped_joints_coincide_is_refused() -> None:
+    bones = [list(b) for b in _BONES]
+    bones[10][2] = bones[13][2] = (0, -5, 0)  # both hip joints at one point
+    index = {b[0]: i for i, b in enumerate(bones)}
+    sk = Skeleton(
+        joint_names=tuple(b[0] for b in bones),
+        parents=np.array([-1 if p is None else index[p] for _, p, _ in bones]),
+        offsets=np.array([o for _, _, o in bones], dtype=float),
+        channels=(("tx", "ty", "tz", "rz", "rx", "ry"),) + (("rz", "rx", "ry"),) * 15,
+        name="narrow",
+    )
+    motion = Motion(sk, 30.0, np.array([[0.0, 95.0, 0.0]] * 3), quat.identity((3, 16)))
+    with pytest.raises(ValueError, match=r"narrow.*Hip-LHip.*one point"):
+        s16.canonical_positions16(motion)
+
+
+def test_a_mirrored_clip_swaps_left_and_right() -> None:
+    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.pose.data import PoseClip
+
+    clip = PoseClip.from_motion(generate_clip("wave", 2, n_frames=40), fps=30, height=170)
+    mirror = clip.mirrored()
+    left, right = s16.JOINTS_16.index("LHand"), s16.JOINTS_16.index("RHand")
+    flip = np.array([-1.0, 1.0, 1.0])
+    np.testing.assert_allclose(mirror.local[:, left], clip.local[:, right] * flip, atol=1e-9)
+    np.testing.assert_allclose(mirror.local[:, right], clip.local[:, left] * flip, atol=1e-9)
+    np.testing.assert_allclose(mirror.mirrored().poses.gpd, clip.poses.gpd, atol=1e-9)

@@ -11,7 +11,14 @@ from rich.table import Table
 
 from quatmotion import bench as bench_package
 from quatmotion.cli._app import app
-from quatmotion.cli._common import CliInputError, console, user_errors
+from quatmotion.cli._common import (
+    CliInputError,
+    ForceOption,
+    at_least,
+    check_outputs,
+    console,
+    user_errors,
+)
 
 
 @app.command()
@@ -19,13 +26,18 @@ def bench(
     name: Annotated[str, typer.Argument(help="Benchmark: a module of quatmotion.bench.")],
     out: Annotated[Path, typer.Option(help="JSON file to write (figures go beside it).")],
     quick: Annotated[bool, typer.Option(help="A small, fast version.")] = False,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    seed: Annotated[int, typer.Option(help="Random seed (0 or more).")] = 0,
+    force: ForceOption = False,
 ) -> None:
     """Run ``quatmotion.bench.NAME.run(out, quick=..., seed=...)``."""
     with user_errors():
         available = bench_package.names()
         if name not in available:
             raise CliInputError(f"unknown benchmark {name!r}; available: {', '.join(available)}")
+        if out.suffix.lower() != ".json":
+            raise CliInputError(f"{out}: --out names the JSON file to write (*.json)")
+        check_outputs([out], force=force)
+        at_least("--seed", seed, 0)
         module = importlib.import_module(f"quatmotion.bench.{name}")
         if not callable(getattr(module, "run", None)):
             raise CliInputError(f"quatmotion.bench.{name} has no run() function")

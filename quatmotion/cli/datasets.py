@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from quatmotion.cli._app import app
-from quatmotion.cli._common import CliInputError, console, user_errors
+from quatmotion.cli._common import CliInputError, at_least, console, user_errors
 
 datasets_app = typer.Typer(
     help="The motion-capture data folder: list clips, fetch CMU subjects.", no_args_is_help=True
@@ -27,6 +27,7 @@ def datasets_list(
     from quatmotion.datasets import catalogue, data_root
 
     with user_errors():
+        at_least("--limit", limit, 0)
         root = data_root()
         entries = catalogue(root, collection=collection, match=match)
         table = Table(title=f"{len(entries)} clips in {root}", title_justify="left")
@@ -55,7 +56,9 @@ def datasets_fetch(
     trials: Annotated[
         str | None, typer.Option(help="Comma-separated trials (default: all).")
     ] = None,
-    overwrite: Annotated[bool, typer.Option(help="Download files that already exist.")] = False,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", "--force", help="Download files that already exist.")
+    ] = False,
 ) -> None:
     """Download CMU subjects' ASF and AMC files, each written atomically."""
     from quatmotion.datasets import DEFAULT_CMU_BASE_URL, fetch_cmu

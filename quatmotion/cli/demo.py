@@ -8,7 +8,15 @@ from typing import Annotated
 import typer
 
 from quatmotion.cli._app import app
-from quatmotion.cli._common import console, user_errors
+from quatmotion.cli._common import (
+    CliInputError,
+    ForceOption,
+    UnitsOption,
+    at_least,
+    check_outputs,
+    console,
+    user_errors,
+)
 
 
 @app.command()
@@ -22,9 +30,15 @@ def demo(
     ),
     seed: Annotated[int, typer.Option(help="Seed of the generated library and the learners.")] = 0,
     quick: Annotated[bool, typer.Option(help="Fewer clips and iterations.")] = False,
+    units: UnitsOption = None,
+    force: ForceOption = False,
 ) -> None:
     """Generate (or load) clips, show them, and compress them with QSSD vs K-SVD."""
     from quatmotion.demo import run_demo
 
     with user_errors():
-        run_demo(paths or [], out_dir=out, seed=seed, quick=quick, console=console)
+        if out.exists() and not out.is_dir():
+            raise CliInputError(f"{out}: --out names a folder, this is a file")
+        at_least("--seed", seed, 0)
+        check_outputs([out / "summary.json"], force=force)
+        run_demo(paths or [], out_dir=out, seed=seed, quick=quick, console=console, units=units)

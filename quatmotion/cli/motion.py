@@ -7,11 +7,19 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
+from typer.core import TyperCommand
 
 from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
+    ForceOption,
+    Outputs,
+    SkeletonOption,
+    UnitsOption,
+    at_least,
+    check_outputs,
     console,
+    number_in,
     progress_bar,
     read_clip,
     require_file,
@@ -19,95 +27,174 @@ from quatmotion.cli._common import (
 )
 
 if TYPE_CHECKING:
-    from quatmotion.motion import Motion
+    import click
+
+    from quatmotion.motion import Motion, Skeleton
+
+# A generated clip is built in memory, about 8 kB a frame at its peak: this bound keeps it near
+# 2.5 GB (and its BVH near 200 MB).
+MAX_GENERATED_FRAMES = 300_000
+FPS_RANGE = (1.0, 1000.0)  # frames per second of motion capture
 
 
-def _asf_path_for(amc: Path) -> Path:
-    """Where an AMC's ASF goes so that :func:`quatmotion.io.find_asf_for_amc` finds it."""
-    parts = amc.stem.split("_")
-    if len(parts) >= 2 and parts[0].upper() == "HDM":
-        return amc.with_name(f"{parts[0]}_{parts[1]}.asf")
-    if len(parts) >= 2:
-        return amc.with_name(f"{parts[0]}.asf")
-    return amc.with_suffix(".asf")
-
-
-def _write(motion: Motion, out: Path) -> list[Path]:
-    """Write ``motion`` to ``out`` by extension; an AMC gets its ASF beside it."""
-    from quatmotion.io import MOTION_SUFFIXES, write_asf, write_motion
+def _outputs_for(out: Path, skeleton: Skeleton) -> list[Path]:
+    """The files writing a clip of ``skeleton`` to ``out`` makes: an AMC gets its ASF, same
+    name, beside it (where :func:`quatmotion.io.find_asf_for_amc` looks first)."""
+    from quatmotion.io import MOTION_SUFFIXES
 
     suffix = out.suffix.lower()
     if suffix not in MOTION_SUFFIXES:
         raise CliInputError(
             f"{out}: unknown output type {out.suffix!r} (expected {', '.join(MOTION_SUFFIXES)})"
         )
-    if suffix == ".amc" and motion.skeleton.extras.get("format") != "asf":
+    if suffix == ".amc" and skeleton.extras.get("format") != "asf":
         raise CliInputError(
             f"{out}: AMC output needs an ASF skeleton; this clip's skeleton "
-            f"({motion.skeleton.name!r}) comes from a BVH, write .bvh instead"
+            f"({skeleton.name!r}) comes from a BVH, write .bvh instead"
         )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    written = [out]
-    write_motion(motion, out)
-    if suffix == ".amc":
-        asf = _asf_path_for(out)
-        write_asf(motion.skeleton, asf)
-        written.append(asf)
-    return written
+    return [out, out.with_suffix(".asf")] if suffix == ".amc" else [out]
 
 
-def _motion_summary(motion: Motion, path: str) -> Table:
-    from quatmotion.motion import standing_height
+def _write(motion: Motion, targets: list[Path], outputs: Outputs) -> None:
+    """Write ``motion`` to ``targets`` (from :func:`_outputs_for`; already checked)."""
+    from quatmotion.io import write_asf, write_motion
 
-    sk = motion.skeleton
-    table = Table(title=path, show_header=False, title_justify="left")
+    write_motion(motion, outputs.file(targets[0]))
+    if len(targets) > 1:
+        write_asf(motion.skeleton, outputs.file(targets[1]))
+
+
+def _cm(value: float) -> str:
+    """A length for a table: one decimal, or 3 significant digits when absurdly large."""
+    return f"{value:.1f}" if abs(value) < 1e6 else f"{value:.3g}"
+
+
+def _unit(skeleton: Skeleton) -> str:
+    extras = skeleton.extras
+    if extras.get("format") == "asf":
+        per_inch = 2.54 / extras["length_scale"]
+        return f"ASF unit, 1/{per_inch:g} inch ({extras['length_scale']:.4g} cm)"
+    if extras.get("format") == "bvh":
+        name = extras.get("bvh_unit") or f"{extras['bvh_scale']:g} cm"
+        how = "guessed from the skeleton's size" if extras.get("bvh_unit_guessed") else "given"
+        return f"{name} ({how})"
+    return "cm"
+
+
+def _rest_pose_height(skeleton: Skeleton) -> str:
+    """The rest pose's vertical extent, or why it is not a height (a rest pose lying down)."""
+    import numpy as np
+
+    rest = skeleton.rest_positions()
+    extent = np.ptp(rest, axis=0)
+    try:  # upright: the head straight above the feet (Bandai's rest pose lies along X)
+        from quatmotion.pose.skeleton16 import joint_indices16
+
+        joints = rest[joint_indices16(skeleton)]
+        body = joints[3] - 0.5 * (joints[12] + joints[15])
+    except ValueError:  # not a skeleton the 16 joints map: its tallest side
+        body = extent
+    length = float(np.linalg.norm(body))
+    if length > 0 and abs(body[1]) < 0.9 * length:
+        along = "XYZ"[int(np.argmax(np.abs(body)))]
+        return f"- (rest pose not upright: it lies along {along})"
+    return _cm(float(extent[1]))
+
+
+def _skeleton_rows(skeleton: Skeleton) -> list[tuple[str, str]]:
+    rows = [
+        ("skeleton", skeleton.name or "-"),
+        ("joints", str(skeleton.n_joints)),
+        ("end sites", str(skeleton.n_sites)),
+        ("unit", _unit(skeleton)),
+        ("rest pose height (cm)", _rest_pose_height(skeleton)),
+    ]
+    try:
+        from quatmotion.pose.skeleton16 import stature16
+
+        rows.append(("ankle-to-head bone chain (cm)", _cm(stature16(skeleton))))
+    except ValueError:  # not a skeleton the 16-joint pose skeleton maps
+        pass
+    return rows
+
+
+def _frame_count(motion: Motion) -> str:
+    n = motion.n_frames
+    amc = motion.skeleton.extras.get("format") == "asf"
+    numbering = f"; numbered 1 to {n} in the AMC file" if amc else ""
+    return f"{n} (frames 0 to {n - 1}{numbering})"
+
+
+def _pelvis(motion: Motion) -> int:
+    """The joint that carries the body: the 16-joint Hip where the skeleton maps (Bandai's root
+    is a static joint below its moving Hips), else the root."""
+    try:
+        from quatmotion.pose.skeleton16 import joint_indices16
+
+        return int(joint_indices16(motion.skeleton)[0])
+    except ValueError:
+        return 0
+
+
+def _motion_summary(motion: Motion) -> Table:
+    import numpy as np
+
+    from quatmotion.motion import forward_kinematics, standing_height
+
+    table = Table(show_header=False)
     table.add_column("field", style="bold")
     table.add_column("value")
-    rows = [
-        ("skeleton", sk.name or "-"),
-        ("joints", str(sk.n_joints)),
-        ("end sites", str(sk.n_sites)),
-        ("frames", str(motion.n_frames)),
+    rows = _skeleton_rows(motion.skeleton)
+    rows[3:3] = [
+        ("frames", _frame_count(motion)),
         ("fps", f"{motion.fps:g}"),
         ("duration (s)", f"{motion.duration:.3f}"),
-        ("rest height (cm)", f"{sk.height():.1f}"),
     ]
-    if motion.n_frames:
+    # Absurd but finite values (reported as warnings) may overflow on the way: show what comes.
+    with np.errstate(all="ignore"):
         step = max(1, motion.n_frames // 200)
-        rows.append(("standing height (cm)", f"{standing_height(motion, step):.1f}"))
-        rows.append(
-            ("root at frame 0 (cm)", " ".join(f"{v:.1f}" for v in motion.root_translation[0]))
-        )
+        extent = standing_height(motion, step)
+        pelvis = _pelvis(motion)
+        at_start = forward_kinematics(motion.slice(0, 1)).positions[0, pelvis]
+    rows.append(("vertical extent, median over frames (cm)", _cm(extent)))
+    rows.append(
+        (f"{motion.skeleton.joint_names[pelvis]} at frame 0 (cm)", " ".join(map(_cm, at_start)))
+    )
     for field, value in rows:
         table.add_row(field, value)
     return table
 
 
+def _title(path: Path) -> None:
+    # A line of its own, not a table title: Rich folds a title to the table's width.
+    console.print(str(path), markup=False, highlight=False, soft_wrap=True)
+
+
 @app.command()
 def info(
     file: Annotated[Path, typer.Argument(help="A .amc, .bvh or .asf file.")],
-    skeleton: Annotated[
-        Path | None, typer.Option("--skeleton", "-s", help="ASF of an AMC (else found by name).")
-    ] = None,
+    skeleton: SkeletonOption = None,
+    units: UnitsOption = None,
 ) -> None:
-    """Print a clip's skeleton name, joints, frames, fps, duration and height (cm)."""
+    """Print a clip's skeleton, unit, frames, fps, duration and body measures (cm)."""
     with user_errors():
         if file.suffix.lower() == ".asf":
             from quatmotion.io import read_asf
 
+            if units is not None:
+                raise CliInputError(
+                    f"{file}: --units applies to BVH input only (an ASF states its unit)"
+                )
             sk = read_asf(require_file(file))
-            table = Table(title=str(file), show_header=False, title_justify="left")
-            for field, value in (
-                ("skeleton", sk.name),
-                ("joints", str(sk.n_joints)),
-                ("end sites", str(sk.n_sites)),
-                ("rest height (cm)", f"{sk.height():.1f}"),
-            ):
+            _title(file)
+            table = Table(show_header=False)
+            for field, value in _skeleton_rows(sk):
                 table.add_row(field, value)
             console.print(table)
             return
-        motion = read_clip(file, skeleton)
-        console.print(_motion_summary(motion, str(file)))
+        motion = read_clip(file, skeleton, units)
+        _title(file)
+        console.print(_motion_summary(motion))
 
 
 @app.command()
@@ -118,12 +205,16 @@ def convert(
             help="Input clip(s) then the output: a .amc/.bvh file for one input, else a folder."
         ),
     ],
-    skeleton: Annotated[
-        Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC input (else found by name).")
-    ] = None,
+    skeleton: SkeletonOption = None,
+    units: UnitsOption = None,
     to: Annotated[str, typer.Option(help="Output format when writing into a folder.")] = "bvh",
+    force: ForceOption = False,
 ) -> None:
-    """Convert AMC <-> BVH by extension (ASF+AMC -> BVH too); many inputs into a folder."""
+    """Convert AMC <-> BVH by extension (ASF+AMC -> BVH too); many inputs into a folder.
+
+    An AMC output gets its ASF beside it, same name. Existing files are kept unless --force;
+    an input is never overwritten. If a clip fails, nothing written by the command is left.
+    """
     from quatmotion.io import MOTION_SUFFIXES
 
     with user_errors():
@@ -133,42 +224,87 @@ def convert(
         fmt = "." + to.lower().lstrip(".")
         if fmt not in MOTION_SUFFIXES:
             raise CliInputError(f"--to must be one of amc, bvh; got {to!r}")
-        if len(inputs) == 1 and out.suffix.lower() in MOTION_SUFFIXES:
-            motion = read_clip(inputs[0], skeleton)
-            written = _write(motion, out)
-            console.print(f"wrote {', '.join(str(w) for w in written)}")
-            return
-        if out.exists() and not out.is_dir():
-            raise CliInputError(f"{out}: several inputs need an output folder, not a file")
-        if out.suffix.lower() in MOTION_SUFFIXES:
-            raise CliInputError(f"{out}: several inputs need an output folder")
         for path in inputs:  # fail before writing anything when an input is missing
             require_file(path)
-        out.mkdir(parents=True, exist_ok=True)
+        into_folder = len(inputs) > 1 or out.is_dir()
+        if not into_folder and out.suffix.lower() not in MOTION_SUFFIXES:
+            raise CliInputError(
+                f"{out}: unknown output type {out.suffix!r} (expected "
+                f"{', '.join(MOTION_SUFFIXES)}, or an existing folder)"
+            )
+        if into_folder and out.exists() and not out.is_dir():
+            raise CliInputError(f"{out}: several inputs need an output folder, not a file")
+        if into_folder and out.suffix.lower() in MOTION_SUFFIXES and not out.is_dir():
+            raise CliInputError(f"{out}: several inputs need an output folder")
+        targets = [out] if not into_folder else [out / f"{p.stem}{fmt}" for p in inputs]
+        if len(set(targets)) < len(targets):
+            raise CliInputError("two inputs have the same name: their outputs would collide")
+        # Read everything first: a bad clip then stops the command before anything is written.
+        motions = []
         with progress_bar() as progress:
-            task = progress.add_task("converting", total=len(inputs))
+            task = progress.add_task("reading", total=len(inputs))
             for path in inputs:
-                motion = read_clip(path, skeleton)
-                _write(motion, out / f"{path.stem}{fmt}")
+                # In a batch, --skeleton is for its AMC files and --units for its BVH files.
+                bvh, alone = path.suffix.lower() == ".bvh", len(inputs) == 1
+                sk = skeleton if alone or not bvh else None
+                motions.append(read_clip(path, sk, units if alone or bvh else None))
                 progress.advance(task)
-        console.print(f"wrote {len(inputs)} clip(s) to {out}")
+        planned = [_outputs_for(t, m.skeleton) for m, t in zip(motions, targets, strict=True)]
+        check_outputs([f for files in planned for f in files], inputs, force=force)
+        with Outputs() as outputs:
+            if into_folder:
+                outputs.folder(out)
+            for motion, files in zip(motions, planned, strict=True):
+                _write(motion, files, outputs)
+        written = [f for files in planned for f in files]
+        if into_folder:
+            console.print(f"wrote {len(inputs)} clip(s) to {out}")
+        else:
+            console.print(f"wrote {', '.join(str(w) for w in written)}")
 
 
-@app.command()
+class _GenerateCommand(TyperCommand):
+    """``generate``'s help lists the motion kinds, read from the generator when help is shown
+    (importing it when the command line starts would slow every command down)."""
+
+    def format_help(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        from quatmotion.motion.synthetic import KINDS
+
+        self.help = f"Write one procedural clip. KIND is one of: {', '.join(KINDS)}."
+        super().format_help(ctx, formatter)
+
+
+@app.command(cls=_GenerateCommand)
 def generate(
-    kind: Annotated[str, typer.Argument(help="Motion kind (see --help of 'demo' for the list).")],
+    kind: Annotated[str, typer.Argument(help="Motion kind (listed above).")],
     out: Annotated[Path, typer.Argument(help="Output .bvh or .amc (ASF written beside).")],
-    seed: Annotated[int, typer.Option(help="Seed of style and noise.")] = 0,
-    frames: Annotated[int | None, typer.Option(help="Frames (default: kind-dependent).")] = None,
-    fps: Annotated[float, typer.Option(help="Frame rate.")] = 120.0,
+    seed: Annotated[int, typer.Option(help="Seed of style and noise (0 or more).")] = 0,
+    frames: Annotated[
+        int | None,
+        typer.Option(help=f"Frames, 1 to {MAX_GENERATED_FRAMES} (default: kind-dependent)."),
+    ] = None,
+    fps: Annotated[
+        float, typer.Option(help=f"Frame rate, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g}.")
+    ] = 120.0,
+    force: ForceOption = False,
 ) -> None:
     """Write one procedural clip (walk, run, jump, jumping_jack, squat, ...)."""
-    from quatmotion.motion.synthetic import generate_clip
-
     with user_errors():
-        motion = generate_clip(kind, seed, n_frames=frames, fps=fps)
-        written = _write(motion, out)
+        at_least("--seed", seed, 0)
+        if frames is not None:
+            at_least("--frames", frames, 1, MAX_GENERATED_FRAMES)
+        number_in("--fps", fps, *FPS_RANGE)
+        from quatmotion.motion.synthetic import KINDS, cmu_skeleton, generate_clip
+
+        if kind not in KINDS:
+            raise CliInputError(f"unknown motion kind {kind!r}; choose from {', '.join(KINDS)}")
+        skeleton = cmu_skeleton()
+        targets = _outputs_for(out, skeleton)
+        check_outputs(targets, force=force)  # before the work, which may take a while
+        motion = generate_clip(kind, seed, n_frames=frames, fps=fps, skeleton=skeleton)
+        with Outputs() as outputs:
+            _write(motion, targets, outputs)
         console.print(
-            f"wrote {', '.join(str(w) for w in written)} "
+            f"wrote {', '.join(str(w) for w in targets)} "
             f"({motion.n_frames} frames at {motion.fps:g} fps)"
         )

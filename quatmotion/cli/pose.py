@@ -1,13 +1,15 @@
 """``quatmotion pose index | search``: a motion library's poses under a learned distance.
 
 ``index`` reads every ``.amc`` and ``.bvh`` file under the given folders (ASF skeletons found
-as :func:`quatmotion.io.read_amc` finds them), prepares each clip
-(:meth:`quatmotion.pose.data.PoseClip.from_motion`: resampled to ``--fps``, scaled to
-``--height`` cm) and builds a :class:`~quatmotion.pose.library.PoseLibrary` with
+as :func:`quatmotion.io.read_amc` finds them, or ``--skeleton``), prepares each clip
+(:meth:`quatmotion.pose.data.PoseClip.from_motion`: resampled to ``--fps``, put on the canonical
+body of ``--height`` cm, so that skeletons of different proportions compare) and builds a
+:class:`~quatmotion.pose.library.PoseLibrary` with
 :meth:`~quatmotion.pose.library.PoseLibrary.build_streamed`: clips prepared in parallel
 (``--workers``, ``--scheduler``; :mod:`quatmotion.parallel`), a bar counting finished clips,
 unreadable files listed at the end and exit code 1 when there were any. ``search`` answers
-with the nearest poses: clip, frame number in the clip's file, time in seconds and distance.
+with the nearest poses: clip, frame number in the clip's file (from 0), time in seconds and
+distance.
 """
 
 from __future__ import annotations
@@ -24,11 +26,22 @@ from rich.progress import Progress, TaskID
 
 from quatmotion.cli._app import app
 from quatmotion.cli._common import (
+    FRAMES_HELP,
     CliInputError,
+    ForceOption,
+    SkeletonOption,
+    UnitsOption,
+    at_least,
+    check_frame,
+    check_outputs,
+    console,
     error_console,
+    number_in,
     progress_bar,
     read_clip,
+    require_file,
     user_errors,
+    warn,
 )
 from quatmotion.parallel import SCHEDULER_ENV
 
@@ -37,6 +50,9 @@ pose_app = typer.Typer(
     no_args_is_help=True,
 )
 app.add_typer(pose_app, name="pose")
+
+FPS_RANGE = (1.0, 1000.0)
+HEIGHT_RANGE = (50.0, 300.0)  # cm: a stature from a small child to beyond the tallest adult
 
 
 def _echo(message: str) -> None:
@@ -49,9 +65,15 @@ def index_command(
         list[Path], typer.Argument(help="Folders (searched recursively) or .amc/.bvh files.")
     ],
     output: Annotated[Path, typer.Option("-o", "--output", help="Library file to write.")],
-    fps: Annotated[float, typer.Option(help="Frame rate poses are sampled at.")] = 30.0,
+    fps: Annotated[
+        float,
+        typer.Option(
+            help=f"Frame rate poses are sampled at, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g}."
+        ),
+    ] = 30.0,
     height: Annotated[
-        float, typer.Option(help="Body height every skeleton is scaled to, cm.")
+        float,
+        typer.Option(help="Stature of the common body every skeleton is put on, cm."),
     ] = 170.0,
     metric: Annotated[
         str, typer.Option(help="Pose distance to learn: GPD+LMS (measured best) or GPD+RDSR.")
@@ -61,7 +83,7 @@ def index_command(
     pairs: Annotated[
         int, typer.Option(help="Transition pairs wanted (similar, and as many dissimilar for LMS).")
     ] = 500,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    seed: Annotated[int, typer.Option(help="Random seed (0 or more).")] = 0,
     fit_poses: Annotated[
         int, typer.Option(help="Poses (of clips drawn at random) the distance is learned on.")
     ] = 20_000,
@@ -81,6 +103,14 @@ def index_command(
             help=f"Dask scheduler, tcp://HOST:PORT (default: ${SCHEDULER_ENV}, else local).",
         ),
     ] = None,
+    skeleton: Annotated[
+        Path | None,
+        typer.Option(
+            "--skeleton", "-s", help="ASF of the AMC files whose ASF is not found by name."
+        ),
+    ] = None,
+    units: UnitsOption = None,
+    force: ForceOption = False,
 ) -> None:
     """Learn a pose distance on the library and index every pose of it.
 
@@ -94,13 +124,30 @@ def index_command(
     with user_errors():
         if metric not in METRICS:
             raise CliInputError(f"unknown --metric {metric!r}; choose from {', '.join(METRICS)}")
-        files = find_motion_files(paths)
+        number_in("--fps", fps, *FPS_RANGE)
+        number_in("--height", height, *HEIGHT_RANGE)
+        for option, value in (
+            ("--rank", rank),
+            ("--unlabeled", unlabeled),
+            ("--pairs", pairs),
+            ("--fit-poses", fit_poses),
+            ("--index-threads", index_threads),
+        ):
+            at_least(option, value, 1)
+        at_least("--seed", seed, 0)
+        if skeleton is not None:
+            require_file(skeleton)
         where = resolve_scheduler(scheduler, workers=workers)
+        files = find_motion_files(paths)
+        check_outputs([output], files, force=force)
         _echo(f"{len(files)} clips, prepared on {where.describe()}")
+        load = functools.partial(
+            load_pose_clip, fps=fps, height=height, skeleton=skeleton, units=units
+        )
         with progress_bar(error_console) as bar:
             library, failures = PoseLibrary.build_streamed(
                 files,
-                functools.partial(load_pose_clip, fps=fps, height=height),
+                load,
                 fit_poses=fit_poses,
                 rank=rank,
                 n_unlabeled=unlabeled,
@@ -143,42 +190,74 @@ class _StageBars:
 @pose_app.command("search")
 def search_command(
     library_path: Annotated[Path, typer.Argument(help="A library written by 'pose index'.")],
-    frame: Annotated[int, typer.Option("--frame", "-f", help="Frame number in the clip's file.")],
+    frame: Annotated[
+        int, typer.Option("--frame", "-f", help=f"Frame number in the clip's file ({FRAMES_HELP}).")
+    ],
     clip: Annotated[
-        str | None, typer.Option("--clip", "-c", help="Indexed clip: name, file name or number.")
+        str | None,
+        typer.Option("--clip", "-c", help="Indexed clip: its name, file name, stem or number."),
     ] = None,
     file: Annotated[
         Path | None, typer.Option("--file", help="Query from a clip not in the library.")
     ] = None,
-    k: Annotated[int, typer.Option("-k", help="Number of results.")] = 10,
+    k: Annotated[
+        int, typer.Option("-k", help="Number of results (1 to the library's poses).")
+    ] = 10,
     other_clips: Annotated[
         bool, typer.Option(help="Leave out results from the query's own clip.")
     ] = False,
     ef: Annotated[int, typer.Option(help="HNSW search breadth (higher: slower, more exact).")] = 64,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    skeleton: SkeletonOption = None,
+    units: UnitsOption = None,
 ) -> None:
-    """Find the poses most like frame F of a clip."""
+    """Find the poses most like frame F of a clip (frames count from 0)."""
     import numpy as np
 
     from quatmotion.pose.library import PoseLibrary
+    from quatmotion.pose.skeleton16 import skeleton_kind
 
     with user_errors():
         if (clip is None) == (file is None):
             raise CliInputError("give exactly one of --clip (an indexed clip) or --file")
+        if file is None and (skeleton is not None or units is not None):
+            raise CliInputError("--skeleton and --units apply to a --file query")
+        at_least("--ef", ef, 1)
         library = PoseLibrary.load(library_path, ef_search=ef)
         if file is not None:
-            query_clip = library.prepare_query(read_clip(file))
-            row = min(max(int(round(frame / query_clip.step)), 0), len(query_clip) - 1)
+            motion = read_clip(file, skeleton, units, strict=True)
+            check_frame(frame, motion.n_frames, str(file))
+            kinds = library.meta.get("skeletons")
+            if kinds and skeleton_kind(motion.skeleton) not in kinds:
+                warn(
+                    f"{file}: a {skeleton_kind(motion.skeleton)} skeleton, the library's are "
+                    f"{', '.join(kinds)}: poses are compared on one common body, but distances "
+                    "between skeletons run larger than within one"
+                )
+            with np.errstate(all="ignore"):
+                query_clip = library.prepare_query(motion)
+            row = min(int(round(frame / query_clip.step)), len(query_clip) - 1)
             query = library.project(query_clip.poses[row : row + 1].gpd)
             own_clip = -1
-            label = f"{file} frame {row * query_clip.step}"
+            query_doc = {"clip": file.stem, "path": str(file), "frame": row * query_clip.step}
         else:
             item = library.find(clip, frame)
             query = library.index.vectors([item])
             own_clip = int(library.clip_of[item])
-            label = f"{library.clip_names[own_clip]} frame {library.frame_of[item]}"
-        n_items = library.index.n_items_
-        want = min(n_items, k if not other_clips else k + int(np.sum(library.clip_of == own_clip)))
+            name = library.clip_names[own_clip]
+            query_doc = {
+                "clip": Path(name).stem,
+                "path": name,
+                "frame": int(library.frame_of[item]),
+            }
+        n_poses = len(library.clip_of)
+        available = int(np.sum(library.clip_of != own_clip)) if other_clips else n_poses
+        if not 1 <= k <= available:
+            where = " outside the query's clip" if other_clips else ""
+            raise CliInputError(
+                f"-k must be from 1 to {available} (the library's poses{where}), got {k}"
+            )
+        want = min(n_poses, k + (n_poses - available))
         t0 = time.perf_counter()
         ids, dist = library.search(query, want)
         elapsed = time.perf_counter() - t0
@@ -188,34 +267,65 @@ def search_command(
             ids, dist = ids[keep], dist[keep]
         ids, dist = ids[:k], dist[:k]
     file_fps = library.meta.get("file_fps")
+    labels = _labels([library.clip_names[int(library.clip_of[i])] for i in ids])
     results = []
     for rank_, (i, d) in enumerate(zip(ids, dist, strict=True), start=1):
         c = int(library.clip_of[i])
         f = int(library.frame_of[i])
+        path = library.clip_names[c]
         results.append(
             {
                 "rank": rank_,
-                "clip": library.clip_names[c],
+                "clip": Path(path).stem,
+                "path": path,
+                "label": labels.get(path, ""),
+                "distance": float(d),
                 "frame": f,
                 "seconds": f / file_fps[c] if file_fps else None,
-                "distance": float(d),
             }
         )
     if as_json:
-        json.dump(
-            {"query": label, "search_ms": 1e3 * elapsed, "results": results}, sys.stdout, indent=2
-        )
+        doc = {
+            "query": query_doc,
+            "method": library.meta.get("metric", "GPD+RDSR"),
+            "search_ms": 1e3 * elapsed,
+            "results": results,
+        }
+        json.dump(doc, sys.stdout, indent=2)
         sys.stdout.write("\n")
         return
-    from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"poses like {label} ({1e3 * elapsed:.2f} ms)")
-    for col in ("rank", "clip", "frame", "time (s)", "distance"):
-        table.add_column(col, justify="left" if col == "clip" else "right")
+    used = query_doc["frame"]
+    nearest = f", the nearest {'indexed' if file is None else 'sampled'} to {frame}"
+    console.print(
+        f"poses like {query_doc['path']} frame {used}{nearest if used != frame else ''} "
+        f"({FRAMES_HELP}); {1e3 * elapsed:.2f} ms",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
+    table = Table()
+    for col in ("rank", "clip", "label", "frame", "time (s)", "distance"):
+        table.add_column(col, justify="left" if col in ("clip", "label") else "right")
     for r in results:
         secs = "" if r["seconds"] is None else f"{r['seconds']:.2f}"
         table.add_row(
-            str(r["rank"]), Path(r["clip"]).name, str(r["frame"]), secs, f"{r['distance']:.4g}"
+            str(r["rank"]), r["clip"], r["label"], str(r["frame"]), secs, f"{r['distance']:.4g}"
         )
-    Console().print(table)
+    console.print(table)
+
+
+def _labels(paths: list[str]) -> dict[str, str]:
+    """Labels of the clips the data folder's catalogue knows (HDM05 class, Bandai content, CMU
+    description), by path; other clips have none."""
+    from quatmotion.datasets import catalogue, data_root
+
+    root = data_root(must_exist=False)
+    inside = [p for p in paths if Path(p).resolve().is_relative_to(root)]
+    if not inside or not root.is_dir():
+        return {}
+    wanted = {Path(p).resolve(): p for p in inside}
+    return {
+        wanted[e.path.resolve()]: e.label for e in catalogue(root) if e.path.resolve() in wanted
+    }

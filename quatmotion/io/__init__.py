@@ -14,15 +14,37 @@ from quatmotion.io.asf_amc import (
     write_amc,
     write_asf,
 )
-from quatmotion.io.bvh import detect_bvh_scale, read_bvh, to_bvh_skeleton, write_bvh
-from quatmotion.io.files import MOTION_SUFFIXES, find_motion_files, read_motion, write_motion
+from quatmotion.io.bvh import (
+    BVH_UNITS,
+    PLAUSIBLE_FIGURE_CM,
+    detect_bvh_scale,
+    read_bvh,
+    to_bvh_skeleton,
+    write_bvh,
+)
+from quatmotion.io.files import (
+    FAR_CM,
+    MOTION_SUFFIXES,
+    Doubt,
+    find_motion_files,
+    implausible_values,
+    posed_size_cm,
+    read_motion,
+    write_motion,
+)
 
 __all__ = [
+    "BVH_UNITS",
+    "FAR_CM",
+    "Doubt",
     "MOTION_SUFFIXES",
+    "PLAUSIBLE_FIGURE_CM",
     "asf_bone_end_positions",
     "detect_bvh_scale",
     "find_asf_for_amc",
     "find_motion_files",
+    "implausible_values",
+    "posed_size_cm",
     "read_amc",
     "read_asf",
     "read_bvh",

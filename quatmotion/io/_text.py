@@ -40,6 +40,9 @@ _BINARY = re.compile(rb"[\x00-\x08\x0e-\x1f\x7f]")
 _TEXT_BYTES = bytes(b for b in range(256) if not _BINARY.match(bytes([b])))
 
 
+_UTF8_BOM = b"\xef\xbb\xbf"
+
+
 def read_text(path: str | Path) -> str:
     """The whole file as a string (Latin-1), refusing binary content.
 
@@ -60,6 +63,8 @@ def read_text(path: str | Path) -> str:
         If the file cannot be read.
     """
     data = Path(path).read_bytes()
+    if data.startswith(_UTF8_BOM):  # Windows editors start text files with one
+        data = data[len(_UTF8_BOM) :]
     # bytes.translate deleting every allowed byte is a fast C scan; the regex only locates.
     bad = _BINARY.search(data) if data.translate(None, _TEXT_BYTES) else None
     if bad is not None:

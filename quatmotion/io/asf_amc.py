@@ -483,10 +483,11 @@ def _require_asf(skeleton: Skeleton, what: str) -> None:
 
 
 def find_asf_for_amc(path: str | Path) -> Path:
-    """The ASF that goes with an AMC by the CMU or HDM05 naming conventions.
+    """The ASF that goes with an AMC: same name first, then the CMU or HDM05 conventions.
 
-    CMU: ``SS_TT.amc`` -> ``SS.asf`` in the same folder. HDM05:
-    ``clips/CLASS/HDM_AA_....amc`` -> ``../../skeletons/HDM_AA.asf``.
+    In order: ``NAME.asf`` beside ``NAME.amc`` (where quatmotion writes it); CMU:
+    ``SS_TT.amc`` -> ``SS.asf`` in the same folder; HDM05: ``clips/CLASS/HDM_AA_....amc`` ->
+    ``../../skeletons/HDM_AA.asf`` or ``HDM_AA.asf`` in the same folder.
 
     Raises
     ------
@@ -494,8 +495,8 @@ def find_asf_for_amc(path: str | Path) -> Path:
         If neither exists (the message says to pass the skeleton, e.g. ``--skeleton``).
     """
     path = Path(path)
-    candidates = []
     stem = path.stem
+    candidates = [path.with_suffix(".asf")]
     if "_" in stem:
         candidates.append(path.with_name(stem.split("_", 1)[0] + ".asf"))
     parts = stem.split("_")
@@ -710,7 +711,9 @@ def read_amc(
     if values is None:
         values = _amc_values_careful(body, names, counts, path, first_line, skeleton)
     try:
-        return _motion_from_values(skeleton, values, names, counts, degrees, fps, path.stem)
+        # As in read_bvh: the Motion checks name values that overflow once scaled.
+        with np.errstate(over="ignore", invalid="ignore"):
+            return _motion_from_values(skeleton, values, names, counts, degrees, fps, path.stem)
     except ValueError as error:  # e.g. translations so large they overflow once scaled
         raise FormatError(str(error), path) from error
 

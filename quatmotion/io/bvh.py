@@ -11,14 +11,16 @@ Conventions
 * Position channels are the joint's local translation: they replace its ``OFFSET`` (component
   by component). Root position channels give ``Motion.root_translation``; position channels on
   other joints (Bandai: six channels on every joint) give ``Motion.joint_translations``.
-* Units: BVH has no unit field. ``read_bvh(path, scale=...)`` takes the number of centimetres
-  per file unit; ``scale="auto"`` (the default) looks at the rest skeleton's largest extent
-  (the standing height, or the arm span of a T-pose) and picks, among centimetres (1),
-  millimetres (0.1), metres (100), inches (2.54) and the CMU/ASF unit of 1/0.45 inch
-  (2.54 / 0.45), the one that makes it closest to 170 cm (in ratio). Bandai files come out in
-  centimetres, the CMU BVH conversion in the ASF unit. The scale is kept in
-  ``Skeleton.extras["bvh_scale"]`` and :func:`write_bvh` writes in the same unit, so a
-  read-write trip keeps the file's numbers.
+* Units: BVH has no unit field. ``read_bvh(path, scale=...)`` takes the unit, by name
+  (:data:`BVH_UNITS`: ``cm``, ``mm``, ``m``, ``in`` and ``asf``, the CMU/ASF unit of 1/0.45 inch) or
+  as centimetres per file unit; ``scale="auto"`` (the default) looks at the rest skeleton's largest
+  extent (the standing height, or the arm span of a T-pose) and picks the named unit that makes it
+  closest to 170 cm (in ratio). Bandai files come out in centimetres, the CMU BVH conversion in the
+  ASF unit. A guess can be wrong (a 90 cm child in centimetres is nearer 170 cm read as inches):
+  :func:`quatmotion.io.implausible_values` checks the figure against :data:`PLAUSIBLE_FIGURE_CM`.
+  The scale is kept in ``Skeleton.extras`` (``bvh_scale``, cm per unit; ``bvh_unit``, its name or
+  None; ``bvh_unit_guessed``) and :func:`write_bvh` writes in the same unit, so a read-write trip
+  keeps the file's numbers.
 * Frame rate: ``1 / Frame Time``, rounded to the nearest integer when within 0.01 % of it
   (files store ``0.0333333`` for 30 frames/s).
 """
@@ -27,7 +29,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,7 +47,14 @@ from quatmotion.io._text import (
 )
 from quatmotion.motion import Motion, Skeleton
 
-__all__ = ["detect_bvh_scale", "read_bvh", "to_bvh_skeleton", "write_bvh"]
+__all__ = [
+    "BVH_UNITS",
+    "PLAUSIBLE_FIGURE_CM",
+    "detect_bvh_scale",
+    "read_bvh",
+    "to_bvh_skeleton",
+    "write_bvh",
+]
 
 _CHANNEL_TOKENS = {
     "xposition": "tx",
@@ -57,8 +65,12 @@ _CHANNEL_TOKENS = {
     "zrotation": "rz",
 }
 _FILE_CHANNELS = {v: k[0].upper() + k[1:] for k, v in _CHANNEL_TOKENS.items()}
-UNIT_CANDIDATES_CM = {"cm": 1.0, "mm": 0.1, "m": 100.0, "inch": 2.54, "asf": 2.54 / 0.45}
+BVH_UNITS: dict[str, float] = {"cm": 1.0, "mm": 0.1, "m": 100.0, "in": 2.54, "asf": 2.54 / 0.45}
+"""Length units a BVH file may be in, by name: centimetres per file unit."""
 TYPICAL_HEIGHT_CM = 170.0
+PLAUSIBLE_FIGURE_CM = (50.0, 220.0)
+"""The largest extent of a human figure at rest (height, or arm span): an infant to a very tall
+adult. A unit guess outside it is doubtful."""
 _MAX_DEPTH = 200  # far deeper than any body; keeps recursion bounded on hostile input
 
 
@@ -176,13 +188,13 @@ def detect_bvh_scale(rest_positions: NDArray[np.float64]) -> float:
     Returns
     -------
     float
-        The value of :data:`UNIT_CANDIDATES_CM` that brings the largest extent closest (in
+        The value of :data:`BVH_UNITS` that brings the largest extent closest (in
         ratio) to 170 cm; 1.0 for a degenerate skeleton.
     """
     extent = float(np.max(np.ptp(rest_positions, axis=0))) if len(rest_positions) else 0.0
     if not np.isfinite(extent) or extent <= 0:
         return 1.0
-    scales = np.array(list(UNIT_CANDIDATES_CM.values()))
+    scales = np.array(list(BVH_UNITS.values()))
     return float(scales[np.argmin(np.abs(np.log(extent * scales / TYPICAL_HEIGHT_CM)))])
 
 
@@ -219,30 +231,35 @@ def _frame_values(
     return np.asarray(rows, dtype=np.float64).reshape(n_frames, n_channels)
 
 
-def read_bvh(path: str | Path, scale: float | Literal["auto"] = "auto") -> Motion:
+def read_bvh(path: str | Path, scale: float | str = "auto") -> Motion:
     """Read a BVH file.
 
     Parameters
     ----------
     path : str or Path
-    scale : float or "auto"
-        Centimetres per file unit; ``"auto"`` detects it from the rest skeleton's size (see
-        the module docstring and :func:`detect_bvh_scale`).
+    scale : float, str or "auto"
+        The file's length unit: a name of :data:`BVH_UNITS` or centimetres per file unit;
+        ``"auto"`` guesses it from the rest skeleton's size (see the module docstring and
+        :func:`detect_bvh_scale`).
 
     Returns
     -------
     Motion
         Skeleton with ``euler="intrinsic"``, offsets in centimetres, ``extras`` with
-        ``format="bvh"`` and ``bvh_scale``; ``joint_translations`` when joints other than the
-        root have position channels.
+        ``format="bvh"``, ``bvh_scale`` (cm per file unit), ``bvh_unit`` (its name in
+        :data:`BVH_UNITS`, or None) and ``bvh_unit_guessed``; ``joint_translations`` when
+        joints other than the root have position channels.
 
     Raises
     ------
     FormatError
         Naming the file and line: bad hierarchy, unknown channels, missing ``MOTION``,
         frame count or value count mismatches, bad or non-finite numbers.
+    ValueError
+        For an unknown unit name or a scale that is not a positive number.
     """
     path = Path(path)
+    cm_per_unit = None if isinstance(scale, str) and scale == "auto" else _unit_scale(scale)
     text = read_text(path)
     head_end, motion_line, found = _find_motion_keyword(text)
     hierarchy_tokens = [
@@ -265,30 +282,42 @@ def read_bvh(path: str | Path, scale: float | Literal["auto"] = "auto") -> Motio
     values = _frame_values(block, motion_line + 3, n_frames, n_channels, path)
     offsets_units = np.asarray(offsets, dtype=np.float64)
     site_units = np.asarray(site_offsets, dtype=np.float64).reshape(-1, 3)
-    if scale == "auto":
+    guessed = cm_per_unit is None
+    if cm_per_unit is None:
         cm_per_unit = _detect_file_scale(parents, offsets_units, site_parents, site_units)
-    else:
-        cm_per_unit = float(scale)
-        if not (np.isfinite(cm_per_unit) and cm_per_unit > 0):
-            raise ValueError(
-                f"scale must be a positive number of cm per unit or 'auto', got {scale!r}"
-            )
     try:
-        return _build_motion(
-            names,
-            parents,
-            offsets_units,
-            channels,
-            site_names,
-            site_parents,
-            site_units,
-            cm_per_unit,
-            values,
-            frame_time,
-            path.stem,
-        )
+        # Huge values overflow once scaled: the Skeleton and Motion checks then name them, so
+        # NumPy's own warning (with its internal file paths) would only be noise.
+        with np.errstate(over="ignore", invalid="ignore"):
+            return _build_motion(
+                names,
+                parents,
+                offsets_units,
+                channels,
+                site_names,
+                site_parents,
+                site_units,
+                cm_per_unit,
+                guessed,
+                values,
+                frame_time,
+                path.stem,
+            )
     except ValueError as error:  # e.g. values so large they overflow once scaled
         raise FormatError(str(error), path) from error
+
+
+def _unit_scale(scale: float | str) -> float:
+    """Centimetres per file unit of a unit name or number; ValueError if neither."""
+    if isinstance(scale, str):
+        unit = scale.strip().lower()
+        if unit not in BVH_UNITS:
+            raise ValueError(f"unknown length unit {scale!r}; choose from {', '.join(BVH_UNITS)}")
+        return BVH_UNITS[unit]
+    cm_per_unit = float(scale)
+    if not (np.isfinite(cm_per_unit) and cm_per_unit > 0):
+        raise ValueError(f"scale must be a positive number of cm per unit or 'auto', got {scale!r}")
+    return cm_per_unit
 
 
 def _find_motion_keyword(text: str) -> tuple[int, int, bool]:
@@ -354,10 +383,12 @@ def _build_motion(
     site_parents: list[int],
     site_units: NDArray[np.float64],
     cm_per_unit: float,
+    guessed: bool,
     values: NDArray[np.float64],
     frame_time: float,
     name: str,
 ) -> Motion:
+    unit = next((n for n, cm in BVH_UNITS.items() if cm == cm_per_unit), None)
     skeleton = Skeleton(
         joint_names=tuple(names),
         parents=np.asarray(parents, dtype=np.int64),
@@ -368,7 +399,12 @@ def _build_motion(
         site_parents=np.asarray(site_parents, dtype=np.int64),
         site_offsets=site_units * cm_per_unit,
         name=name,
-        extras={"format": "bvh", "bvh_scale": cm_per_unit},
+        extras={
+            "format": "bvh",
+            "bvh_scale": cm_per_unit,
+            "bvh_unit": unit,
+            "bvh_unit_guessed": guessed,
+        },
     )
     fps = 1.0 / frame_time
     if abs(fps - round(fps)) <= 1e-4 * fps:

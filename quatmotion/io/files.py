@@ -8,12 +8,24 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Literal, NamedTuple
+
+import numpy as np
 
 from quatmotion.io.asf_amc import read_amc, write_amc
-from quatmotion.io.bvh import read_bvh, write_bvh
-from quatmotion.motion import Motion, Skeleton
+from quatmotion.io.bvh import BVH_UNITS, PLAUSIBLE_FIGURE_CM, read_bvh, write_bvh
+from quatmotion.motion import Motion, Skeleton, forward_kinematics
 
-__all__ = ["MOTION_SUFFIXES", "find_motion_files", "read_motion", "write_motion"]
+__all__ = [
+    "FAR_CM",
+    "MOTION_SUFFIXES",
+    "Doubt",
+    "find_motion_files",
+    "implausible_values",
+    "posed_size_cm",
+    "read_motion",
+    "write_motion",
+]
 
 MOTION_SUFFIXES = (".amc", ".bvh")
 """File suffixes of motion clips (compared case-insensitively)."""
@@ -62,10 +74,16 @@ def find_motion_files(paths: Iterable[str | Path]) -> list[Path]:
     return unique
 
 
-MOTION_SUFFIXES = (".amc", ".bvh")
+FAR_CM = 1e5
+"""A kilometre: coordinates or bones beyond it are not human motion capture."""
 
 
-def read_motion(path: str | Path, skeleton: Skeleton | str | Path | None = None) -> Motion:
+def read_motion(
+    path: str | Path,
+    skeleton: Skeleton | str | Path | None = None,
+    *,
+    units: str | float | None = None,
+) -> Motion:
     """Read a motion file, choosing the reader by extension.
 
     Parameters
@@ -75,6 +93,9 @@ def read_motion(path: str | Path, skeleton: Skeleton | str | Path | None = None)
         ``.bvh``.
     skeleton : Skeleton, str, Path or None
         For ``.amc`` only: the skeleton or its ASF path (see :func:`read_amc`).
+    units : str, float or None
+        For ``.bvh`` only: the file's length unit, a name of :data:`BVH_UNITS` or centimetres
+        per unit; ``None`` guesses it (see :func:`read_bvh`). An ASF states its own.
 
     Returns
     -------
@@ -83,18 +104,21 @@ def read_motion(path: str | Path, skeleton: Skeleton | str | Path | None = None)
     Raises
     ------
     ValueError
-        For another extension, or a skeleton given for a BVH file.
+        For another extension, a skeleton given for a BVH file, a unit given for an AMC file,
+        or an unknown unit.
     FormatError
         For a malformed file.
     """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".amc":
+        if units is not None:
+            raise ValueError("an AMC's length unit is the one its ASF states; do not pass one")
         return read_amc(path, skeleton)
     if suffix == ".bvh":
         if skeleton is not None:
             raise ValueError("a BVH file carries its own skeleton; do not pass one")
-        return read_bvh(path)
+        return read_bvh(path, "auto" if units is None else units)
     raise ValueError(
         f"unknown motion file type {path.suffix!r} (expected one of {MOTION_SUFFIXES})"
     )
@@ -122,3 +146,83 @@ def write_motion(motion: Motion, path: str | Path) -> None:
         raise ValueError(
             f"unknown motion file type {path.suffix!r} (expected one of {MOTION_SUFFIXES})"
         )
+
+
+class Doubt(NamedTuple):
+    """Something unlikely in a clip that was read without error."""
+
+    kind: Literal["unit", "far"]
+    """``"unit"``: a guessed unit makes an implausible figure; ``"far"``: beyond 1 km."""
+    message: str
+    """One sentence, without the file name."""
+
+
+def implausible_values(motion: Motion) -> list[Doubt]:
+    """What in a clip that was read without error is unlikely for human motion capture.
+
+    Two checks: a BVH length unit that was guessed and makes the posed figure's size (the median
+    over frames of its largest extent: the height standing, the length lying) fall outside
+    :data:`PLAUSIBLE_FIGURE_CM`, naming the units that would not; and coordinates or bones
+    beyond :data:`FAR_CM`. Readers accept both (the numbers are valid); a caller shows these
+    messages as warnings.
+
+    Parameters
+    ----------
+    motion : Motion
+
+    Returns
+    -------
+    list of Doubt
+        Empty when nothing is doubtful.
+    """
+    doubts = []
+    sk = motion.skeleton
+    with np.errstate(over="ignore", invalid="ignore"):
+        root = float(np.max(np.abs(motion.root_translation), initial=0.0))
+        bones = float(np.max(np.abs(sk.offsets), initial=0.0))
+        if motion.joint_translations is not None:
+            bones = max(bones, float(np.max(np.abs(motion.joint_translations))))
+    if root > FAR_CM:
+        doubts.append(Doubt("far", f"the root is {root:.3g} cm from the origin, over 1 km"))
+    if bones > FAR_CM:
+        doubts.append(Doubt("far", f"a bone is {bones:.3g} cm long, over 1 km"))
+    if sk.extras.get("bvh_unit_guessed") and bones <= FAR_CM:
+        size = posed_size_cm(motion)
+        low, high = PLAUSIBLE_FIGURE_CM
+        if not low <= size <= high:
+            cm = sk.extras["bvh_scale"]
+            others = [
+                f"{size / cm * other:.3g} cm read in {name}"
+                for name, other in BVH_UNITS.items()
+                if other != cm and low <= size / cm * other <= high
+            ]
+            alternatives = f"; it would be {' or '.join(others)}" if others else ""
+            unit = sk.extras.get("bvh_unit") or f"{cm:g} cm"
+            doubts.append(
+                Doubt(
+                    "unit",
+                    f"the figure is {size:.3g} cm tall or long with the length unit guessed as "
+                    f"{unit}; a human figure is {low:g} to {high:g} cm{alternatives}",
+                )
+            )
+    return doubts
+
+
+def posed_size_cm(motion: Motion, n_frames: int = 30) -> float:
+    """The figure's size as posed: the median over frames of its largest extent, cm.
+
+    Unlike the rest pose's extent (what :func:`quatmotion.io.detect_bvh_scale` measures), this
+    holds for skeletons whose rest pose is no pose at all (Bandai's lies along X, 4.5 m long).
+    A root that stays put while position channels of other joints carry the body is a
+    reference node, not part of the figure, and is left out (Bandai's stays on the floor at the
+    origin while its Hips walk away). ``n_frames`` evenly spaced frames are measured.
+    """
+    clip = motion.slice(0, None, max(1, motion.n_frames // n_frames))
+    with np.errstate(over="ignore", invalid="ignore"):
+        points = forward_kinematics(clip).all_positions()
+        carried = clip.joint_translations is not None and np.any(
+            np.ptp(clip.joint_translations[:, 1:], axis=0) > 0
+        )
+        if carried and np.all(points[:, 0] == points[:1, 0]):
+            points = points[:, 1:]
+        return float(np.median(np.max(np.ptp(points, axis=1), axis=-1)))

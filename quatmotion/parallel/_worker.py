@@ -53,6 +53,13 @@ def limit_threads_in_worker() -> None:
     if not _process_limited:
         for key, value in SINGLE_THREAD_ENV.items():
             os.environ[key] = value
+        if "numba" in sys.modules:
+            # Numba read its thread count before this process was forked from the server, and
+            # its OpenMP layer sets OpenMP's thread count to it when it first starts, undoing a
+            # limit set before: start it now, so the limit below is the last word.
+            from numba.np.ufunc.parallel import _launch_threads
+
+            _launch_threads()
         from threadpoolctl import threadpool_limits
 
         threadpool_limits(limits=1)

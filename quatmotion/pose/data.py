@@ -339,14 +339,20 @@ class PoseClip:
     step : int
         File frames per kept frame (frame ``i`` here is frame ``i * step`` of the file).
     world : ndarray, shape (T, 16, 3)
-        World positions of the 16 pose joints, centimetres, scaled.
+        World positions of the 16 pose joints on the canonical body, centimetres.
     local : ndarray, shape (T, 16, 3)
         The same in the body frame, the Hip at ``(0, hip height, 0)`` (see
         :func:`quatmotion.pose.skeleton16.to_body_frame` with ``keep_height=True``).
     poses : PoseData
         The ``T`` poses with their time derivatives.
     height : float or None
-        The stature the body was scaled to, centimetres (``None``: the file's own size).
+        The stature of the canonical body, centimetres (``None``: the skeleton's own).
+    file_frames : int or None
+        Frames of the clip's file (before resampling), so frame numbers can be checked;
+        ``None`` when unknown.
+    skeleton_kind : str or None
+        The skeleton family it came from (:func:`skeleton16.skeleton_kind`), ``None`` when
+        unknown.
     """
 
     name: str
@@ -356,6 +362,8 @@ class PoseClip:
     local: NDArray[np.float64]
     poses: PoseData
     height: float | None = None
+    file_frames: int | None = None
+    skeleton_kind: str | None = None
 
     @classmethod
     def from_motion(
@@ -366,7 +374,7 @@ class PoseClip:
         height: float | None = None,
         name: str | None = None,
     ) -> PoseClip:
-        """Resample ``motion`` to about ``fps``, scale its body to ``height`` and describe it.
+        """Resample ``motion`` to about ``fps``, put it on the canonical body and describe it.
 
         Parameters
         ----------
@@ -376,8 +384,9 @@ class PoseClip:
             Target frame rate: every ``round(motion.fps / fps)``-th frame is kept (at least
             every frame). ``None`` keeps every frame.
         height : float, optional
-            Stature to scale the body to, centimetres (:func:`skeleton16.height_scale`);
-            ``None`` keeps the file's size.
+            Stature of the body the poses are put on, centimetres: every clip goes onto the
+            canonical body (:func:`skeleton16.canonical_positions16`), so that poses of
+            different skeletons compare. ``None`` keeps the skeleton's own stature.
         name : str, optional
             Default ``motion.name``.
 
@@ -387,11 +396,11 @@ class PoseClip:
         """
         if fps is not None and not (np.isfinite(fps) and fps > 0):
             raise ValueError(f"fps must be positive and finite, got {fps}")
+        file_frames = motion.n_frames
         step = 1 if fps is None else max(1, int(round(motion.fps / fps)))
         if step > 1:
             motion = motion.slice(step=step)
-        scale = 1.0 if height is None else skeleton16.height_scale(motion.skeleton, height)
-        world = skeleton16.world_positions16(motion) * scale
+        world = skeleton16.canonical_positions16(motion, height)
         local = skeleton16.to_body_frame(world, keep_height=True)
         return cls(
             name=motion.name if name is None else name,
@@ -401,6 +410,29 @@ class PoseClip:
             local=local,
             poses=PoseData.from_clip(local, motion.fps),
             height=height,
+            file_frames=file_frames,
+            skeleton_kind=skeleton16.skeleton_kind(motion.skeleton),
+        )
+
+    def mirrored(self) -> PoseClip:
+        """The clip's mirror image: left and right swapped (a left kick becomes a right one).
+
+        A pose distance is not mirror-invariant; this lets a search or a test compare a motion
+        with the same motion done on the other side. World X is negated, so the body frame of
+        the mirrored clip is the mirror of the original's.
+        """
+        world = self.world[:, list(skeleton16.MIRROR_16)] * np.array([-1.0, 1.0, 1.0])
+        local = skeleton16.to_body_frame(world, keep_height=True)
+        return PoseClip(
+            name=self.name,
+            fps=self.fps,
+            step=self.step,
+            world=world,
+            local=local,
+            poses=PoseData.from_clip(local, self.fps),
+            height=self.height,
+            file_frames=self.file_frames,
+            skeleton_kind=self.skeleton_kind,
         )
 
     def __len__(self) -> int:

@@ -1,7 +1,7 @@
 """A saved, searchable pose library: "poses like frame F of clip C".
 
-Every pose of a motion library is described by the GPD, scaled (min-max, then unit length),
-projected by a learned metric ``W``, and put in an HNSW graph
+Every pose of a motion library is described by the GPD, scaled (min-max, clipped to the library's
+range, then unit length), projected by a learned metric ``W``, and put in an HNSW graph
 (:class:`~quatmotion.pose.index.HNSWIndex`). In the projected space the learned distance
 ``sqrt((x - y)^T W W^T (x - y))`` is plain Euclidean distance, so an L2 index answers
 learned-metric queries. :meth:`PoseLibrary.build` learns the metric from the library itself,
@@ -18,9 +18,16 @@ similar pairs, and (for LMS) poses at least a second apart as the dissimilar one
 
 Conventions
 -----------
-* Clips are prepared by :meth:`PoseClip.from_motion` (resampled, scaled to one body height);
-  queries go through :meth:`PoseLibrary.prepare_query`, so they are described alike.
-* Frame numbers count from 0 in the clip's file, before any resampling.
+* Clips are prepared by :meth:`PoseClip.from_motion` (resampled, put on the canonical body of
+  one stature); queries go through :meth:`PoseLibrary.prepare_query`, so they are described
+  alike whatever their skeleton.
+* Features are clipped to the library's range after the min-max step: a query from another
+  body or motion may exceed the range in a few features (nearly constant ones, such as the
+  spread of a rigid pelvis), and unclipped they would dominate its unit-length vector, so that
+  every such query lands on the same few poses.
+* Frame numbers count from 0 in the clip's file, before any resampling (an AMC file's frame 1
+  is frame 0). Asking for a frame outside a clip, or a clip that is not there, is an error
+  naming what there is.
 * A library file is one ``.npz`` holding the serialised HNSW graph, the projection model and the
   pose catalogue (clip names, frame numbers, fps), with a ``meta`` record naming the format
   (``quatmotion-pose-library``) and its version; it is written to a temporary file and then
@@ -31,6 +38,7 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import functools
 import json
 import os
@@ -69,7 +77,11 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 _FORMAT = "quatmotion-pose-library"
-_VERSION = 1
+_VERSION = 2  # 2: poses on the canonical body, features clipped to the library's range
+_NOT_A_LIBRARY = (
+    f"not a quatmotion pose library (expected a file written by 'quatmotion pose index': "
+    f"format {_FORMAT}, version {_VERSION})"
+)
 # Fewer transition pairs than this teach a metric too little: use consecutive frames instead.
 _MIN_TRANSITION_PAIRS = 10
 _FAR_APART_S = 1.0  # fallback dissimilar pairs: poses of one clip at least this far apart
@@ -96,7 +108,7 @@ class PoseLibrary:
     model : dict of str to ndarray
         The projection: ``scale`` and ``offset`` (shape (D,), the GPD normalisation of Eq. 38),
         ``W`` (shape (D, r), the metric's projection); poses map to
-        ``unit(scale * gpd + offset) @ W``.
+        ``unit(clip(scale * gpd + offset, 0, 1)) @ W``.
     meta : dict
         JSON-serialisable settings (fps, frame step, height, method, labels used...).
     """
@@ -127,7 +139,7 @@ class PoseLibrary:
 
         The steps: GPD of every pose; positive pairs (good transitions by Kovar's windowed
         point-cloud distance, :func:`~quatmotion.pose.labels.transition_labels`, or
-        consecutive frames when the clips yield fewer than 10); the min-max + unit-length
+        consecutive frames when the clips yield fewer than 10); the min-max (clipped) + unit-length
         scaling fitted on the unlabeled sample and the pairs; the metric learned from them;
         every pose projected by it into an HNSW index.
 
@@ -182,7 +194,12 @@ class PoseLibrary:
             clip_of=offsets.clip_of(),
             frame_of=offsets.frame_of() * steps,
             model=model,
-            meta={**meta, "file_fps": [c.fps * c.step for c in clips]},
+            meta={
+                **meta,
+                "file_fps": [c.fps * c.step for c in clips],
+                "file_frames": [c.file_frames for c in clips],
+                "skeletons": sorted({c.skeleton_kind for c in clips if c.skeleton_kind}),
+            },
         )
 
     @classmethod
@@ -331,6 +348,8 @@ class PoseLibrary:
         names: list[str] = []
         lengths: list[int] = []
         steps: list[int] = []
+        file_frames: list[int | None] = []
+        kinds: set[str] = set()
         pending: list[NDArray[np.float32]] = []
         n_pending = 0
         t0 = time.perf_counter()
@@ -357,6 +376,8 @@ class PoseLibrary:
                 names.append(clip.name)
                 lengths.append(len(clip.vectors))
                 steps.append(clip.step)
+                file_frames.append(clip.file_frames)
+                kinds.update([clip.skeleton_kind] if clip.skeleton_kind else [])
                 pending.append(clip.vectors)
                 n_pending += len(clip.vectors)
                 if n_pending >= flush_poses:
@@ -378,6 +399,8 @@ class PoseLibrary:
             meta={
                 **meta,
                 "file_fps": [fps * s for s in steps],
+                "file_frames": file_frames,
+                "skeletons": sorted(kinds),
                 "fit_clips": n_fit_clips,
                 "fit_poses": n_sample_poses,
             },
@@ -408,33 +431,79 @@ class PoseLibrary:
         Parameters
         ----------
         clip : str or int
-            Clip number, full name, or a unique suffix of the name (e.g. the file name).
+            See :meth:`clip_number`.
         frame : int
-            Frame number in the clip's file.
+            Frame number in the clip's file, from 0.
+
+        Raises
+        ------
+        ValueError
+            For a clip that is not there (naming close names) or a frame outside the clip
+            (naming its frames).
         """
-        c = self._clip_number(clip)
+        c = self.clip_number(clip)
+        n_frames = self.file_frames(c)
+        if not 0 <= frame < n_frames:
+            raise ValueError(
+                f"frame {frame} is out of range: {self.clip_names[c]} has frames 0 to "
+                f"{n_frames - 1} (frames count from 0; an AMC file's frame 1 is frame 0)"
+            )
         rows = np.flatnonzero(self.clip_of == c)
         if len(rows) == 0:
             raise ValueError(f"clip {self.clip_names[c]!r} has no indexed pose")
         return int(rows[np.argmin(np.abs(self.frame_of[rows] - frame))])
 
-    def _clip_number(self, clip: str | int) -> int:
+    def file_frames(self, clip: int) -> int:
+        """Frames of clip number ``clip``'s file (its last indexed frame + 1 in libraries that
+        did not record it)."""
+        recorded = self.meta.get("file_frames")
+        if recorded and recorded[clip] is not None:
+            return int(recorded[clip])
+        return int(self.frame_of[self.clip_of == clip].max(initial=-1)) + 1
+
+    def clip_number(self, clip: str | int) -> int:
+        """The number of an indexed clip.
+
+        Parameters
+        ----------
+        clip : str or int
+            The clip's name (its path as indexed), a unique end of it (the file name, its stem,
+            or trailing folders), or its number from 0; digits are read as a number only when
+            no clip is named so.
+
+        Raises
+        ------
+        ValueError
+            Naming up to five close names when none matches, or the matches when several do.
+        """
+        names = self.clip_names
         if isinstance(clip, (int, np.integer)):
-            if not 0 <= clip < len(self.clip_names):
-                raise ValueError(f"clip number {clip} out of range 0..{len(self.clip_names) - 1}")
+            if not 0 <= clip < len(names):
+                raise ValueError(f"clip number {clip} is out of range 0 to {len(names) - 1}")
             return int(clip)
-        matches = [i for i, n in enumerate(self.clip_names) if n == clip]
+        text = str(clip)
+        matches = [i for i, n in enumerate(names) if n == text]
         if not matches:
-            matches = [
-                i
-                for i, n in enumerate(self.clip_names)
-                if n.endswith(clip) or pathlib.Path(n).stem == clip
-            ]
-        if len(matches) != 1:
+            matches = [i for i, n in enumerate(names) if _names_end(n, text)]
+        if not matches and text.isdigit():
+            return self.clip_number(int(text))
+        if len(matches) == 1:
+            return matches[0]
+        if matches:
+            listed = ", ".join(names[i] for i in matches[:5])
+            more = f" and {len(matches) - 5} more" if len(matches) > 5 else ""
             raise ValueError(
-                f"clip {clip!r} matches {len(matches)} indexed clips; give a longer name"
+                f"clip {text!r} matches {len(matches)} indexed clips ({listed}{more}); "
+                "give more of the path"
             )
-        return matches[0]
+        stems = [pathlib.PurePath(n).stem for n in names]
+        close = [m for m in stems if text.lower() in m.lower()][:5]
+        close = close or difflib.get_close_matches(text, stems, n=5, cutoff=0.5)
+        hint = f"; close names: {', '.join(close)}" if close else ""
+        raise ValueError(
+            f"no indexed clip is named {text!r} ({len(names)} clips, numbered 0 to "
+            f"{len(names) - 1}){hint}"
+        )
 
     def search(self, vectors: ArrayLike, k: int = 10) -> tuple[IntArray, FloatArray]:
         """Approximate nearest indexed poses of projected query vectors, ``(Q, k)`` each."""
@@ -469,7 +538,7 @@ class PoseLibrary:
             with np.load(path, allow_pickle=False) as data:
                 meta = json.loads(str(data["meta"]))
                 if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
-                    raise FormatError(f"not a quatmotion pose library (expected {_FORMAT})", path)
+                    raise FormatError(_NOT_A_LIBRARY, path)
                 version = meta.get("version")
                 if version != _VERSION:
                     newer = isinstance(version, int) and version > _VERSION
@@ -493,11 +562,18 @@ class PoseLibrary:
                 )
         except FormatError:
             raise
+        except (IsADirectoryError, FileNotFoundError, PermissionError):
+            raise
         except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-            # np.load raises ValueError (pickled or unknown content), OSError, BadZipFile...
-            raise FormatError(
-                f"not a readable quatmotion pose library ({type(exc).__name__}: {exc})", path
-            ) from exc
+            # np.load's own message (pickled data, a bad zip...) says nothing about what the
+            # file should have been.
+            raise FormatError(_NOT_A_LIBRARY, path) from exc
+
+
+def _names_end(name: str, text: str) -> bool:
+    """Whether ``text`` is the end of path ``name`` (whole components) or its file's stem."""
+    path, tail = pathlib.PurePath(name), pathlib.PurePath(text)
+    return path.stem == text or path.parts[-len(tail.parts) :] == tail.parts
 
 
 def _labelled_pairs(
@@ -589,7 +665,7 @@ def _learn_projection(
         clips, clip_offsets, n_pairs, rng, say, dissimilar=lms
     )
     unlabeled = rng.permutation(len(poses))[:n_unlabeled]
-    scaler = MinMaxUnitScaler().fit(raw[np.unique(np.r_[unlabeled, pairs.ravel()])])
+    scaler = MinMaxUnitScaler(clip=True).fit(raw[np.unique(np.r_[unlabeled, pairs.ravel()])])
     X = scaler.transform(raw)
     del raw
     t0 = time.perf_counter()
@@ -629,7 +705,8 @@ def _none_read(n_sources: int, failed: dict[int, Failure]) -> str:
 
 
 def project_gpd(raw_gpd: ArrayLike, model: dict[str, FloatArray]) -> FloatArray:
-    """Raw GPD features mapped to a library's index space: ``unit(scale * gpd + offset) @ W``.
+    """Raw GPD features mapped to a library's index space:
+    ``unit(clip(scale * gpd + offset, 0, 1)) @ W``.
 
     Parameters
     ----------
@@ -642,7 +719,8 @@ def project_gpd(raw_gpd: ArrayLike, model: dict[str, FloatArray]) -> FloatArray:
     ndarray, shape (N, r)
     """
     x = np.asarray(raw_gpd, dtype=np.float64)
-    x = x * model["scale"] + model["offset"]
+    # Clipped to the library's range: see the module's conventions.
+    x = np.clip(x * model["scale"] + model["offset"], 0.0, 1.0)
     norm = np.linalg.norm(x, axis=1, keepdims=True)
     x = x / np.where(norm > 0, norm, 1.0)
     return x @ model["W"]
@@ -660,7 +738,11 @@ class ProjectedClip:
     step : int
         File frames per kept frame.
     height : float or None
-        Stature the body was scaled to, centimetres.
+        Stature of the canonical body, centimetres.
+    file_frames : int or None
+        Frames of the clip's file, before resampling.
+    skeleton_kind : str or None
+        The skeleton family it came from.
     vectors : ndarray of float32, shape (T, r)
         Every pose projected into the index space.
     """
@@ -669,6 +751,8 @@ class ProjectedClip:
     fps: float
     step: int
     height: float | None
+    file_frames: int | None
+    skeleton_kind: str | None
     vectors: NDArray[np.float32]
 
 
@@ -676,24 +760,58 @@ def projected_clip(source: Any, *, load: Callable[[Any], PoseClip], model: dict)
     """Load one clip and project its poses (the per-clip job run by batch workers)."""
     clip = load(source)
     vectors = project_gpd(clip.poses.gpd, model).astype(np.float32)
-    return ProjectedClip(clip.name, clip.fps, clip.step, clip.height, vectors)
+    return ProjectedClip(
+        clip.name, clip.fps, clip.step, clip.height, clip.file_frames, clip.skeleton_kind, vectors
+    )
 
 
-def load_pose_clip(path: str | os.PathLike[str], *, fps: float, height: float) -> PoseClip:
+def load_pose_clip(
+    path: str | os.PathLike[str],
+    *,
+    fps: float,
+    height: float,
+    skeleton: str | os.PathLike[str] | None = None,
+    units: str | None = None,
+) -> PoseClip:
     """Read a motion file and prepare it for a pose library (a batch job: module level).
 
     Parameters
     ----------
     path : str or Path
-        An ``.amc`` (its ASF found by :func:`quatmotion.io.read_amc`'s rules) or ``.bvh``.
+        An ``.amc`` (its ASF found by :func:`quatmotion.io.read_amc`'s rules, else
+        ``skeleton``) or ``.bvh``.
     fps, height : float
         As for :meth:`PoseClip.from_motion`.
+    skeleton : str or Path, optional
+        The ASF of AMC files whose own is not found by name.
+    units : str, optional
+        Length unit of a BVH file (:data:`quatmotion.io.BVH_UNITS`); guessed when None.
 
     Returns
     -------
     PoseClip
         Named by ``str(path)``.
-    """
-    from quatmotion.io import read_motion
 
-    return PoseClip.from_motion(read_motion(path), fps=fps, height=height, name=str(path))
+    Raises
+    ------
+    ValueError
+        For a clip with coordinates beyond a kilometre: not human motion capture, and its
+        features would overflow.
+    """
+    from quatmotion.io import find_asf_for_amc, implausible_values, read_motion
+
+    path = pathlib.Path(path)
+    amc = path.suffix.lower() == ".amc"
+    asf = None
+    if amc and skeleton is not None:
+        try:
+            find_asf_for_amc(path)
+        except FormatError:
+            asf = skeleton
+    motion = read_motion(path, asf, units=None if amc else units)
+    for doubt in implausible_values(motion):
+        if doubt.kind == "far":
+            raise ValueError(f"{path}: {doubt.message}: not human motion capture")
+    # A clip that cannot be described fails with a message, not NumPy's overflow warnings.
+    with np.errstate(all="ignore"):
+        return PoseClip.from_motion(motion, fps=fps, height=height, name=str(path))

@@ -39,6 +39,15 @@ Conventions
   not depend on a file's root-axis convention, and points sideways whatever the torso does.
   Left is then +X. A pose whose hip line is vertical (lying on the side) has no yaw; it keeps
   the last valid yaw of its clip (or 0).
+* **Canonical body** (:func:`canonical_positions16`): skeletons place the 16 joints with their
+  own proportions (Bandai's shoulders are half as wide as CMU's, its neck joint higher, its
+  root level with the hip joints where CMU's sits a tenth of the stature above them), and a
+  pose descriptor measures those proportions as much as the pose: bone lengths are the GPD's
+  most constant features, so one skeleton's constants lie far outside another's range. Poses
+  of different skeletons compare once each is put on one body: the Hip goes midway between
+  the hip joints (the same anatomical points in every skeleton, unlike the root), every bone
+  keeps its direction and takes the canonical length, and the Hip's trajectory is scaled by
+  the ratio of the leg lengths (so the floor, ``y = 0``, stays the floor).
 """
 
 from __future__ import annotations
@@ -72,6 +81,12 @@ JOINTS_16: tuple[str, ...] = (
 PARENTS_16: tuple[int, ...] = (-1, 0, 1, 2, 1, 4, 5, 1, 7, 8, 0, 10, 11, 0, 13, 14)
 END_SITES_16: tuple[int, ...] = (3, 6, 9, 12, 15)
 """Indices of the five end sites of the paper: Head, LHand, RHand, LFoot, RFoot."""
+MIRROR_16: tuple[int, ...] = tuple(
+    JOINTS_16.index(("R" if n[0] == "L" else "L") + n[1:]) if n[0] in "LR" else k
+    for k, n in enumerate(JOINTS_16)
+)
+"""Each joint's mirror image (left and right swapped): ``positions[:, MIRROR_16]`` with X
+negated in the body frame is the mirrored pose."""
 
 SkeletonKind = Literal["asf", "cmu_bvh", "bandai"]
 
@@ -92,6 +107,22 @@ _JOINT_MAPS: dict[str, tuple[str, ...]] = {
         "UpperLeg_L", "LowerLeg_L", "Foot_L", "UpperLeg_R", "LowerLeg_R", "Foot_R",
     ),
 }  # fmt: skip
+
+# Length of the bone from each joint's parent to the joint on the canonical body, as a fraction
+# of its stature (the ankle-to-head chain LFoot-LKnee-LHip-Hip-Chest-Neck-Head, which sums to
+# 1), with the Hip midway between the hip joints. The proportions are those of the generator's
+# CMU-like body (motion.synthetic.cmu_skeleton, CMU subject 02 mirrored), fixed here so that
+# indexed libraries do not change with the generator.
+_CANONICAL_BONE_FRACTIONS: dict[str, float] = {
+    "Chest": 0.2157, "Neck": 0.0746, "Head": 0.1129,
+    "LShoulder": 0.1670, "LElbow": 0.1756, "LHand": 0.1211,
+    "RShoulder": 0.1670, "RElbow": 0.1756, "RHand": 0.1211,
+    "LHip": 0.0598, "LKnee": 0.2740, "LFoot": 0.2630,
+    "RHip": 0.0598, "RKnee": 0.2740, "RFoot": 0.2630,
+}  # fmt: skip
+_STATURE_CHAIN = ("LFoot", "LKnee", "LHip", "Hip", "Chest", "Neck", "Head")
+_LEG_BONES = tuple(JOINTS_16.index(n) for n in ("LKnee", "LFoot", "RKnee", "RFoot"))
+_MIN_BONE_FRACTION = 1e-3  # a mapped bone shorter than this share of the stature has no direction
 
 _HIP_L, _HIP_R = JOINTS_16.index("LHip"), JOINTS_16.index("RHip")
 _MIN_HIP_LINE = 1e-6  # cm: a shorter horizontal hip line gives no usable yaw
@@ -297,8 +328,84 @@ def stature16(skeleton: Skeleton) -> float:
         Centimetres.
     """
     rest = skeleton.rest_positions(include_sites=False)[joint_indices16(skeleton)]
-    chain = [JOINTS_16.index(n) for n in ("LFoot", "LKnee", "LHip", "Hip", "Chest", "Neck", "Head")]
+    chain = [JOINTS_16.index(n) for n in _STATURE_CHAIN]
     return float(np.sum(np.linalg.norm(np.diff(rest[chain], axis=0), axis=1)))
+
+
+def canonical_bone_lengths(height: float) -> NDArray[np.float64]:
+    """Bone lengths of the canonical body of stature ``height`` cm.
+
+    Parameters
+    ----------
+    height : float
+        Stature: the ankle-to-head chain LFoot-LKnee-LHip-Hip-Chest-Neck-Head, with the Hip
+        midway between the hip joints; centimetres, positive.
+
+    Returns
+    -------
+    ndarray, shape (16,)
+        Entry ``k`` is the length of the bone from ``PARENTS_16[k]`` to joint ``k``, cm; entry
+        0 (the Hip, the root) is 0.
+    """
+    if not (np.isfinite(height) and height > 0):
+        raise ValueError(f"height must be positive and finite, got {height}")
+    fractions = np.array([0.0] + [_CANONICAL_BONE_FRACTIONS[n] for n in JOINTS_16[1:]])
+    chain = sum(_CANONICAL_BONE_FRACTIONS[n] for n in _STATURE_CHAIN if n != "Hip")
+    return fractions * (height / chain)
+
+
+def canonical_positions16(motion: Motion, height: float | None = None) -> NDArray[np.float64]:
+    """World positions of the 16 pose joints moved onto the canonical body.
+
+    The Hip goes midway between the hip joints; every bone of :data:`PARENTS_16` then keeps its
+    direction in each frame and takes its length on the canonical body of stature ``height``
+    (:func:`canonical_bone_lengths`); the Hip's world trajectory is scaled about the origin by
+    the ratio of the canonical legs (thigh and shin) to the clip's own. Two skeletons with
+    different proportions doing the same pose give the same positions.
+
+    Parameters
+    ----------
+    motion : Motion
+        A clip of a supported skeleton (see :func:`skeleton_kind`), ``T`` frames.
+    height : float, optional
+        Stature of the canonical body, centimetres; ``None`` takes the clip's own, measured
+        along the same chain.
+
+    Returns
+    -------
+    ndarray, shape (T, 16, 3)
+        Centimetres, Y up, :data:`JOINTS_16` order.
+
+    Raises
+    ------
+    ValueError
+        For a skeleton of no supported family, or one that places two joints of a mapped bone
+        at the same point (the bone's direction is then undefined).
+    """
+    world = world_positions16(motion)
+    world[:, 0] = 0.5 * (world[:, _HIP_L] + world[:, _HIP_R])
+    parents = np.asarray(PARENTS_16)
+    bones = world[:, 1:] - world[:, parents[1:]]
+    own = np.linalg.norm(bones, axis=-1)
+    # The median over frames: joints with translation channels (Bandai) may stretch a little.
+    own_median = np.r_[0.0, np.median(own, axis=0)]
+    chain = [JOINTS_16.index(n) for n in _STATURE_CHAIN if n != "Hip"]
+    own_stature = float(own_median[chain].sum())
+    short = own_median[1:] <= _MIN_BONE_FRACTION * own_stature
+    if np.any(short):
+        names = [f"{JOINTS_16[parents[k]]}-{JOINTS_16[k]}" for k in np.flatnonzero(short) + 1]
+        raise ValueError(
+            f"skeleton {motion.skeleton.name!r} puts the ends of the 16-joint bones {names} at "
+            "one point: their directions are undefined"
+        )
+    lengths = canonical_bone_lengths(own_stature if height is None else float(height))
+    legs = list(_LEG_BONES)
+    directions = bones / np.maximum(own, 1e-12)[..., None]
+    out = np.empty_like(world)
+    out[:, 0] = world[:, 0] * (lengths[legs].sum() / own_median[legs].sum())
+    for k in range(1, len(JOINTS_16)):  # parents come first
+        out[:, k] = out[:, parents[k]] + lengths[k] * directions[:, k - 1]
+    return out
 
 
 def height_scale(skeleton: Skeleton, height: float) -> float:
