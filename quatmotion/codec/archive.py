@@ -198,7 +198,7 @@ class Archive:
         for k in range(len(layout.translation_joints)):
             if at_rest[k]:
                 active[layout.translation_columns(k)] = False
-        context = ClipContext(info, entry.n_frames, entry.fps, active)
+        context = ClipContext(info, skeleton, entry.n_frames, entry.fps, active)
         try:
             X = self.method.decode(model, r.take(r.remaining), context)
         except FormatError as error:

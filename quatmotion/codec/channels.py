@@ -12,8 +12,9 @@ Conventions
   - ``KIND_ROTVEC`` (three rotation dofs): the rotation vector ``2 log(ref^-1 q)``, radians,
     unwrapped over time against its ``2 pi`` twin (so it never jumps while the rotation turns
     past half a turn from the reference);
-  - ``KIND_EULER`` (one or two rotation dofs): the joint's own dof angles, radians, unwrapped,
-    so a decoded clip always lies on the joint's dofs and writes back to its file format;
+  - ``KIND_EULER`` (one or two rotation dofs; three in the file-channel layout of the naive
+    codec): the joint's own dof angles, radians, unwrapped, so a decoded clip always lies on
+    the joint's dofs and writes back to its file format;
   - ``KIND_FIXED`` (no rotation dof): no channel, the identity.
 
   Channels come in this order: the root translation ``(x, y, z)`` in centimetres, each joint's
@@ -49,6 +50,8 @@ __all__ = [
     "KIND_ROOT",
     "KIND_ROTVEC",
     "ChannelLayout",
+    "default_kinds",
+    "euler_kinds",
     "from_channels",
     "layout_key",
     "make_layout",
@@ -135,7 +138,7 @@ def make_layout(skeleton: Skeleton, kinds: NDArray[np.int64]) -> ChannelLayout:
     for j in range(J):
         n_dof = len(_dof_axes(skeleton, j))
         expected = {0: (KIND_FIXED,), 1: (KIND_EULER,), 2: (KIND_EULER,)}.get(
-            n_dof, (KIND_ROTVEC, KIND_ROOT)
+            n_dof, (KIND_ROTVEC, KIND_ROOT, KIND_EULER)
         )
         if kinds[j] not in expected:
             raise ValueError(f"joint {skeleton.joint_names[j]!r}: kind {kinds[j]} for {n_dof} dofs")
@@ -145,6 +148,14 @@ def make_layout(skeleton: Skeleton, kinds: NDArray[np.int64]) -> ChannelLayout:
     moving = [j for j in range(1, J) if any(ch[0] == "t" for ch in skeleton.channels[j])]
     return ChannelLayout(
         kinds, starts, counts, np.asarray(moving, dtype=np.int64), c + 3 * len(moving)
+    )
+
+
+def euler_kinds(skeleton: Skeleton) -> NDArray[np.int64]:
+    """Every joint with rotation dofs as its file's Euler angles (the naive codec's channels)."""
+    return np.array(
+        [KIND_EULER if _dof_axes(skeleton, j) else KIND_FIXED for j in range(skeleton.n_joints)],
+        dtype=np.int64,
     )
 
 

@@ -164,7 +164,7 @@ def _clip_context(library: PreparedLibrary, i: int) -> ClipContext:
     for k in range(len(info.layout.translation_joints)):
         if clip.at_rest[k]:
             active[info.layout.translation_columns(k)] = False
-    return ClipContext(info, clip.motion.n_frames, clip.motion.fps, active)
+    return ClipContext(info, clip.motion.skeleton, clip.motion.n_frames, clip.motion.fps, active)
 
 
 def _verify_and_repair(

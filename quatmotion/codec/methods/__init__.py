@@ -8,6 +8,8 @@ sparse model and with the Euclidean K-SVD.
 from __future__ import annotations
 
 from quatmotion.codec.methods._base import ClipContext, EncodedLibrary, Method
+from quatmotion.codec.methods.naive import NaiveMethod
+from quatmotion.codec.methods.sparse import SparseMethod
 from quatmotion.codec.methods.spline import BASELINE, BEST, SplineMethod
 
 __all__ = ["METHODS", "ClipContext", "EncodedLibrary", "Method", "get_method"]
@@ -17,6 +19,9 @@ def _registry() -> dict[str, Method]:
     return {
         "best": SplineMethod("best", BEST),
         "spline": SplineMethod("spline", BASELINE),
+        "naive": NaiveMethod(),
+        "qssd": SparseMethod("qssd"),
+        "ksvd": SparseMethod("ksvd"),
     }
 
 

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary
+from quatmotion.motion import Skeleton
 
 __all__ = ["ClipContext", "EncodedLibrary", "Method"]
 
@@ -28,6 +29,7 @@ class ClipContext:
     """What the decoder of one clip knows from the header and the shared layout part."""
 
     layout: LayoutInfo
+    skeleton: Skeleton
     n_frames: int
     fps: float
     active: NDArray[np.bool_]

@@ -78,6 +78,8 @@ class SplineSettings:
     mean_start: bool
     refine_rounds: int = 6
     steps_tried: int = 5
+    gamma: float = 1.0
+    bad_frame_bytes: float = 16.0
 
 
 BEST = SplineSettings("metric", "lpc", (20.0, 24.0, 28.0), True, True)
@@ -249,7 +251,7 @@ class SplineMethod(Method):
     def _channel_scale(self, info: LayoutInfo) -> NDArray[np.float64]:
         if self.settings.scaling == "lever":
             return np.maximum(info.lever, 1e-6)
-        return np.sqrt(info.weights + info.lever**2 / info.n_points)
+        return np.sqrt(info.weights + self.settings.gamma * info.lever**2 / info.n_points)
 
     def _fit_model(self, library: PreparedLibrary, k: int, breaks_of) -> SplineModel:
         info = library.layouts[k]
@@ -368,7 +370,7 @@ class SplineMethod(Method):
                 )
                 payload = plan.to_bytes() + stream
                 # frames still over the bound go to the orchestrator's repair: count their cost
-                cost = len(payload) + 8 * len(bad)
+                cost = len(payload) + self.settings.bad_frame_bytes * len(bad)
                 if best is None or cost < best[0]:
                     best = (cost, payload)
                     misses = 0
