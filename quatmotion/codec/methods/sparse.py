@@ -230,7 +230,9 @@ class SparseMethod(Method):
         w = Writer().f32(quality).uvarint(len(samples))
         enc = constriction.stream.queue.RangeEncoder()
         K = D.shape[0]
-        enc.encode(counts.astype(np.int32), constriction.stream.model.Uniform(self._L(K) + 1))
+        enc.encode(
+            counts.astype(np.int32), constriction.stream.model.Uniform(self._sparsity_for(K) + 1)
+        )
         enc.encode(W.indices.astype(np.int32), constriction.stream.model.Uniform(K))
         w.blob(enc.get_compressed().astype("<u4").tobytes())
         w.blob(
@@ -245,7 +247,7 @@ class SparseMethod(Method):
         )
         return w.bytes()
 
-    def _L(self, K: int) -> int:
+    def _sparsity_for(self, K: int) -> int:
         return int(min(self.sparsity, K))
 
     def _code_qssd(self, est, D, samples):
@@ -300,9 +302,9 @@ class SparseMethod(Method):
         words = np.frombuffer(words + b"\0" * (-len(words) % 4), dtype="<u4").astype(np.uint32)
         dec = constriction.stream.queue.RangeDecoder(words)
         try:
-            counts = dec.decode(constriction.stream.model.Uniform(self._L(K) + 1), N).astype(
-                np.int64
-            )
+            counts = dec.decode(
+                constriction.stream.model.Uniform(self._sparsity_for(K) + 1), N
+            ).astype(np.int64)
             indices = dec.decode(constriction.stream.model.Uniform(K), int(counts.sum())).astype(
                 np.int64
             )
