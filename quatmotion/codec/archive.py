@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import os
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -169,7 +170,16 @@ class Archive:
     def layout(self, k: int) -> tuple[LayoutInfo, Any]:
         """The ``k``-th layout and its method model."""
         if k not in self._layouts:
-            data = read_chunk(self._file, self._layout_chunks[k], self._name)
+            packed = read_chunk(self._file, self._layout_chunks[k], self._name)
+            try:
+                inflater = zlib.decompressobj(-15)
+                data = inflater.decompress(packed) + inflater.flush()
+                if not inflater.eof or inflater.unused_data:
+                    raise zlib.error("incomplete stream")
+            except zlib.error as error:
+                raise FormatError(
+                    f"library chunk: corrupt deflate stream ({error})", self._name
+                ) from None
             r = Reader(data, self._name, "library chunk")
             info = LayoutInfo.read(r, self.skeleton(self.header.layouts[k].skeleton))
             try:

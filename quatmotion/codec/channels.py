@@ -21,8 +21,8 @@ Conventions
   rotation channels in joint order, then ``(x, y, z)`` of every joint ``j > 0`` that has
   translation channels (centimetres).
 * ``ref`` is the layout's **reference pose**, one unit quaternion per joint, stored in the
-  file quantised to 1/1024 rad per rotation-vector component; encoder and decoder use the
-  quantised one, so it need not be precise, only shared.
+  file quantised to 1/40 rad per rotation-vector component (int8); encoder and decoder use
+  the quantised one, so it need not be precise, only shared.
 * The round trip ``from_channels(to_channels(m))`` reproduces rotations and translations to
   rounding (about 1e-13 cm of joint position on the test clips).
 * **Weights** measure what a channel moves: ``w_c`` is the mean over frames and over all points
@@ -203,15 +203,18 @@ def reference_pose(motions: list[Motion], layout: ChannelLayout) -> NDArray[np.f
     return dequantize_reference(quantize_reference(ref))
 
 
-def quantize_reference(ref: NDArray[np.float64]) -> NDArray[np.int16]:
-    """Reference rotations ``(J, 4)`` as rotation vectors in 1/1024 rad, int16 ``(J, 3)``."""
+_REFERENCE_STEPS_PER_RAD = 40.0
+
+
+def quantize_reference(ref: NDArray[np.float64]) -> NDArray[np.int8]:
+    """Reference rotations ``(J, 4)`` as rotation vectors in 1/40 rad, int8 ``(J, 3)``."""
     v = 2.0 * quat.log(quat.canonicalize(ref))
-    return np.clip(np.round(v * 1024), -32767, 32767).astype(np.int16)
+    return np.clip(np.round(v * _REFERENCE_STEPS_PER_RAD), -127, 127).astype(np.int8)
 
 
-def dequantize_reference(codes: NDArray[np.int16]) -> NDArray[np.float64]:
-    """Inverse of :func:`quantize_reference`: ``(J, 3)`` int16 -> ``(J, 4)``."""
-    return quat.exp(np.asarray(codes, dtype=np.float64) / 2048.0)
+def dequantize_reference(codes: NDArray[np.int8]) -> NDArray[np.float64]:
+    """Inverse of :func:`quantize_reference`: ``(J, 3)`` int8 -> ``(J, 4)``."""
+    return quat.exp(np.asarray(codes, dtype=np.float64) / (2.0 * _REFERENCE_STEPS_PER_RAD))
 
 
 def _unwrap_rotvec(v: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -404,3 +407,62 @@ def measure_weights(
         w[c] = np.mean(d * d)
         lever[c] = np.mean(d.max(axis=1))
     return w, lever
+
+
+def joint_rotations(
+    x: NDArray[np.float64],
+    j: int,
+    skeleton: Skeleton,
+    layout: ChannelLayout,
+    ref: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Local rotations ``(T, 4)`` of joint ``j`` from its channels ``x`` ``(T, counts[j])``."""
+    kind = layout.kinds[j]
+    T = len(x)
+    if kind == KIND_FIXED:
+        return quat.identity((T,))
+    if kind == KIND_ROTVEC:
+        return quat.multiply(ref[j], quat.exp(x / 2.0))
+    if kind == KIND_ROOT:
+        s = quat.multiply(ref[j], quat.exp(x[:, 1:4] / 2.0))
+        return quat.multiply(quat.about_axis(x[:, 0], "y"), s)
+    from quatmotion.io._text import compose_channels
+
+    letters = "".join("xyz"[i] for i in _dof_axes(skeleton, j))
+    c = skeleton.axes[j]
+    m = compose_channels(x, letters, skeleton.euler == "intrinsic")
+    return quat.multiply(quat.multiply(c, m), quat.conjugate(c))
+
+
+def joint_channels(
+    q: NDArray[np.float64],
+    j: int,
+    skeleton: Skeleton,
+    layout: ChannelLayout,
+    ref: NDArray[np.float64],
+    near: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Channels ``(T, counts[j])`` of joint ``j`` with local rotations ``q`` ``(T, 4)``, each
+    frame on the branch nearest ``near`` (the same rotation, angles shifted by whole turns)."""
+    kind = layout.kinds[j]
+    two_pi = 2.0 * np.pi
+    if kind == KIND_ROTVEC or kind == KIND_ROOT:
+        if kind == KIND_ROOT:
+            heading, q = _heading_split(q)
+            heading = heading + two_pi * np.round((near[:, 0] - heading) / two_pi)
+            target = near[:, 1:4]
+        else:
+            target = near
+        v = 2.0 * quat.log(quat.canonicalize(quat.multiply(quat.conjugate(ref[j]), q)))
+        a = np.linalg.norm(v, axis=1, keepdims=True)
+        twin = v * (1.0 - two_pi / np.maximum(a, 1e-12))
+        pick = np.sum((twin - target) ** 2, axis=1) < np.sum((v - target) ** 2, axis=1)
+        v = np.where(pick[:, None] & (a > 1e-12), twin, v)
+        return np.column_stack((heading, v)) if kind == KIND_ROOT else v
+    if kind == KIND_EULER:
+        c = skeleton.axes[j]
+        local = quat.multiply(quat.multiply(quat.conjugate(c), q), c)
+        letters = "".join("xyz"[i] for i in _dof_axes(skeleton, j))
+        a = decompose_channels(local, letters, skeleton.euler == "intrinsic")
+        return a + two_pi * np.round((near - a) / two_pi)
+    return np.zeros((len(q), 0))

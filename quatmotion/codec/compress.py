@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import time
+import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -212,10 +213,13 @@ def _loaded_models(method: Method, library: PreparedLibrary, encoded: EncodedLib
 
 
 def _layout_chunks(library: PreparedLibrary, encoded: EncodedLibrary, start: int) -> list[bytes]:
-    return [
-        library.layouts[k].to_bytes() + encoded.models[k]
-        for k in range(start, len(library.layouts))
-    ]
+    """``L`` payloads: raw deflate of the shared layout part and the method's model."""
+    out = []
+    for k in range(start, len(library.layouts)):
+        compressor = zlib.compressobj(9, zlib.DEFLATED, -15, 9)
+        data = library.layouts[k].to_bytes() + encoded.models[k]
+        out.append(compressor.compress(data) + compressor.flush())
+    return out
 
 
 def _assemble(

@@ -5,9 +5,10 @@ Conventions
 * Clips whose skeletons share a structure (:func:`~quatmotion.codec.channels.layout_key`) share
   one **layout**: joint kinds, reference pose and channel weights, stored once in the file
   (the common part of an ``L`` chunk, :meth:`LayoutInfo.to_bytes`).
-* Weights are stored as unsigned bytes on a quarter-octave grid: ``w = 2 ** ((code - 128) / 4)``
-  (cm^2 per unit^2), lever arms likewise (cm per unit). Everything that uses them (encoder and
-  decoder) uses the stored, rounded values.
+* The file stores per layout the joint kinds (one byte each), the reference pose (rotation
+  vectors in steps of 1/40 rad, int8: it only centres the channels) and the lever arms
+  (unsigned bytes on a quarter-octave grid, ``2 ** ((code - 128) / 4)`` cm per unit). The
+  metric weights are the encoder's (methods store what their decoders need).
 """
 
 from __future__ import annotations
@@ -65,8 +66,8 @@ class LayoutInfo:
     layout : ChannelLayout
     reference : ndarray, shape (J, 4)
         Quantised reference pose.
-    weights : ndarray, shape (C,)
-        Metric weights (cm^2 per unit^2), quantised.
+    weights : ndarray, shape (C,), or None
+        Metric weights (cm^2 per unit^2), quantised; ``None`` when read from a file.
     lever : ndarray, shape (C,)
         Lever arms (cm per unit), quantised.
     """
@@ -74,7 +75,7 @@ class LayoutInfo:
     skeleton: Skeleton
     layout: ChannelLayout
     reference: NDArray[np.float64]
-    weights: NDArray[np.float64]
+    weights: NDArray[np.float64] | None
     lever: NDArray[np.float64]
 
     @property
@@ -85,8 +86,8 @@ class LayoutInfo:
         J = self.skeleton.n_joints
         w = Writer()
         w.array(self.layout.kinds, "<u1")
-        w.array(quantize_reference(self.reference).reshape(J * 3), "<i2")
-        w.array(encode_log2(self.weights), "<u1").array(encode_log2(self.lever), "<u1")
+        w.array(quantize_reference(self.reference).reshape(J * 3), "<i1")
+        w.array(encode_log2(self.lever), "<u1")
         return w.bytes()
 
     @classmethod
@@ -97,11 +98,9 @@ class LayoutInfo:
             layout = make_layout(skeleton, kinds)
         except ValueError as error:
             raise FormatError(f"library: joint kinds do not fit the skeleton ({error})") from None
-        reference = dequantize_reference(r.array(J * 3, "<i2").reshape(J, 3))
-        C = layout.n_channels
-        weights = decode_log2(r.array(C, "<u1"))
-        lever = decode_log2(r.array(C, "<u1"))
-        return cls(skeleton, layout, reference, weights, lever)
+        reference = dequantize_reference(r.array(J * 3, "<i1").reshape(J, 3))
+        lever = decode_log2(r.array(layout.n_channels, "<u1"))
+        return cls(skeleton, layout, reference, None, lever)
 
 
 @dataclass(eq=False)

@@ -125,3 +125,56 @@ def evaluate_segments(
             t = knot_vector(L, spacing, inserted.get(s, ()))
             _evaluate(t, np.ascontiguousarray(c, dtype=np.float64), L, out, a)
     return out
+
+
+class SplineBasis:
+    """The B-spline basis of a whole clip (all segments), for many least-squares fits.
+
+    ``B`` is the sparse ``(T, n)`` design matrix (a short segment contributes identity rows);
+    the Gram matrix ``B^T B`` is banded (cubic: 3 off-diagonals, segments do not overlap), so a
+    fit is one sparse product and one banded Cholesky solve: cheap enough to fit each joint's
+    channels separately, as hierarchical compensation needs.
+    """
+
+    def __init__(self, n_frames: int, breaks, spacing: float, inserted=None):
+        from scipy.interpolate import BSpline
+        from scipy.sparse import block_diag, identity
+
+        inserted = inserted or {}
+        blocks = []
+        for s, (a, b) in enumerate(segment_bounds(n_frames, breaks)):
+            L = b - a
+            if L < MIN_SPLINE_FRAMES:
+                blocks.append(identity(L, format="csr"))
+            else:
+                t = knot_vector(L, spacing, inserted.get(s, ()))
+                blocks.append(BSpline.design_matrix(np.arange(L, dtype=np.float64), t, 3))
+        self.B = block_diag(blocks, format="csr")
+        self.Bt = self.B.T.tocsr()
+        gram = (self.Bt @ self.B).toarray() if self.B.shape[1] <= 2048 else None
+        n = self.B.shape[1]
+        if gram is None:
+            gram = (self.Bt @ self.B).todia()
+            ab = np.zeros((4, n))
+            for u in range(4):
+                diag = gram.diagonal(u)
+                ab[3 - u, u:] = diag
+        else:
+            ab = np.zeros((4, n))
+            for u in range(4):
+                ab[3 - u, u:] = np.diagonal(gram, u)
+        self._banded = ab
+
+    @property
+    def n_rows(self) -> int:
+        return self.B.shape[1]
+
+    def fit(self, Y: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Least-squares coefficients ``(n, c)`` of ``Y`` ``(T, c)``."""
+        from scipy.linalg import solveh_banded
+
+        return solveh_banded(self._banded, self.Bt @ Y)
+
+    def evaluate(self, coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``B c``: ``(n, c) -> (T, c)``."""
+        return self.B @ coefficients

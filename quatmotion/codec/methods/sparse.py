@@ -14,7 +14,7 @@
    give a dictionary larger than our collections' coarse samples; ``K = min(2000, N // 8)``
    (at least 4) is used, ``L = min(15, K)``, 50 iterations.
 4. **Quantisation**: atom logs (step ``quality / 512`` rad), weights (step ``quality / 32``),
-   root channels (step ``quality / 2`` weighted cm).
+   root channels (step ``quality / 2`` cm of largest displacement).
 5. **Arithmetic coding** with constriction: atom indices uniform over ``K``, weights and
    dictionary and root with the adaptive Laplace coder of :mod:`quatmotion.codec.entropy`.
 
@@ -222,7 +222,7 @@ class SparseMethod(Method):
         values = np.round(W.data / wstep).astype(np.int64)
         # root channels: coarse approximation in weighted units
         cols = _root_columns(info)
-        scale = np.sqrt(info.weights[cols])
+        scale = info.lever[cols]
         R = np.round(_coarse(clip.channels[:, cols] * scale) / (quality / _ROOT_UNIT)).astype(
             np.int64
         )
@@ -343,7 +343,7 @@ class SparseMethod(Method):
         T = context.n_frames
         disp = _fine(coarse, T).reshape(T, n, 3)
         rot = quat.multiply(info.reference[joints], quat.exp(disp / 2.0))
-        scale = np.sqrt(info.weights[cols])
+        scale = info.lever[cols]
         root = _fine(np.cumsum(Rd, axis=0) * (quality / _ROOT_UNIT), T) / scale
         return _to_layout_channels(rot, joints, root, cols, context)
 

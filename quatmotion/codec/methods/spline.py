@@ -23,6 +23,9 @@ What only ``best`` does (each measured in ``docs/performance.md``):
 * order-2 linear prediction with coefficients fitted once per library (gait sampled at 5
   knots per cycle is far from linear, so a plain delta predicts poorly);
 * the first row of each segment predicted from the library's mean, with its own scale;
+* **hierarchical compensation** (encoder only): joints are coded parents first and each
+  joint's target is the original global rotation seen from its decoded parent, so a parent's
+  error is taken up by its children instead of adding up towards the hands and feet;
 * **breaks** at glitches (a pose jumping far more than its neighbours), so the spline does not
   smear a 91 cm jump over a second of frames;
 * the rotations relative to the library's reference pose (shared), not each clip's mean.
@@ -40,13 +43,16 @@ from quatmotion.codec import entropy
 from quatmotion.codec.binary import Reader, Writer
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary, decode_log2, encode_log2
 from quatmotion.codec.methods._base import ClipContext, EncodedLibrary, Method
+from quatmotion.codec.channels import joint_channels, joint_rotations
 from quatmotion.codec.spline import (
     MIN_SPLINE_FRAMES,
+    SplineBasis,
     evaluate_segments,
     fit_segments,
     knot_vector,
     segment_bounds,
 )
+from quatmotion.quat import conjugate, multiply
 from quatmotion.errors import FormatError
 from quatmotion.motion import forward_kinematics
 
@@ -80,9 +86,12 @@ class SplineSettings:
     steps_tried: int = 5
     gamma: float = 1.0
     bad_frame_bytes: float = 16.0
+    compensate: bool = False
 
 
-BEST = SplineSettings("metric", "lpc", (20.0, 24.0, 28.0), True, True)
+BEST = SplineSettings(
+    "metric", "lpc", (24.0,), True, True, steps_tried=3, gamma=4.0, compensate=True
+)
 BASELINE = SplineSettings("lever", "delta", (16.0, 24.0, 32.0), False, False)
 
 
@@ -347,15 +356,8 @@ class SplineMethod(Method):
                 for _round in range(self.settings.refine_rounds + 1):
                     key = (plan.breaks, tuple(sorted(plan.inserted.items())))
                     if key not in fits:
-                        fits[key] = fit_segments(Y, plan.breaks, plan.spacing, plan.inserted)
-                    Q = [np.round(c / step).astype(np.int64) for c in fits[key]]
-                    Xh = clip.channels.copy()
-                    Xh[:, cols] = (
-                        evaluate_segments(
-                            [q * step for q in Q], T, plan.breaks, plan.spacing, plan.inserted
-                        )
-                        / model.scale[cols]
-                    )
+                        fits[key] = SplineBasis(T, plan.breaks, plan.spacing, plan.inserted)
+                    Qcols, Xh = self._code_columns(library, i, fits[key], model, cols, step)
                     bad = self._bad_frames(library, i, Xh, P, bound)
                     if len(bad) == 0 or bound is None:
                         break
@@ -363,6 +365,7 @@ class SplineMethod(Method):
                     if refined is None:
                         break
                     plan = refined
+                Q = [Qcols]
                 starts = _segment_starts(T, plan)
                 R = _residuals(np.concatenate(Q), starts, model, step, cols)
                 stream = entropy.encode_rows(
@@ -379,6 +382,52 @@ class SplineMethod(Method):
                     if misses >= 2:
                         break
         return best[1]
+
+    def _code_columns(self, library, i, basis: SplineBasis, model, cols, step):
+        """Quantised coefficients ``(n, len(cols))`` and the decoded channels ``(T, C)``.
+
+        With compensation, joints are coded parents first and each joint's target is the
+        original global rotation seen from its decoded parent, so the quantisation error of
+        a parent is taken up by its children instead of adding up along the chain.
+        """
+        clip = library.clips[i]
+        X = clip.channels
+        scale = model.scale
+        Xh = X.copy()
+        Q = np.zeros((basis.n_rows, X.shape[1]), dtype=np.int64)
+
+        def code(columns, target):
+            c = basis.fit(target * scale[columns])
+            q = np.round(c / step).astype(np.int64)
+            Q[:, columns] = q
+            Xh[:, columns] = basis.evaluate(q * step) / scale[columns]
+
+        active = np.zeros(X.shape[1], dtype=bool)
+        active[cols] = True
+        if not self.settings.compensate:
+            code(cols, X[:, cols])
+            return Q[:, cols], Xh
+        info = library.layouts[clip.layout]
+        layout, ref, sk = info.layout, info.reference, clip.motion.skeleton
+        G = clip.world.rotations
+        Gh = np.empty_like(G)
+        rest = [c for c in cols if c < 3 or c >= layout.starts[-1] + layout.counts[-1]]
+        if rest:
+            code(np.asarray(rest), X[:, rest])
+        for j in range(sk.n_joints):
+            a, n = int(layout.starts[j]), int(layout.counts[j])
+            columns = np.arange(a, a + n)
+            p = int(sk.parents[j])
+            if n:
+                if j > 0:
+                    local = multiply(conjugate(Gh[:, p]), G[:, j])
+                    target = joint_channels(local, j, sk, layout, ref, X[:, columns])
+                else:
+                    target = X[:, columns]
+                code(columns, target)
+            q = joint_rotations(Xh[:, columns], j, sk, layout, ref)
+            Gh[:, j] = q if j == 0 else multiply(Gh[:, p], q)
+        return Q[:, cols], Xh
 
     def _bad_frames(self, library, i, Xh, P, bound) -> NDArray[np.int64]:
         if bound is None:
