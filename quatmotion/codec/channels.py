@@ -446,7 +446,7 @@ def joint_channels(
     frame on the branch nearest ``near`` (the same rotation, angles shifted by whole turns)."""
     kind = layout.kinds[j]
     two_pi = 2.0 * np.pi
-    if kind == KIND_ROTVEC or kind == KIND_ROOT:
+    if kind in (KIND_ROTVEC, KIND_ROOT):
         if kind == KIND_ROOT:
             heading, q = _heading_split(q)
             heading = heading + two_pi * np.round((near[:, 0] - heading) / two_pi)

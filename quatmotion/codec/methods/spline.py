@@ -41,9 +41,9 @@ from numpy.typing import NDArray
 
 from quatmotion.codec import entropy
 from quatmotion.codec.binary import Reader, Writer
+from quatmotion.codec.channels import joint_channels, joint_rotations
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary, decode_log2, encode_log2
 from quatmotion.codec.methods._base import ClipContext, EncodedLibrary, Method
-from quatmotion.codec.channels import joint_channels, joint_rotations
 from quatmotion.codec.spline import (
     MIN_SPLINE_FRAMES,
     SplineBasis,
@@ -52,9 +52,9 @@ from quatmotion.codec.spline import (
     knot_vector,
     segment_bounds,
 )
-from quatmotion.quat import conjugate, multiply
 from quatmotion.errors import FormatError
 from quatmotion.motion import forward_kinematics
+from quatmotion.quat import conjugate, multiply
 
 __all__ = ["SplineMethod", "SplineSettings", "detect_breaks"]
 
