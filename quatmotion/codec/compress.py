@@ -188,12 +188,13 @@ def _verify_and_repair(
             fix = find_corrections(
                 clip.channels,
                 X,
-                clip.positions,
+                clip.world,
                 clip.motion.skeleton,
                 info,
                 clip.at_rest,
                 context.active,
                 max_error,
+                library.vertices,
             )
             fix.apply(X, np.maximum(info.lever, 1e-9))
         corrections.append(fix)
@@ -298,6 +299,7 @@ def compress(
     ratio: float | None = None,
     method: str = "best",
     quality: float | None = None,
+    bound_on: str = "joints",
     skeleton: Skeleton | str | Path | None = None,
     seed: int = 0,
     progress: Progress | None = None,
@@ -320,6 +322,9 @@ def compress(
     quality : float, optional
         The method's size knob (its quantiser step; larger means smaller files). With
         ``max_error`` it caps the step the rate control may use.
+    bound_on : {"joints", "vertices"}
+        What ``max_error`` bounds: joint and end-site positions, or also the virtual vertices
+        3 cm along each joint's axes (the Animation Compression Library's measure).
     skeleton : Skeleton or path, optional
         The ASF for AMC inputs whose skeleton is not found by name.
     seed : int
@@ -343,11 +348,13 @@ def compress(
     report = progress or (lambda *_: None)
     motions, sources = _load_inputs(clips, skeleton)
     _validate(motions, max_error, ratio)
+    if bound_on not in ("joints", "vertices"):
+        raise ValueError(f"bound_on must be 'joints' or 'vertices', got {bound_on!r}")
     codec = get_method(method)
     table = _SkeletonTable()
     clip_skeleton = [table.index(m.skeleton) for m in motions]
     report("prepare", 0, len(motions))
-    library = prepare_library(motions, sources)
+    library = prepare_library(motions, sources, vertices=bound_on == "vertices")
     layout_skeletons = [table.index(info.skeleton) for info in library.layouts]
     report("encode", 0, len(motions))
     q = quality if quality is not None else codec.default_quality

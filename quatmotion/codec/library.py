@@ -31,6 +31,7 @@ from quatmotion.codec.channels import (
     reference_pose,
     to_channels,
 )
+from quatmotion.codec.metrics import VIRTUAL_VERTEX_CM
 from quatmotion.errors import FormatError
 from quatmotion.motion import Motion, Skeleton, WorldTransforms, forward_kinematics
 
@@ -127,6 +128,8 @@ class PreparedLibrary:
     layouts: list[LayoutInfo]
     clips: list[PreparedClip]
     members: list[list[int]] = field(default_factory=list)
+    vertices: bool = False
+    """Whether the error bound also covers the virtual vertices (joint orientations)."""
 
     def motion_of(self, i: int, X: NDArray[np.float64]) -> Motion:
         """Clip ``i``'s decoded motion from channels ``X``."""
@@ -146,6 +149,8 @@ def prepare_library(
     motions: list[Motion],
     sources: list[tuple[int, str]] | None = None,
     layouts: list[LayoutInfo] | None = None,
+    *,
+    vertices: bool = False,
 ) -> PreparedLibrary:
     """Group clips by skeleton structure, fit each layout, and compute every clip's channels.
 
@@ -157,6 +162,9 @@ def prepare_library(
     layouts : list of LayoutInfo, optional
         Layouts that already exist (appending to a library): clips of their structure use them
         unchanged; other structures get new layouts after them.
+    vertices : bool
+        The bound covers the virtual vertices: every rotation channel's lever arm is at least
+        their 3 cm (a twist about a bone moves no joint but turns the vertices).
     """
     existing = list(layouts or [])
     keys = [layout_key(info.skeleton) for info in existing]
@@ -171,6 +179,13 @@ def prepare_library(
         layout = make_layout(sk, default_kinds(sk, group))
         reference = reference_pose(group, layout)
         weights, lever = measure_weights(group, layout, reference)
+        if vertices:
+            rotation = np.ones(layout.n_channels, dtype=bool)
+            rotation[:3] = False
+            for k in range(len(layout.translation_joints)):
+                rotation[layout.translation_columns(k)] = False
+            lever = np.where(rotation, np.maximum(lever, VIRTUAL_VERTEX_CM), lever)
+            weights = np.where(rotation, np.maximum(weights, VIRTUAL_VERTEX_CM**2), weights)
         existing.append(LayoutInfo(sk, layout, reference, _quantised(weights), _quantised(lever)))
         keys.append(key)
     clips = []
@@ -182,4 +197,4 @@ def prepare_library(
         size, fmt = sources[i] if sources else (0, "")
         clips.append(PreparedClip(m, k, X, at_rest, forward_kinematics(m), size, fmt))
         members[k].append(i)
-    return PreparedLibrary(existing, clips, members)
+    return PreparedLibrary(existing, clips, members, vertices)

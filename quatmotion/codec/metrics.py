@@ -33,6 +33,7 @@ __all__ = [
     "CollectionErrors",
     "clip_errors",
     "collection_errors",
+    "frame_errors",
     "point_errors",
     "raw_float32_bytes",
 ]
@@ -114,3 +115,20 @@ def collection_errors(clips: list[ClipErrors]) -> CollectionErrors:
 def raw_float32_bytes(motion: Motion) -> int:
     """``4 * degrees of freedom * frames``: the clip as raw float32 channels."""
     return 4 * sum(len(c) for c in motion.skeleton.channels) * motion.n_frames
+
+
+def frame_errors(
+    original: WorldTransforms, decoded: Motion, *, vertices: bool = False
+) -> NDArray[np.float64]:
+    """Largest error of each frame, ``(T,)`` cm: over joints and end sites, and with
+    ``vertices`` also over the virtual vertices (the bound the encoder checks)."""
+    d = forward_kinematics(decoded)
+    err = np.linalg.norm(original.all_positions() - d.all_positions(), axis=-1).max(axis=1)
+    if vertices:
+        axes = VIRTUAL_VERTEX_CM * np.eye(3)
+        vo = original.positions[:, :, None, :] + quat.rotate(
+            original.rotations[:, :, None, :], axes
+        )
+        vd = d.positions[:, :, None, :] + quat.rotate(d.rotations[:, :, None, :], axes)
+        err = np.maximum(err, np.linalg.norm(vo - vd, axis=-1).max(axis=(1, 2)))
+    return err

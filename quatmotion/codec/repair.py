@@ -23,8 +23,9 @@ from numpy.typing import NDArray
 from quatmotion.codec.binary import Reader, Writer
 from quatmotion.codec.channels import from_channels
 from quatmotion.codec.library import LayoutInfo
+from quatmotion.codec.metrics import frame_errors
 from quatmotion.errors import FormatError
-from quatmotion.motion import Skeleton, forward_kinematics
+from quatmotion.motion import Skeleton, WorldTransforms
 
 __all__ = ["Corrections", "find_corrections", "read_clip_prefix", "write_clip_prefix"]
 
@@ -59,12 +60,13 @@ class Corrections:
 def find_corrections(
     X: NDArray[np.float64],
     X_hat: NDArray[np.float64],
-    positions: NDArray[np.float64],
+    world: WorldTransforms,
     skeleton: Skeleton,
     info: LayoutInfo,
     at_rest: NDArray[np.bool_],
     active: NDArray[np.bool_],
     bound: float,
+    vertices: bool = False,
 ) -> Corrections:
     """Corrections that bring every frame of ``X_hat`` within ``bound`` of ``positions``.
 
@@ -72,21 +74,25 @@ def find_corrections(
     ----------
     X, X_hat : ndarray, shape (T, C)
         Original and decoded channels.
-    positions : ndarray, shape (T, N, 3)
-        The original's joint and end-site positions, cm.
+    world : WorldTransforms
+        The original's forward kinematics.
     skeleton, info, at_rest, active
         The clip's skeleton, layout, translation-at-rest flags and coded channels.
     bound : float
         Centimetres.
+    vertices : bool
+        Bound the virtual vertices too (:func:`~quatmotion.codec.metrics.frame_errors`).
     """
     layout, ref = info.layout, info.reference
 
-    def frame_errors(rows: NDArray[np.float64], frames: NDArray[np.int64]) -> NDArray[np.float64]:
+    def errors_of(rows: NDArray[np.float64], frames: slice) -> NDArray[np.float64]:
         m = from_channels(rows, skeleton, layout, ref, at_rest, 1.0)
-        p = forward_kinematics(m).all_positions()
-        return np.linalg.norm(p - positions[frames], axis=2).max(axis=1)
+        part = WorldTransforms(
+            world.positions[frames], world.rotations[frames], world.site_positions[frames]
+        )
+        return frame_errors(part, m, vertices=vertices)
 
-    err = frame_errors(X_hat, np.arange(len(X_hat)))
+    err = errors_of(X_hat, slice(None))
     bad = np.flatnonzero(err > bound)
     if len(bad) == 0:
         return Corrections.empty()
@@ -103,7 +109,7 @@ def find_corrections(
             v = np.round(r[sel] * lever[sel] / quantum).astype(np.int64)
             row = X_hat[f].copy()
             row[sel] += v * quantum / lever[sel]
-            if frame_errors(row[None], np.array([f]))[0] <= 0.98 * bound or n == len(order):
+            if errors_of(row[None], slice(f, f + 1))[0] <= 0.98 * bound or n == len(order):
                 break
         keep = v != 0
         frames += [int(f)] * int(keep.sum())

@@ -10,6 +10,8 @@ Conventions
   one coefficient row per frame (the identity basis).
 * Coefficients of a segment are ``(n, C)``: ``n = n_intervals + 3`` rows (cubic), or ``L`` rows
   for a short segment. The rows of all segments, in order, are what the entropy coder sees.
+* A spacing below 2 frames means no spline at all: every segment keeps its frames (the
+  identity basis), for bounds tighter than the capture's frame-to-frame noise.
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ def knot_vector(length: int, spacing: float, inserted=()) -> NDArray[np.float64]
 
 def n_rows(length: int, spacing: float, inserted=()) -> int:
     """Coefficient rows of a segment of ``length`` frames."""
-    if length < MIN_SPLINE_FRAMES:
+    if length < MIN_SPLINE_FRAMES or spacing < 2:
         return length
     return len(knot_vector(length, spacing, inserted)) - 4
 
@@ -69,7 +71,7 @@ def fit_segments(
     out = []
     for s, (a, b) in enumerate(segment_bounds(len(Y), breaks)):
         L = b - a
-        if L < MIN_SPLINE_FRAMES:
+        if L < MIN_SPLINE_FRAMES or spacing < 2:
             out.append(np.array(Y[a:b], dtype=np.float64))
             continue
         t = knot_vector(L, spacing, inserted.get(s, ()))
@@ -119,7 +121,7 @@ def evaluate_segments(
         zip(segment_bounds(n_frames, breaks), coefficients, strict=True)
     ):
         L = b - a
-        if L < MIN_SPLINE_FRAMES:
+        if L < MIN_SPLINE_FRAMES or spacing < 2:
             out[a:b] = c
         else:
             t = knot_vector(L, spacing, inserted.get(s, ()))
@@ -144,7 +146,7 @@ class SplineBasis:
         blocks = []
         for s, (a, b) in enumerate(segment_bounds(n_frames, breaks)):
             L = b - a
-            if L < MIN_SPLINE_FRAMES:
+            if L < MIN_SPLINE_FRAMES or spacing < 2:
                 blocks.append(identity(L, format="csr"))
             else:
                 t = knot_vector(L, spacing, inserted.get(s, ()))

@@ -44,22 +44,23 @@ from quatmotion.codec.binary import Reader, Writer
 from quatmotion.codec.channels import joint_channels, joint_rotations
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary, decode_log2, encode_log2
 from quatmotion.codec.methods._base import ClipContext, EncodedLibrary, Method
+from quatmotion.codec.metrics import frame_errors
 from quatmotion.codec.spline import (
     MIN_SPLINE_FRAMES,
     SplineBasis,
     evaluate_segments,
     fit_segments,
     knot_vector,
+    n_rows,
     segment_bounds,
 )
 from quatmotion.errors import FormatError
-from quatmotion.motion import forward_kinematics
 from quatmotion.quat import conjugate, multiply
 
 __all__ = ["SplineMethod", "SplineSettings", "detect_breaks"]
 
 _STEP_GRID = 8  # steps per octave
-_STEP_FLOOR = 1.0 / 64.0
+_STEP_FLOOR = 2.0**-12
 _LPC_UNIT = 64.0
 _MEAN_UNIT = 16.0
 
@@ -85,7 +86,6 @@ class SplineSettings:
     refine_rounds: int = 6
     steps_tried: int = 5
     gamma: float = 1.0
-    bad_frame_bytes: float = 16.0
     compensate: bool = False
 
 
@@ -202,11 +202,7 @@ def _segment_starts(n_frames: int, plan: ClipPlan) -> NDArray[np.bool_]:
     flags = []
     for s, (a, b) in enumerate(segment_bounds(n_frames, plan.breaks)):
         L = b - a
-        n = (
-            L
-            if L < MIN_SPLINE_FRAMES
-            else len(knot_vector(L, plan.spacing, plan.inserted.get(s, ()))) - 4
-        )
+        n = n_rows(L, plan.spacing, plan.inserted.get(s, ()))
         f = np.zeros(n, dtype=bool)
         f[0] = True
         flags.append(f)
@@ -335,52 +331,71 @@ class SplineMethod(Method):
                 active[layout.translation_columns(k)] = False
         return active
 
+    def _spacings(self, bound: float | None) -> tuple[float, ...]:
+        """Knot spacings to try: the configured ones, shortened for tight bounds (a spline
+        with 24-frame knots cannot follow a capture to a millimetre)."""
+        if bound is None:
+            return self.settings.spacings
+        factor = min(1.0, np.sqrt(bound / 5.0))
+        spacings = tuple(max(3.0, round(k * factor)) for k in self.settings.spacings)
+        return spacings + ((1.0,) if bound < 0.5 else ())
+
     def _encode_clip(self, library, i, model, breaks, quality, bound) -> bytes:
         clip = library.clips[i]
         active = self._active(library, i)
         cols = np.flatnonzero(active)
-        Y = clip.channels[:, cols] * model.scale[cols]
-        T = len(Y)
-        P = clip.positions
-        top = step_code(quality)
+        T = clip.motion.n_frames
+        # the first step: the cap, or about a fifth of the bound (weighted cm) if smaller
+        top = step_code(min(quality, 0.2 * bound) if bound else quality)
         best = None
-        for spacing in self.settings.spacings:
-            fits: dict[tuple, list] = {}
-            misses = 0
-            for n_try in range(self.settings.steps_tried):
-                code = top - 3 * n_try
-                if code < 0:
-                    break
+        for spacing in self._spacings(bound):
+            fits: dict[tuple, SplineBasis] = {}
+
+            def trial(code: int, spacing=spacing, fits=fits):
                 step = step_value(code)
                 plan = ClipPlan(int(round(spacing)), code, breaks, {})
                 for _round in range(self.settings.refine_rounds + 1):
                     key = (plan.breaks, tuple(sorted(plan.inserted.items())))
                     if key not in fits:
                         fits[key] = SplineBasis(T, plan.breaks, plan.spacing, plan.inserted)
-                    Qcols, Xh = self._code_columns(library, i, fits[key], model, cols, step)
-                    bad = self._bad_frames(library, i, Xh, P, bound)
-                    if len(bad) == 0 or bound is None:
+                    Q, Xh = self._code_columns(library, i, fits[key], model, cols, step)
+                    bad = self._bad_frames(library, i, Xh, bound)
+                    if len(bad) == 0:
                         break
                     refined = self._refine(plan, bad, T)
                     if refined is None:
                         break
                     plan = refined
-                Q = [Qcols]
                 starts = _segment_starts(T, plan)
-                R = _residuals(np.concatenate(Q), starts, model, step, cols)
+                R = _residuals(Q, starts, model, step, cols)
                 stream = entropy.encode_rows(
                     R, model.initial[cols] / step, model.start_scale[cols] / step, starts
                 )
                 payload = plan.to_bytes() + stream
-                # frames still over the bound go to the orchestrator's repair: count their cost
-                cost = len(payload) + self.settings.bad_frame_bytes * len(bad)
+                # frames still over the bound go to the orchestrator's repair: about three
+                # bytes for each channel that moves a point by more than an eighth of the bound
+                lever = library.layouts[clip.layout].lever
+                off = np.abs(clip.channels[bad] - Xh[bad]) * lever > bound / 8.0 if len(bad) else 0
+                repair = 3.0 * np.sum(off) + 2.0 * len(bad)
+                return len(payload) + repair, payload, len(bad)
+
+            # halve the step while more than 1 % of the frames miss the bound, then try the
+            # neighbours of the best step on the 1/8-octave grid
+            code = top
+            tried = {}
+            for _ in range(10):
+                tried[code] = trial(code)
+                if tried[code][2] <= max(1, T // 100) or code < 8:
+                    break
+                code -= 8
+            centre = min(tried, key=lambda c: tried[c][0])
+            for offset in (-3, 3)[: max(0, self.settings.steps_tried - 1)]:
+                c = centre + offset
+                if 0 <= c <= 255 and c not in tried and (offset < 0 or c <= top):
+                    tried[c] = trial(c)
+            for cost, payload, _ in tried.values():
                 if best is None or cost < best[0]:
                     best = (cost, payload)
-                    misses = 0
-                else:
-                    misses += 1
-                    if misses >= 2:
-                        break
         return best[1]
 
     def _code_columns(self, library, i, basis: SplineBasis, model, cols, step):
@@ -429,28 +444,30 @@ class SplineMethod(Method):
             Gh[:, j] = q if j == 0 else multiply(Gh[:, p], q)
         return Q[:, cols], Xh
 
-    def _bad_frames(self, library, i, Xh, P, bound) -> NDArray[np.int64]:
+    def _bad_frames(self, library, i, Xh, bound) -> NDArray[np.int64]:
         if bound is None:
             return np.zeros(0, dtype=np.int64)
-        m = library.motion_of(i, Xh)
-        err = np.linalg.norm(forward_kinematics(m).all_positions() - P, axis=2).max(axis=1)
+        err = frame_errors(
+            library.clips[i].world, library.motion_of(i, Xh), vertices=library.vertices
+        )
         return np.flatnonzero(err > bound)
 
     @staticmethod
     def _refine(plan: ClipPlan, bad: NDArray[np.int64], T: int) -> ClipPlan | None:
+        # knot intervals stay at least a quarter of the spacing (and 2 frames) wide
         """Insert a knot in the middle of each knot interval holding a failing frame."""
         inserted = {s: list(v) for s, v in plan.inserted.items()}
         changed = False
         for s, (a, b) in enumerate(segment_bounds(T, plan.breaks)):
             L = b - a
             local = bad[(bad >= a) & (bad < b)] - a
-            if len(local) == 0 or L < MIN_SPLINE_FRAMES:
+            if len(local) == 0 or L < MIN_SPLINE_FRAMES or plan.spacing < 2:
                 continue
             inner = np.unique(knot_vector(L, plan.spacing, inserted.get(s, ()))[3:-3])
             idx = np.clip(np.searchsorted(inner, local, side="right") - 1, 0, len(inner) - 2)
             for j in np.unique(idx):
                 lo, hi = inner[j], inner[j + 1]
-                if hi - lo >= 6.0:
+                if hi - lo >= max(4.0, plan.spacing / 2.0):
                     inserted.setdefault(s, []).append(int((lo + hi) // 2))
                     changed = True
         if not changed:
@@ -488,11 +505,7 @@ class SplineMethod(Method):
         pos = 0
         for s, (a, b) in enumerate(segment_bounds(T, plan.breaks)):
             L = b - a
-            n = (
-                L
-                if L < MIN_SPLINE_FRAMES
-                else len(knot_vector(L, plan.spacing, plan.inserted.get(s, ()))) - 4
-            )
+            n = n_rows(L, plan.spacing, plan.inserted.get(s, ()))
             rows.append(Q[pos : pos + n] * step)
             pos += n
         X = np.zeros((T, context.layout.layout.n_channels))
