@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion.codec.binary import Reader
-from quatmotion.codec.channels import from_channels
+from quatmotion.codec.channels import channel_rotations, from_channels
 from quatmotion.codec.container import (
     ChunkRef,
     ClipEntry,
@@ -217,6 +217,13 @@ class Archive:
             raise FormatError(f"clip {entry.name!r}: decoded channels are invalid", self._name)
         _apply(corrections, X, info)
         return DecodedChannels(X, at_rest, info, skeleton, entry)
+
+    def read_rotations(self, clip: int | str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """A clip's root translation ``(T, 3)`` cm and local rotations ``(T, J, 4)``: the
+        decoded arrays without the validation a :class:`Motion` adds (the fast path)."""
+        d = self.read_channels(clip)
+        rotations = channel_rotations(d.channels, d.skeleton, d.layout.layout, d.layout.reference)
+        return d.channels[:, :3], rotations
 
     def read(self, clip: int | str) -> Motion:
         """A clip as a :class:`Motion` (skeleton, fps, frames and name exactly as stored)."""

@@ -50,6 +50,7 @@ __all__ = [
     "KIND_ROOT",
     "KIND_ROTVEC",
     "ChannelLayout",
+    "channel_rotations",
     "default_kinds",
     "euler_kinds",
     "from_channels",
@@ -340,16 +341,37 @@ def _rotations_kernel(X, kinds, starts, counts, dof_axes, pre, ref):  # pragma: 
 
 
 def _kernel_tables(skeleton: Skeleton, layout: ChannelLayout):
+    """Dof axes ``(J, 3)`` and pre-rotated unit axes ``pre[j, i] = C_j e_i`` with
+    ``pre[j, 3, 0]`` flagging intrinsic composition, cached on the skeleton object."""
+    cached = _TABLES.get(id(skeleton))
+    if cached is not None and cached[0] is skeleton:
+        return cached[1], cached[2]
     J = skeleton.n_joints
     dof_axes = np.zeros((J, 3), dtype=np.int64)
-    # pre[j, i] = C_j e_i (the dof axis in the parent frame); pre[j, 3, 0] flags intrinsic
-    pre = np.zeros((J, 4, 3))
     for j in range(J):
         axes = _dof_axes(skeleton, j)
         dof_axes[j, : len(axes)] = axes
-        pre[j, :3] = quat.rotate(skeleton.axes[j], np.eye(3))
-        pre[j, 3, 0] = 1.0 if skeleton.euler == "intrinsic" else 0.0
+    pre = np.zeros((J, 4, 3))
+    pre[:, :3] = quat.rotate(skeleton.axes[:, None, :], np.eye(3)[None])
+    pre[:, 3, 0] = 1.0 if skeleton.euler == "intrinsic" else 0.0
+    if len(_TABLES) > 64:
+        _TABLES.clear()
+    _TABLES[id(skeleton)] = (skeleton, dof_axes, pre)
     return dof_axes, pre
+
+
+_TABLES: dict[int, tuple] = {}
+
+
+def channel_rotations(
+    X: NDArray[np.float64], skeleton: Skeleton, layout: ChannelLayout, ref: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Local joint rotations ``(T, J, 4)`` of channels ``X`` ``(T, C)`` (one compiled pass)."""
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    dof_axes, pre = _kernel_tables(skeleton, layout)
+    return _rotations_kernel(
+        X, layout.kinds, layout.starts, layout.counts, dof_axes, pre, np.ascontiguousarray(ref)
+    )
 
 
 def from_channels(
@@ -362,11 +384,7 @@ def from_channels(
     name: str = "",
 ) -> Motion:
     """The clip of channels ``X`` ``(T, C)``: the inverse of :func:`to_channels`."""
-    X = np.ascontiguousarray(X, dtype=np.float64)
-    dof_axes, pre = _kernel_tables(skeleton, layout)
-    rotations = _rotations_kernel(
-        X, layout.kinds, layout.starts, layout.counts, dof_axes, pre, np.ascontiguousarray(ref)
-    )
+    rotations = channel_rotations(X, skeleton, layout, ref)
     translations = None
     if len(layout.translation_joints) and not np.all(at_rest):
         translations = np.repeat(skeleton.offsets[None], len(X), axis=0)

@@ -36,6 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -226,20 +227,33 @@ def _residuals(
     return R
 
 
+@numba.njit(cache=True)
+def _unpredict_kernel(R, starts, mean, a1, a2):  # pragma: no cover - compiled
+    n, c = R.shape
+    Q = np.empty_like(R)
+    for i in range(n):
+        for k in range(c):
+            if starts[i]:
+                Q[i, k] = R[i, k] + mean[k]
+            elif i >= 2 and not starts[i - 1]:
+                Q[i, k] = R[i, k] + np.int64(np.round(a1[k] * Q[i - 1, k] + a2[k] * Q[i - 2, k]))
+            else:
+                Q[i, k] = R[i, k] + Q[i - 1, k]
+    return Q
+
+
 def _unpredict(
     R: NDArray[np.int64], starts, model: SplineModel, step: float, cols
 ) -> NDArray[np.int64]:
-    Q = R.copy()
+    """Inverse of :func:`_residuals` (a compiled loop: it runs at every decode)."""
     mean = np.round(model.start_mean[cols] / step).astype(np.int64)
-    a1, a2 = model.a1[cols], model.a2[cols]
-    for i in range(len(R)):
-        if starts[i]:
-            Q[i] = R[i] + mean
-        elif i >= 2 and not starts[i - 1]:
-            Q[i] = R[i] + np.round(a1 * Q[i - 1] + a2 * Q[i - 2]).astype(np.int64)
-        else:
-            Q[i] = R[i] + Q[i - 1]
-    return Q
+    return _unpredict_kernel(
+        np.ascontiguousarray(R, dtype=np.int64),
+        np.asarray(starts, dtype=np.bool_),
+        mean,
+        np.ascontiguousarray(model.a1[cols]),
+        np.ascontiguousarray(model.a2[cols]),
+    )
 
 
 class SplineMethod(Method):
