@@ -87,16 +87,21 @@ class CompressionResult:
 
 # ---------------------------------------------------------------------------------- inputs
 def _load_inputs(
-    items: Sequence[Motion | str | Path], skeleton: Skeleton | str | Path | None
+    items: Sequence[Motion | str | Path],
+    skeleton: Skeleton | str | Path | None,
+    known: Sequence[tuple[int, str]] | None = None,
 ) -> tuple[list[Motion], list[tuple[int, str]]]:
     """Motions and their source sizes from clips, files and folders."""
     motions: list[Motion] = []
     sources: list[tuple[int, str]] = []
     paths: list[Path] = []
+    in_memory = [item for item in items if isinstance(item, Motion)]
+    if known is not None and len(known) != len(in_memory):
+        raise ValueError(f"sources gives {len(known)} sizes for {len(in_memory)} clips")
     for item in items:
         if isinstance(item, Motion):
             motions.append(item)
-            sources.append((0, ""))
+            sources.append(tuple(known[len(motions) - 1]) if known is not None else (0, ""))
         else:
             paths.append(Path(item))
     for path in find_motion_files(paths) if paths else []:
@@ -301,6 +306,7 @@ def compress(
     quality: float | None = None,
     bound_on: str = "joints",
     skeleton: Skeleton | str | Path | None = None,
+    sources: Sequence[tuple[int, str]] | None = None,
     seed: int = 0,
     progress: Progress | None = None,
 ) -> CompressionResult:
@@ -327,6 +333,9 @@ def compress(
         3 cm along each joint's axes (the Animation Compression Library's measure).
     skeleton : Skeleton or path, optional
         The ASF for AMC inputs whose skeleton is not found by name.
+    sources : sequence of (int, str), optional
+        For clips given in memory, the size and format (``"amc"``, ``"bvh"``) of the files
+        they came from (stored for ratios and ``ls``).
     seed : int
         Seed of every random choice (dictionary initialisation): same input and seed, same bytes.
     progress : callable, optional
@@ -346,7 +355,7 @@ def compress(
     """
     t0 = time.perf_counter()
     report = progress or (lambda *_: None)
-    motions, sources = _load_inputs(clips, skeleton)
+    motions, sources = _load_inputs(clips, skeleton, sources)
     _validate(motions, max_error, ratio)
     if bound_on not in ("joints", "vertices"):
         raise ValueError(f"bound_on must be 'joints' or 'vertices', got {bound_on!r}")

@@ -63,6 +63,7 @@ __all__ = ["SplineMethod", "SplineSettings", "detect_breaks"]
 _STEP_GRID = 8  # steps per octave
 _STEP_FLOOR = 2.0**-12
 _LPC_UNIT = 64.0
+_REFERENCE_FPS = 120.0
 _MEAN_UNIT = 16.0
 
 
@@ -82,6 +83,7 @@ class SplineSettings:
     scaling: str  # "metric" or "lever"
     predictor: str  # "lpc" or "delta"
     spacings: tuple[float, ...]
+    """Knot spacings in frames at 120 fps (scaled to each clip's rate: 24 is 0.2 s)."""
     glitch_breaks: bool
     mean_start: bool
     refine_rounds: int = 6
@@ -277,10 +279,11 @@ class SplineMethod(Method):
         scale = decode_log2(encode_log2(self._channel_scale(info)))
         C = info.layout.n_channels
         rows, firsts = [], []
-        spacing = self.settings.spacings[len(self.settings.spacings) // 2]
+        middle = self.settings.spacings[len(self.settings.spacings) // 2]
         for i in library.members[k]:
             clip = library.clips[i]
             Y = clip.channels * scale
+            spacing = max(3.0, middle * clip.motion.fps / _REFERENCE_FPS)
             for c in fit_segments(Y, breaks_of(i), spacing):
                 firsts.append(c[0])
                 if len(c) > 2:
@@ -345,24 +348,25 @@ class SplineMethod(Method):
                 active[layout.translation_columns(k)] = False
         return active
 
-    def _spacings(self, bound: float | None) -> tuple[float, ...]:
-        """Knot spacings to try: the configured ones, shortened for tight bounds (a spline
-        with 24-frame knots cannot follow a capture to a millimetre)."""
-        if bound is None:
-            return self.settings.spacings
-        factor = min(1.0, np.sqrt(bound / 5.0))
+    def _spacings(self, bound: float | None, fps: float) -> tuple[float, ...]:
+        """Knot spacings (frames of this clip) to try: the configured ones at the clip's frame
+        rate, shortened for tight bounds (a spline with 0.2 s knots cannot follow a capture to
+        a millimetre), and the raw frames below half a centimetre."""
+        factor = fps / _REFERENCE_FPS
+        if bound is not None:
+            factor *= min(1.0, np.sqrt(bound / 5.0))
         spacings = tuple(max(3.0, round(k * factor)) for k in self.settings.spacings)
-        return spacings + ((1.0,) if bound < 0.5 else ())
+        return spacings + ((1.0,) if bound is not None and bound < 0.5 else ())
 
     def _encode_clip(self, library, i, model, breaks, quality, bound) -> bytes:
         clip = library.clips[i]
         active = self._active(library, i)
         cols = np.flatnonzero(active)
         T = clip.motion.n_frames
-        # the first step: the cap, or about a fifth of the bound (weighted cm) if smaller
-        top = step_code(min(quality, 0.2 * bound) if bound else quality)
+        # the first step: the cap, or 0.4 of the bound (weighted cm) if smaller
+        top = step_code(min(quality, 0.4 * bound) if bound else quality)
         best = None
-        for spacing in self._spacings(bound):
+        for spacing in self._spacings(bound, clip.motion.fps):
             fits: dict[tuple, SplineBasis] = {}
 
             def trial(code: int, spacing=spacing, fits=fits):
