@@ -262,26 +262,37 @@ def _encode_once(method, library, quality, max_error, seed, given):
 def _search_ratio(
     method, library, ratio, seed, given, size_of
 ) -> tuple[float, EncodedLibrary, list]:
-    """Bisect the quality knob (geometrically) for the largest file within source / ratio."""
+    """The smallest quality knob (best fidelity) whose file fits ``source / ratio``: doubling
+    or halving until the target is bracketed, then geometric bisection."""
     target = sum(c.source_bytes or _text_bytes(c.motion) for c in library.clips) / ratio
-    lo, hi = None, None
+    # the sizes below are measured with zeros for the declared errors, which deflate better
+    # than the final values: keep room for their 8 bytes per clip
+    target -= 8 * len(library.clips) + 8
+    fits: dict[float, tuple] = {}
+    too_big: set[float] = set()
     q = method.default_quality
-    best = None
-    for _ in range(14):
+    for _ in range(24):
         encoded, models = _encode_once(method, library, q, None, seed, given)
-        size = size_of(encoded)
-        if size <= target:
-            lo = q
-            if best is None or q < best[0]:
-                best = (q, encoded, models)
+        if size_of(encoded) <= target:
+            fits[q] = (encoded, models)
         else:
-            hi = q
-        if lo is not None and hi is not None and hi / lo < 1.06:
+            too_big.add(q)
+        smallest_fit = min(fits, default=None)
+        largest_miss = max(
+            (b for b in too_big if smallest_fit is None or b < smallest_fit), default=None
+        )
+        if smallest_fit is None:
+            q *= 2.0
+        elif largest_miss is None:
+            q /= 2.0
+        elif smallest_fit / largest_miss < 1.06:
             break
-        q = q * 2.0 if hi is None else (q / 2.0 if lo is None else float(np.sqrt(lo * hi)))
-    if best is None:
-        best = (q, encoded, models)
-    return best
+        else:
+            q = float(np.sqrt(smallest_fit * largest_miss))
+    if not fits:
+        raise ValueError(f"no setting of {method.name} reaches ratio {ratio:g}")
+    q = min(fits)
+    return q, *fits[q]
 
 
 def _text_bytes(motion: Motion) -> int:

@@ -348,15 +348,16 @@ class SplineMethod(Method):
                 active[layout.translation_columns(k)] = False
         return active
 
-    def _spacings(self, bound: float | None, fps: float) -> tuple[float, ...]:
+    def _spacings(self, bound: float | None, quality: float, fps: float) -> tuple[float, ...]:
         """Knot spacings (frames of this clip) to try: the configured ones at the clip's frame
         rate, shortened for tight bounds (a spline with 0.2 s knots cannot follow a capture to
-        a millimetre), and the raw frames below half a centimetre."""
-        factor = fps / _REFERENCE_FPS
-        if bound is not None:
-            factor *= min(1.0, np.sqrt(bound / 5.0))
+        a millimetre), and the raw frames below half a centimetre. Without a bound the step
+        stands for one (a step of 0.4 times the bound is where the rate control starts)."""
+        if bound is None:
+            bound = quality / 0.4
+        factor = fps / _REFERENCE_FPS * min(1.0, np.sqrt(bound / 5.0))
         spacings = tuple(max(3.0, round(k * factor)) for k in self.settings.spacings)
-        return spacings + ((1.0,) if bound is not None and bound < 0.5 else ())
+        return spacings + ((1.0,) if bound < 0.5 else ())
 
     def _encode_clip(self, library, i, model, breaks, quality, bound) -> bytes:
         clip = library.clips[i]
@@ -366,7 +367,7 @@ class SplineMethod(Method):
         # the first step: the cap, or 0.4 of the bound (weighted cm) if smaller
         top = step_code(min(quality, 0.4 * bound) if bound else quality)
         best = None
-        for spacing in self._spacings(bound, clip.motion.fps):
+        for spacing in self._spacings(bound, quality, clip.motion.fps):
             fits: dict[tuple, SplineBasis] = {}
 
             def trial(code: int, spacing=spacing, fits=fits):
