@@ -338,7 +338,9 @@ def compress(
     method : {"best", "spline", "naive", "qssd", "ksvd"}
     quality : float, optional
         The method's size knob (its quantiser step; larger means smaller files). With
-        ``max_error`` it caps the step the rate control may use.
+        ``max_error`` it caps the step the rate control may use (``best``, ``spline``) or
+        fixes it (the others; without it they try their default and 1/2, 1/4, 1/8 of it and
+        keep the smallest file after repair).
     bound_on : {"joints", "vertices"}
         What ``max_error`` bounds: joint and end-site positions, or also the virtual vertices
         3 cm along each joint's axes (the Animation Compression Library's measure).
@@ -415,7 +417,7 @@ def compress(
     if ratio is not None:
         q, encoded, models = _search_ratio(codec, library, ratio, seed, [], file_size)
         corrections, errors = _verify_and_repair(codec, library, encoded, models, None)
-    elif max_error is not None and not codec.controls_bound:
+    elif max_error is not None and not codec.controls_bound and quality is None:
         best = None
         for scale in (1.0, 0.5, 0.25, 0.125):
             encoded, models = _encode_once(codec, library, q * scale, max_error, seed, [])
