@@ -9,17 +9,22 @@ import pytest
 from quatmotion import codec
 from quatmotion.codec.container import FORMAT_VERSION, MAGIC, scan_chunks
 from quatmotion.errors import FormatError
+from quatmotion.io import read_motion, write_bvh
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
 from quatmotion.motion.synthetic import generate_clip
 
 
 @pytest.fixture(scope="module")
-def clips():
-    return [
-        generate_clip("walk", 3, n_frames=90),
-        generate_clip("squat", 4, n_frames=80),
-        generate_clip("kick", 5, n_frames=70),
-    ]
+def clips(tmp_path_factory):
+    """Generated clips read back from BVH (a BVH skeleton record is small: the corruption
+    test flips a bit in every byte of the file)."""
+    folder = tmp_path_factory.mktemp("clips")
+    out = []
+    for kind, seed, frames in (("walk", 3, 60), ("squat", 4, 50), ("kick", 5, 40)):
+        path = folder / f"{kind}_{seed}.bvh"
+        write_bvh(generate_clip(kind, seed, n_frames=frames), path)
+        out.append(read_motion(path))
+    return out
 
 
 @pytest.fixture(scope="module")
