@@ -155,7 +155,9 @@ def log(q: ArrayLike) -> FloatArray:
     q = _as_quat(q)
     w = q[..., 0]
     v = q[..., 1:]
-    vnorm = np.linalg.norm(v, axis=-1)
+    # hypot, not sqrt(x^2 + y^2 + z^2): squares of components below 1e-154 lose their digits
+    # in the subnormal range, and near q = -1 the axis a * v / |v| then comes out of unit length.
+    vnorm = np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
     half_angle = np.arctan2(vnorm, w)
     # a / |v| -> 1/|q| as |v| -> 0 with w > 0; guard the division instead of dividing 0/0.
     safe = (vnorm > 1e-12) | ((w < 0.0) & (vnorm > 0.0))
