@@ -274,16 +274,20 @@ class SplineMethod(Method):
             return np.maximum(info.lever, 1e-6)
         return np.sqrt(info.weights + self.settings.gamma * info.lever**2 / info.n_points)
 
-    def _fit_model(self, library: PreparedLibrary, k: int, breaks_of) -> SplineModel:
+    def _fit_model(
+        self, library: PreparedLibrary, k: int, breaks_of, bound: float | None, quality: float
+    ) -> SplineModel:
+        """The layout's model, fitted on the spline coefficients of its clips at the knot
+        spacing the rate control will start from (prediction depends on the spacing: at 0.2 s
+        knots a gait cycle is 5 samples, at 0.05 s twenty)."""
         info = library.layouts[k]
         scale = decode_log2(encode_log2(self._channel_scale(info)))
         C = info.layout.n_channels
         rows, firsts = [], []
-        middle = self.settings.spacings[len(self.settings.spacings) // 2]
         for i in library.members[k]:
             clip = library.clips[i]
             Y = clip.channels * scale
-            spacing = max(3.0, middle * clip.motion.fps / _REFERENCE_FPS)
+            spacing = self._spacings(bound, quality, clip.motion.fps)[0]
             for c in fit_segments(Y, breaks_of(i), spacing):
                 firsts.append(c[0])
                 if len(c) > 2:
@@ -328,7 +332,7 @@ class SplineMethod(Method):
             if k < len(given) and given[k] is not None:
                 models.append(given[k])
             elif library.members[k]:
-                models.append(self._fit_model(library, k, lambda i: breaks[i]))
+                models.append(self._fit_model(library, k, lambda i: breaks[i], max_error, quality))
             else:
                 models.append(None)
         payloads = []
