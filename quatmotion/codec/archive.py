@@ -145,6 +145,17 @@ class Archive:
         return self._clip_chunks[self.index_of(clip)].length
 
     # ------------------------------------------------------------------ shared parts
+    def record_text(self, k: int) -> str:
+        """The text of the ``k``-th skeleton record."""
+        return self._record_text(k)
+
+    def payloads(self) -> tuple[list[bytes], list[bytes], list[bytes]]:
+        """The payloads of the ``S``, ``L`` and ``C`` chunks, CRC checked (for appending)."""
+        return tuple(
+            [read_chunk(self._file, ref, self._name) for ref in refs]
+            for refs in (self._record_chunks, self._layout_chunks, self._clip_chunks)
+        )
+
     def _record_text(self, k: int) -> str:
         if k not in self._records:
             rec = self.header.records[k]

@@ -28,7 +28,6 @@ from quatmotion.codec.container import (
     LayoutEntry,
     RecordEntry,
     SkeletonEntry,
-    read_chunk,
     write_chunk,
 )
 from quatmotion.codec.library import PreparedLibrary, prepare_library
@@ -179,15 +178,14 @@ def _verify_and_repair(
     encoded: EncodedLibrary,
     models: list,
     max_error: float | None,
-    first_clip: int = 0,
 ) -> tuple[list[Corrections], list[ClipErrors]]:
     """Decode every clip from its bytes, measure it, and correct frames over the bound."""
     corrections, errors = [], []
-    for i in range(first_clip, len(library.clips)):
+    for i in range(len(library.clips)):
         clip = library.clips[i]
         info = library.layouts[clip.layout]
         context = _clip_context(library, i)
-        X = method.decode(models[clip.layout], encoded.clips[i - first_clip], context)
+        X = method.decode(models[clip.layout], encoded.clips[i], context)
         fix = Corrections.empty()
         if max_error is not None:
             fix = find_corrections(
@@ -483,14 +481,12 @@ def append(
         codec = get_method(old.method)
         table = _SkeletonTable(
             list(old.records),
-            [archive._record_text(k) for k in range(len(old.records))],
+            [archive.record_text(k) for k in range(len(old.records))],
             list(old.skeletons),
             [archive.skeleton(k) for k in range(len(old.skeletons))],
         )
         layouts = [archive.layout(k) for k in range(len(old.layouts))]
-        old_records = [read_chunk(archive._file, r, path) for r in archive._record_chunks]
-        old_layout_chunks = [read_chunk(archive._file, r, path) for r in archive._layout_chunks]
-        old_clip_chunks = [read_chunk(archive._file, r, path) for r in archive._clip_chunks]
+        old_records, old_layout_chunks, old_clip_chunks = archive.payloads()
     clip_skeleton = [table.index(m.skeleton) for m in motions]
     library = prepare_library(motions, sources, [info for info, _ in layouts])
     given = [model for _, model in layouts]
