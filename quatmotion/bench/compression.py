@@ -133,11 +133,18 @@ def _figure_rd(name: str, curves: dict[str, list[dict]], path: pathlib.Path) -> 
             xs = [p[key] for p in pts]
             ys = [p["ratio_text"] for p in pts]
             ax.plot(xs, ys, "o-", label=method, lw=2.2 if method == "best" else 1.2)
+    from matplotlib.ticker import LogLocator, ScalarFormatter
+
     for ax, label in zip(axes, ("ARMS (cm)", "max joint error (cm)"), strict=True):
         ax.set_xlabel(label)
         ax.set_ylabel("compression ratio against the source text")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        for axis in (ax.xaxis, ax.yaxis):
+            # plain numbers at 1, 2, 5 x 10^k: the default labels every minor tick and overlaps
+            axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+            axis.set_major_formatter(ScalarFormatter())
+            axis.set_minor_formatter(plt.NullFormatter())
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
     axes[0].set_title(f"{name}: ratio against ARMS")
