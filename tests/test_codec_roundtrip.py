@@ -112,3 +112,20 @@ def test_real_clip_round_trip(name, tmp_path):
     assert again.n_frames == clip.n_frames
     p = forward_kinematics(again).positions
     assert np.abs(p - forward_kinematics(decoded).positions).max() < 1e-3
+
+
+def test_repair_meets_the_bound_when_lever_arms_understate(generated, monkeypatch):
+    """Stored lever arms are means over frames; a channel that moves nothing in most frames
+    still has to be correctable where it matters (a bug once left 5.07 cm for a 5 cm bound)."""
+    import quatmotion.codec.library as library
+
+    real = library.measure_weights
+
+    def understated(*args, **kwargs):
+        weights, lever = real(*args, **kwargs)
+        return weights * 1e-6, lever * 1e-9
+
+    monkeypatch.setattr(library, "measure_weights", understated)
+    clip = generated[1]
+    result = codec.compress([clip], max_error=1.0, method="spline")
+    _assert_bound(clip, codec.open(result.data).read(0), 1.0)

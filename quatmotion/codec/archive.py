@@ -30,7 +30,7 @@ from quatmotion.codec.container import (
 )
 from quatmotion.codec.library import LayoutInfo
 from quatmotion.codec.methods import ClipContext, get_method
-from quatmotion.codec.repair import Corrections, read_clip_prefix
+from quatmotion.codec.repair import Corrections, correction_lever, read_clip_prefix
 from quatmotion.codec.skeletons import inflate_text, skeleton_from_record
 from quatmotion.errors import FormatError
 from quatmotion.motion import Motion, Skeleton
@@ -260,7 +260,7 @@ class Archive:
 
 
 def _apply(corrections: Corrections, X: NDArray[np.float64], info: LayoutInfo) -> None:
-    corrections.apply(X, np.maximum(info.lever, 1e-9))
+    corrections.apply(X, correction_lever(info))
 
 
 def _known() -> set[str]:

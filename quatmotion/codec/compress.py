@@ -33,7 +33,12 @@ from quatmotion.codec.container import (
 from quatmotion.codec.library import PreparedLibrary, prepare_library
 from quatmotion.codec.methods import ClipContext, EncodedLibrary, Method, get_method
 from quatmotion.codec.metrics import ClipErrors, clip_errors
-from quatmotion.codec.repair import Corrections, find_corrections, write_clip_prefix
+from quatmotion.codec.repair import (
+    Corrections,
+    correction_lever,
+    find_corrections,
+    write_clip_prefix,
+)
 from quatmotion.codec.skeletons import deflate_text, same_skeleton, skeleton_record
 from quatmotion.io import find_motion_files, read_motion
 from quatmotion.motion import Motion, Skeleton
@@ -199,7 +204,7 @@ def _verify_and_repair(
                 max_error,
                 library.vertices,
             )
-            fix.apply(X, np.maximum(info.lever, 1e-9))
+            fix.apply(X, correction_lever(info))
         corrections.append(fix)
         errors.append(clip_errors(clip.world, library.motion_of(i, X)))
     return corrections, errors

@@ -3,9 +3,10 @@
 Conventions
 -----------
 * A correction adds ``value * quantum / lever_c`` to channel ``c`` of one frame (``lever_c``, the
-  layout's stored lever arm in cm per unit, so ``quantum`` is in centimetres of largest point
-  displacement). ``quantum`` is ``bound / 32``: a corrected channel is left at most
-  ``bound / 64`` of displacement from the original.
+  layout's stored lever arm in cm per unit, at least 1, so ``quantum`` is in centimetres of
+  largest point displacement). ``quantum`` is ``bound / 32`` (a corrected channel is left
+  about ``bound / 64`` of displacement from the original), quartered for the whole clip while
+  some frame still misses the bound with every channel corrected.
 * Per failing frame the channels are corrected greedily in order of ``|x - x_hat| lever`` (4,
   then 8, 16, ... channels) until forward kinematics of that frame meets ``0.98 bound``.
 * Stored in each clip chunk's shared prefix (:func:`write_clip_prefix`): a bitmask of the
@@ -27,7 +28,13 @@ from quatmotion.codec.metrics import frame_errors
 from quatmotion.errors import FormatError
 from quatmotion.motion import Skeleton, WorldTransforms
 
-__all__ = ["Corrections", "find_corrections", "read_clip_prefix", "write_clip_prefix"]
+__all__ = [
+    "Corrections",
+    "correction_lever",
+    "find_corrections",
+    "read_clip_prefix",
+    "write_clip_prefix",
+]
 
 _QUANTA_PER_BOUND = 32.0
 
@@ -55,6 +62,16 @@ class Corrections:
             np.add.at(
                 X, (self.frames, self.channels), self.values * self.quantum / lever[self.channels]
             )
+
+
+def correction_lever(info: LayoutInfo) -> NDArray[np.float64]:
+    """The lever arms corrections are scaled by: the layout's, at least 1 cm per unit.
+
+    A stored lever arm is a mean over frames; a channel that moves nothing in most frames
+    (a rotation vector component that is a twist about the bone in most poses) can still move
+    a point in a few, and a floor keeps its corrections from rounding to zero there.
+    """
+    return np.maximum(info.lever, 1.0)
 
 
 def find_corrections(
@@ -96,25 +113,35 @@ def find_corrections(
     bad = np.flatnonzero(err > bound)
     if len(bad) == 0:
         return Corrections.empty()
+    lever = correction_lever(info)
     quantum = bound / _QUANTA_PER_BOUND
-    lever = np.maximum(info.lever, 1e-9)
-    frames, channels, values = [], [], []
-    for f in bad:
-        r = (X[f] - X_hat[f]) * active
-        order = np.argsort(-np.abs(r) * lever, kind="stable")
-        n = 2
-        while True:
-            n = min(2 * n, len(order))
-            sel = order[:n]
-            v = np.round(r[sel] * lever[sel] / quantum).astype(np.int64)
-            row = X_hat[f].copy()
-            row[sel] += v * quantum / lever[sel]
-            if errors_of(row[None], slice(f, f + 1))[0] <= 0.98 * bound or n == len(order):
-                break
-        keep = v != 0
-        frames += [int(f)] * int(keep.sum())
-        channels += sel[keep].tolist()
-        values += v[keep].tolist()
+    # A frame whose every channel is corrected can still miss the bound when the stored lever
+    # arms (means over frames) understate that frame's: then the whole clip's quantum is
+    # quartered and the corrections found again, until every frame passes.
+    for _ in range(12):
+        frames, channels, values = [], [], []
+        missed = False
+        for f in bad:
+            r = (X[f] - X_hat[f]) * active
+            order = np.argsort(-np.abs(r) * lever, kind="stable")
+            n = 2
+            while True:
+                n = min(2 * n, len(order))
+                sel = order[:n]
+                v = np.round(r[sel] * lever[sel] / quantum).astype(np.int64)
+                row = X_hat[f].copy()
+                row[sel] += v * quantum / lever[sel]
+                error = errors_of(row[None], slice(f, f + 1))[0]
+                if error <= 0.98 * bound or n == len(order):
+                    missed = missed or error > bound
+                    break
+            keep = v != 0
+            frames += [int(f)] * int(keep.sum())
+            channels += sel[keep].tolist()
+            values += v[keep].tolist()
+        if not missed:
+            break
+        quantum /= 4.0
     return Corrections(
         quantum,
         np.asarray(frames, dtype=np.int64),

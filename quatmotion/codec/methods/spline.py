@@ -93,7 +93,7 @@ class SplineSettings:
 
 
 BEST = SplineSettings(
-    "metric", "lpc", (24.0,), True, True, steps_tried=3, gamma=4.0, compensate=True
+    "metric", "lpc", (24.0,), True, True, steps_tried=3, gamma=8.0, compensate=True
 )
 BASELINE = SplineSettings("lever", "delta", (16.0, 24.0, 32.0), False, False)
 
