@@ -114,7 +114,8 @@ def _lossy_point(motions, sources, method, arms_target, seed, decode_runs) -> di
         clear_fit_cache()  # the first try learns the dictionary; its time is counted below
     # The sparse codecs' coarse (1 in 8 frames) model floors their ARMS: two tries only.
     tries = 0
-    for tries in range(1, (2 if sparse else 8) + 1):
+    for _ in range(2 if sparse else 8):
+        tries += 1
         result = compress(
             motions, max_error=5.0, method=method, quality=quality, seed=seed, sources=sources
         )
