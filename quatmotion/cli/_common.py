@@ -33,7 +33,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from quatmotion.errors import FormatError
 
 if TYPE_CHECKING:
-    from quatmotion.motion import Motion
+    from quatmotion.motion import Motion, Skeleton
 
 __all__ = [
     "EXIT_BAD_INPUT",
@@ -46,6 +46,7 @@ __all__ = [
     "at_least",
     "check_frame",
     "check_outputs",
+    "clip_files",
     "console",
     "error_console",
     "fail",
@@ -55,6 +56,7 @@ __all__ = [
     "require_file",
     "user_errors",
     "warn",
+    "write_clip",
 ]
 
 EXIT_BAD_INPUT = 2
@@ -308,3 +310,37 @@ def progress_bar(target: Console | None = None) -> Progress:
         TimeElapsedColumn(),
         console=target or console,
     )
+
+
+def clip_files(out: Path, skeleton: Skeleton) -> list[Path]:
+    """The files writing a clip of ``skeleton`` to ``out`` makes: an AMC gets its ASF, same
+    name, beside it (where :func:`quatmotion.io.find_asf_for_amc` looks first).
+
+    Raises
+    ------
+    CliInputError
+        For an unknown suffix, or AMC output of a skeleton that did not come from an ASF.
+    """
+    from quatmotion.io import MOTION_SUFFIXES
+
+    suffix = out.suffix.lower()
+    if suffix not in MOTION_SUFFIXES:
+        raise CliInputError(
+            f"{out}: unknown output type {out.suffix!r} (expected {', '.join(MOTION_SUFFIXES)})"
+        )
+    if suffix == ".amc" and skeleton.extras.get("format") != "asf":
+        raise CliInputError(
+            f"{out}: AMC output needs an ASF skeleton; this clip's skeleton "
+            f"({skeleton.name!r}) comes from a BVH, write .bvh instead"
+        )
+    return [out, out.with_suffix(".asf")] if suffix == ".amc" else [out]
+
+
+def write_clip(motion: Motion, files: list[Path], outputs: Outputs) -> None:
+    """Write ``motion`` to ``files`` (from :func:`clip_files`, already checked against the
+    overwrite policy), each noted in ``outputs``."""
+    from quatmotion.io import write_asf, write_motion
+
+    write_motion(motion, outputs.file(files[0]))
+    if len(files) > 1:
+        write_asf(motion.skeleton, outputs.file(files[1]))

@@ -18,12 +18,14 @@ from quatmotion.cli._common import (
     UnitsOption,
     at_least,
     check_outputs,
+    clip_files,
     console,
     number_in,
     progress_bar,
     read_clip,
     require_file,
     user_errors,
+    write_clip,
 )
 
 if TYPE_CHECKING:
@@ -35,33 +37,6 @@ if TYPE_CHECKING:
 # 2.5 GB (and its BVH near 200 MB).
 MAX_GENERATED_FRAMES = 300_000
 FPS_RANGE = (1.0, 1000.0)  # frames per second of motion capture
-
-
-def _outputs_for(out: Path, skeleton: Skeleton) -> list[Path]:
-    """The files writing a clip of ``skeleton`` to ``out`` makes: an AMC gets its ASF, same
-    name, beside it (where :func:`quatmotion.io.find_asf_for_amc` looks first)."""
-    from quatmotion.io import MOTION_SUFFIXES
-
-    suffix = out.suffix.lower()
-    if suffix not in MOTION_SUFFIXES:
-        raise CliInputError(
-            f"{out}: unknown output type {out.suffix!r} (expected {', '.join(MOTION_SUFFIXES)})"
-        )
-    if suffix == ".amc" and skeleton.extras.get("format") != "asf":
-        raise CliInputError(
-            f"{out}: AMC output needs an ASF skeleton; this clip's skeleton "
-            f"({skeleton.name!r}) comes from a BVH, write .bvh instead"
-        )
-    return [out, out.with_suffix(".asf")] if suffix == ".amc" else [out]
-
-
-def _write(motion: Motion, targets: list[Path], outputs: Outputs) -> None:
-    """Write ``motion`` to ``targets`` (from :func:`_outputs_for`; already checked)."""
-    from quatmotion.io import write_asf, write_motion
-
-    write_motion(motion, outputs.file(targets[0]))
-    if len(targets) > 1:
-        write_asf(motion.skeleton, outputs.file(targets[1]))
 
 
 def _cm(value: float) -> str:
@@ -249,13 +224,13 @@ def convert(
                 sk = skeleton if alone or not bvh else None
                 motions.append(read_clip(path, sk, units if alone or bvh else None))
                 progress.advance(task)
-        planned = [_outputs_for(t, m.skeleton) for m, t in zip(motions, targets, strict=True)]
+        planned = [clip_files(t, m.skeleton) for m, t in zip(motions, targets, strict=True)]
         check_outputs([f for files in planned for f in files], inputs, force=force)
         with Outputs() as outputs:
             if into_folder:
                 outputs.folder(out)
             for motion, files in zip(motions, planned, strict=True):
-                _write(motion, files, outputs)
+                write_clip(motion, files, outputs)
         written = [f for files in planned for f in files]
         if into_folder:
             console.print(f"wrote {len(inputs)} clip(s) to {out}")
@@ -299,11 +274,11 @@ def generate(
         if kind not in KINDS:
             raise CliInputError(f"unknown motion kind {kind!r}; choose from {', '.join(KINDS)}")
         skeleton = cmu_skeleton()
-        targets = _outputs_for(out, skeleton)
+        targets = clip_files(out, skeleton)
         check_outputs(targets, force=force)  # before the work, which may take a while
         motion = generate_clip(kind, seed, n_frames=frames, fps=fps, skeleton=skeleton)
         with Outputs() as outputs:
-            _write(motion, targets, outputs)
+            write_clip(motion, targets, outputs)
         console.print(
             f"wrote {', '.join(str(w) for w in targets)} "
             f"({motion.n_frames} frames at {motion.fps:g} fps)"

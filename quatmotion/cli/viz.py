@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -13,29 +12,10 @@ from quatmotion.cli._app import app
 from quatmotion.cli._common import CliInputError, console, read_clip, require_file, user_errors
 
 if TYPE_CHECKING:
-    from types import ModuleType
-
     from quatmotion.motion import Motion
 
 LIBRARY_SEPARATOR = "::"
 """``LIB.qmz::CLIP`` names one clip of a compressed library."""
-
-
-def _codec(purpose: str) -> ModuleType:
-    """``quatmotion.codec``, or a one-line error saying it is needed for ``purpose``.
-
-    The hook for the codec: imported by name because the package is not on this branch yet;
-    when it is, this becomes a plain import (so the import-linter sees it). The viewer uses the
-    codec branch's API: ``codec.open(path_or_bytes)`` gives an archive whose ``read(clip)``
-    decodes a clip (by name) to a Motion, and ``codec.compress([motion]).data`` is the bytes of
-    a one-clip ``.qmz`` (default method and settings).
-    """
-    try:
-        return importlib.import_module("quatmotion.codec")
-    except ModuleNotFoundError:
-        raise CliInputError(
-            f"{purpose} needs the codec (quatmotion.codec), which this version does not have"
-        ) from None
 
 
 def _read(spec: str, skeleton: Path | None) -> Motion:
@@ -44,7 +24,8 @@ def _read(spec: str, skeleton: Path | None) -> Motion:
         library, clip = spec.split(LIBRARY_SEPARATOR, 1)
         if not library or not clip:
             raise CliInputError(f"{spec}: expected LIBRARY.qmz::CLIP")
-        codec = _codec(f"{spec}: reading a .qmz clip")
+        from quatmotion import codec
+
         with codec.open(require_file(Path(library))) as archive:
             motion = archive.read(clip)
         return dataclasses.replace(motion, name=f"{Path(library).name}::{clip}")
@@ -52,9 +33,11 @@ def _read(spec: str, skeleton: Path | None) -> Motion:
 
 
 def _decoded(motion: Motion) -> Motion:
-    """``motion`` compressed into a one-clip ``.qmz`` in memory, then decoded."""
-    codec = _codec("--compare-decoded")
-    with codec.open(codec.compress([motion]).data) as archive:
+    """``motion`` compressed into a one-clip ``.qmz`` in memory (the default bound), then
+    decoded."""
+    from quatmotion import codec
+
+    with codec.open(codec.compress([motion], max_error=codec.DEFAULT_MAX_ERROR_CM).data) as archive:
         decoded = archive.read(0)
     return dataclasses.replace(decoded, name=f"{motion.name} (decoded)")
 
@@ -63,9 +46,7 @@ def _decoded(motion: Motion) -> Motion:
 def view(
     files: Annotated[
         list[str],
-        typer.Argument(
-            help="Clips: .amc/.bvh files (a .qmz clip as LIB.qmz::CLIP with the codec)."
-        ),
+        typer.Argument(help="Clips: .amc/.bvh files (a .qmz clip as LIB.qmz::CLIP)."),
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="HTML page to write.")] = Path(
         "view.html"

@@ -50,7 +50,9 @@ from quatmotion.motion import Motion, Skeleton
 __all__ = [
     "BVH_UNITS",
     "PLAUSIBLE_FIGURE_CM",
+    "bvh_text",
     "detect_bvh_scale",
+    "parse_bvh",
     "read_bvh",
     "to_bvh_skeleton",
     "write_bvh",
@@ -259,8 +261,27 @@ def read_bvh(path: str | Path, scale: float | str = "auto") -> Motion:
         For an unknown unit name or a scale that is not a positive number.
     """
     path = Path(path)
+    return parse_bvh(read_text(path), path, scale)
+
+
+def parse_bvh(text: str, path: str | Path, scale: float | str = "auto") -> Motion:
+    """Parse the text of a BVH file: :func:`read_bvh` without reading a file.
+
+    Parameters
+    ----------
+    text : str
+        The whole BVH text.
+    path : str or Path
+        The name messages give and whose stem names the motion (it is not opened).
+    scale : float, str or "auto"
+        As for :func:`read_bvh`.
+
+    Returns
+    -------
+    Motion
+    """
+    path = Path(path)
     cm_per_unit = None if isinstance(scale, str) and scale == "auto" else _unit_scale(scale)
-    text = read_text(path)
     head_end, motion_line, found = _find_motion_keyword(text)
     hierarchy_tokens = [
         (token, number)
@@ -546,6 +567,12 @@ def write_bvh(motion: Motion, path: str | Path) -> None:
     motion : Motion
     path : str or Path
     """
+    atomic_write(path, bvh_text(motion))
+
+
+def bvh_text(motion: Motion) -> str:
+    """The BVH text :func:`write_bvh` writes for ``motion`` (a zero-frame motion gives the
+    hierarchy alone, with ``Frames: 0``)."""
     sk = motion.skeleton
     if not _bvh_skeleton_matches(sk):
         identity = quat.identity((sk.n_joints,))
@@ -595,4 +622,4 @@ def write_bvh(motion: Motion, path: str | Path) -> None:
     out += ["MOTION", f"Frames: {motion.n_frames}", f"Frame Time: {1.0 / motion.fps:.10g}", ""]
     row = " ".join(["%.10g"] * values.shape[1]) + "\n"
     body = (row * values.shape[0]) % tuple(values.ravel().tolist()) if values.size else ""
-    atomic_write(path, "\n".join(out) + body)
+    return "\n".join(out) + body

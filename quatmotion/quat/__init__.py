@@ -160,13 +160,16 @@ def log(q: ArrayLike) -> FloatArray:
     vnorm = np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
     half_angle = np.arctan2(vnorm, w)
     # a / |v| -> 1/|q| as |v| -> 0 with w > 0; guard the division instead of dividing 0/0.
-    safe = (vnorm > 1e-12) | ((w < 0.0) & (vnorm > 0.0))
-    scale = np.where(
-        safe, half_angle / np.where(safe, vnorm, 1.0), 1.0 / np.maximum(np.abs(w), 1e-300)
-    )
-    out = v * scale[..., None]
+    safe = (vnorm > 1e-12) | ((w < 0.0) & (np.abs(v).max(axis=-1) > 0.0))
+    # The axis v / |v| from v divided by its largest component first: near q = -1 the squares
+    # of components below 1e-154 are subnormal or zero, and |v| would lose its digits.
+    largest = np.abs(v).max(axis=-1, keepdims=True)
+    scaled = v / np.where(largest > 0.0, largest, 1.0)
+    axis = scaled / np.maximum(np.linalg.norm(scaled, axis=-1, keepdims=True), 1e-300)
+    small = v * (1.0 / np.maximum(np.abs(w), 1e-300))[..., None]
+    out = np.where(safe[..., None], axis * half_angle[..., None], small)
     # q = -1 has no axis; any pi * u is a log of it. Pick the x axis so exp(log(-1)) == -1.
-    minus_one = (w < 0.0) & (vnorm == 0.0)
+    minus_one = (w < 0.0) & (np.abs(v).max(axis=-1) == 0.0)
     if np.any(minus_one):
         out[minus_one] = (np.pi, 0.0, 0.0)
     return out

@@ -1,0 +1,66 @@
+"""``quatmotion compress | ls | decompress | append`` through Typer's CliRunner."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from typer.testing import CliRunner
+
+from quatmotion.cli import app
+from quatmotion.io import read_motion, write_bvh
+from quatmotion.motion import forward_kinematics
+from quatmotion.motion.synthetic import generate_clip
+
+runner = CliRunner()
+
+
+def _invoke(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def test_compress_ls_decompress_append(tmp_path: Path):
+    src = tmp_path / "src"
+    src.mkdir()
+    clips = [generate_clip("walk", 1, n_frames=80), generate_clip("run", 2, n_frames=70)]
+    for clip in clips:
+        write_bvh(clip, src / f"{clip.name}.bvh")
+    lib = tmp_path / "lib.qmz"
+    result = _invoke("compress", src / f"{clips[0].name}.bvh", "-o", lib, "--max-error", "2")
+    assert result.exit_code == 0, result.output
+    result = _invoke("append", lib, src / f"{clips[1].name}.bvh", "--max-error", "2")
+    assert result.exit_code == 0, result.output
+    result = _invoke("ls", lib)
+    assert (
+        result.exit_code == 0 and clips[0].name in result.output and clips[1].name in result.output
+    )
+    out = tmp_path / "out"
+    result = _invoke("decompress", lib, "-o", out, "--clip", clips[1].name)
+    assert result.exit_code == 0, result.output
+    assert [p.name for p in out.iterdir()] == [f"{clips[1].name}.bvh"]
+    back = read_motion(out / f"{clips[1].name}.bvh")
+    original = read_motion(src / f"{clips[1].name}.bvh")
+    assert back.n_frames == original.n_frames and back.fps == original.fps
+    err = np.linalg.norm(
+        forward_kinematics(back).all_positions() - forward_kinematics(original).all_positions(),
+        axis=-1,
+    )
+    assert err.max() <= 2.0 + 1e-6  # 10-digit text on both sides
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path):
+    out = tmp_path / "x.qmz"
+    for args in (
+        ("compress", tmp_path / "missing.bvh", "-o", out),
+        ("compress", tmp_path, "-o", out, "--method", "zip"),
+        ("compress", tmp_path, "-o", out, "--max-error", "1", "--ratio", "10"),
+        ("ls", tmp_path / "missing.qmz"),
+    ):
+        result = _invoke(*args)
+        assert result.exit_code == 2, (args, result.output)
+        assert result.output.count("error:") == 1 and "Traceback" not in result.output
+    garbage = tmp_path / "garbage.qmz"
+    garbage.write_bytes(b"not a library at all")
+    result = _invoke("ls", garbage)
+    assert result.exit_code == 2 and "magic" in result.output
+    assert not out.exists()
