@@ -64,3 +64,25 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path):
     result = _invoke("ls", garbage)
     assert result.exit_code == 2 and "magic" in result.output
     assert not out.exists()
+
+
+def test_a_bad_file_is_reported_and_skipped_and_the_exit_code_is_1(tmp_path: Path):
+    src = tmp_path / "src"
+    src.mkdir()
+    clips = [generate_clip("walk", 1, n_frames=60), generate_clip("kick", 2, n_frames=50)]
+    for clip in clips:
+        write_bvh(clip, src / f"{clip.name}.bvh")
+    text = (src / f"{clips[0].name}.bvh").read_text()
+    (src / "broken.bvh").write_text(text[: len(text) // 2])  # truncated mid-frame
+    lib = tmp_path / "lib.qmz"
+    result = _invoke("compress", src, "-o", lib, "--max-error", "2", "--workers", "2")
+    assert result.exit_code == 1, result.output
+    assert "skipped" in result.stderr and "broken.bvh" in result.stderr
+    listing = _invoke("ls", lib)
+    assert all(clip.name in listing.output for clip in clips)
+    assert "broken" not in listing.output
+    # the output exists now: replacing it needs --force
+    again = _invoke("compress", src / f"{clips[0].name}.bvh", "-o", lib)
+    assert again.exit_code == 2 and "--force" in again.stderr
+    forced = _invoke("compress", src / f"{clips[0].name}.bvh", "-o", lib, "--force")
+    assert forced.exit_code == 0, forced.output

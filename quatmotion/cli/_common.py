@@ -41,8 +41,10 @@ __all__ = [
     "CliInputError",
     "ForceOption",
     "Outputs",
+    "SchedulerOption",
     "SkeletonOption",
     "UnitsOption",
+    "WorkersOption",
     "at_least",
     "check_frame",
     "check_outputs",
@@ -53,6 +55,7 @@ __all__ = [
     "number_in",
     "progress_bar",
     "read_clip",
+    "report_skipped",
     "require_file",
     "user_errors",
     "warn",
@@ -153,6 +156,26 @@ SkeletonOption = Annotated[
     typer.Option("--skeleton", "-s", help="ASF skeleton of AMC input (else found by name)."),
 ]
 ForceOption = Annotated[bool, typer.Option("--force", help="Replace existing output files.")]
+
+WorkersOption = Annotated[
+    int | None,
+    typer.Option(help="Worker processes (default: one per CPU; 1 runs in this process)."),
+]
+"""``--workers`` of every batch command (:mod:`quatmotion.parallel`)."""
+
+SchedulerOption = Annotated[
+    str | None,
+    typer.Option(
+        help="Dask scheduler, tcp://HOST:PORT (default: $QUATMOTION_SCHEDULER, else local)."
+    ),
+]
+"""``--scheduler`` of every batch command (:func:`quatmotion.parallel.resolve_scheduler`)."""
+
+
+def report_skipped(failures: Iterable[object]) -> None:
+    """One ``skipped ...`` line on stderr per input a batch command left out."""
+    for failure in failures:
+        error_console.print(f"skipped {failure}", markup=False, highlight=False, soft_wrap=True)
 
 
 def read_clip(

@@ -13,10 +13,13 @@ from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
     Outputs,
+    SchedulerOption,
+    WorkersOption,
     check_outputs,
     clip_files,
     console,
     progress_bar,
+    report_skipped,
     require_file,
     user_errors,
     write_clip,
@@ -67,9 +70,16 @@ def compress(
         Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC inputs (else by name).")
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of random choices (same seed, same bytes).")] = 0,
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
     force: ForceOption = False,
 ) -> None:
-    """Compress clips into one .qmz library (default: every joint within 1 cm)."""
+    """Compress clips into one .qmz library (default: every joint within 1 cm).
+
+    Clips are encoded in parallel (--workers, --scheduler) with the same bytes on any
+    scheduler; a file that cannot be read is reported and left out, and the command then ends
+    with exit code 1.
+    """
     from quatmotion.codec import DEFAULT_MAX_ERROR_CM
     from quatmotion.codec import compress as run_compress
 
@@ -87,9 +97,14 @@ def compress(
         with progress_bar() as progress:
             result = run_compress(
                 inputs, out, max_error=max_error, ratio=ratio, method=method,
-                skeleton=skeleton, seed=seed, progress=_reporter(progress),
+                skeleton=skeleton, seed=seed, progress=_reporter(progress), workers=workers,
+                scheduler=scheduler, on_error="skip",
             )  # fmt: skip
-        console.print(f"wrote {out}: {len(result.clip_errors)} clip(s), {_summary(result)}")
+    report_skipped(f"{name}: {reason}" for name, reason in result.failed)
+    console.print(f"wrote {out}: {len(result.clip_errors)} clip(s), {_summary(result)}")
+    if result.failed:
+        console.print(f"{len(result.failed)} input(s) failed")
+        raise typer.Exit(code=1)
 
 
 @app.command()
@@ -178,6 +193,8 @@ def append(
     skeleton: Annotated[
         Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC inputs (else by name).")
     ] = None,
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
 ) -> None:
     """Add clips to a .qmz file without re-encoding the clips already in it."""
     from quatmotion.codec import append as run_append
@@ -186,7 +203,11 @@ def append(
         require_file(library)
         if skeleton is not None:
             require_file(skeleton)
-        result = run_append(library, inputs, max_error=max_error, skeleton=skeleton)
+        with progress_bar() as progress:
+            result = run_append(
+                library, inputs, max_error=max_error, skeleton=skeleton,
+                progress=_reporter(progress), workers=workers, scheduler=scheduler,
+            )  # fmt: skip
         console.print(
             f"added {len(result.clip_errors)} clip(s) to {library}: now {result.size:,} bytes"
         )

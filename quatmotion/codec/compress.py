@@ -15,6 +15,7 @@ import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -40,13 +41,29 @@ from quatmotion.codec.repair import (
     write_clip_prefix,
 )
 from quatmotion.codec.skeletons import deflate_text, same_skeleton, skeleton_record
+from quatmotion.errors import FormatError
 from quatmotion.io import find_motion_files, read_motion
 from quatmotion.motion import Motion, Skeleton
+from quatmotion.parallel import Scheduler, run_batch
 
-__all__ = ["DEFAULT_MAX_ERROR_CM", "CompressionResult", "append", "compress"]
+__all__ = [
+    "DEFAULT_MAX_ERROR_CM",
+    "FIT_SAMPLE_CLIPS",
+    "ClipJob",
+    "CodedClip",
+    "CompressionResult",
+    "append",
+    "clip_jobs",
+    "code_clip",
+    "compress",
+]
 
 DEFAULT_MAX_ERROR_CM = 1.0
 """The bound the command line and the viewer use when none is given: every joint within 1 cm."""
+
+FIT_SAMPLE_CLIPS = 256
+"""Most clips of one skeleton structure its shared model is learned on; a larger library
+learns on a seeded sample of this many and encodes every clip with it."""
 
 Progress = Callable[[str, int, int], None]
 
@@ -86,6 +103,8 @@ class CompressionResult:
     seconds: float
     quality: float
     corrections: list[int] = field(default_factory=list)
+    failed: list[tuple[str, str]] = field(default_factory=list)
+    """Inputs left out (``on_error="skip"``): (file or clip, one-line reason)."""
 
     @property
     def size(self) -> int:
@@ -97,8 +116,10 @@ def _load_inputs(
     items: Sequence[Motion | str | Path],
     skeleton: Skeleton | str | Path | None,
     known: Sequence[tuple[int, str]] | None = None,
+    failed: list[tuple[str, str]] | None = None,
 ) -> tuple[list[Motion], list[tuple[int, str]]]:
-    """Motions and their source sizes from clips, files and folders."""
+    """Motions and their source sizes from clips, files and folders. With ``failed``, a file
+    that cannot be read is noted there (file, reason) and left out instead of raising."""
     motions: list[Motion] = []
     sources: list[tuple[int, str]] = []
     paths: list[Path] = []
@@ -112,11 +133,46 @@ def _load_inputs(
         else:
             paths.append(Path(item))
     for path in find_motion_files(paths) if paths else []:
-        motions.append(read_motion(path, skeleton if path.suffix.lower() == ".amc" else None))
-        sources.append((path.stat().st_size, path.suffix.lower().lstrip(".")))
+        try:
+            motion = read_motion(path, skeleton if path.suffix.lower() == ".amc" else None)
+            size = path.stat().st_size
+        except (FormatError, OSError, ValueError) as error:
+            if failed is None:
+                raise
+            failed.append((str(path), str(error).splitlines()[0]))
+            continue
+        motions.append(motion)
+        sources.append((size, path.suffix.lower().lstrip(".")))
     if not motions:
         raise ValueError("nothing to compress: no clips given")
     return motions, sources
+
+
+def _admit(
+    motions: list[Motion],
+    sources: list[tuple[int, str]],
+    table: _SkeletonTable,
+    failed: list[tuple[str, str]],
+) -> tuple[list[Motion], list[tuple[int, str]]]:
+    """The clips that can be stored (frames, a name, a skeleton the format can record); the
+    others are noted in ``failed`` and left out."""
+    kept, kept_sources = [], []
+    for motion, source in zip(motions, sources, strict=True):
+        try:
+            if motion.n_frames == 0:
+                raise ValueError("no frames")
+            if not motion.name:
+                raise ValueError("every clip needs a name (its file stem)")
+            table.index(motion.skeleton)
+        except ValueError as error:
+            failed.append((motion.name or "<unnamed clip>", str(error).splitlines()[0]))
+            continue
+        kept.append(motion)
+        kept_sources.append(source)
+    if not kept:
+        name, reason = failed[0]
+        raise ValueError(f"nothing to compress: every input failed ({name}: {reason})")
+    return kept, kept_sources
 
 
 def _validate(motions: list[Motion], max_error: float | None, ratio: float | None) -> None:
@@ -180,48 +236,260 @@ def _clip_context(library: PreparedLibrary, i: int) -> ClipContext:
     return ClipContext(info, clip.motion.skeleton, clip.motion.n_frames, clip.motion.fps, active)
 
 
-def _verify_and_repair(
+@dataclass(frozen=True)
+class ClipJob:
+    """One clip's share of the encoding: what :func:`code_clip` needs, and nothing of the
+    other clips, so the clips of a library are coded in any process with the same bytes.
+
+    Attributes
+    ----------
+    method : Method
+    library : PreparedLibrary
+        The clip alone (index 0) with every layout of the library.
+    model : object
+        The encoder's model of the clip's layout (:meth:`Method.fit_models`).
+    decoder_model : object
+        The same model as the decoder reads it from the file (:meth:`Method.load_model`).
+    quality : float
+    max_error : float or None
+        The bound the encoder aims at and the repair enforces (``None``: none).
+    verify : bool
+        Decode the payload, measure it and repair the frames over ``max_error``.
+    payload : bytes or None
+        Already coded (verify only).
+    """
+
+    method: Method
+    library: PreparedLibrary
+    model: Any
+    decoder_model: Any
+    quality: float
+    max_error: float | None
+    verify: bool
+    payload: bytes | None = None
+
+    def __str__(self) -> str:  # how a failure names the job
+        return f"clip {self.library.clips[0].motion.name!r}"
+
+
+@dataclass(frozen=True)
+class CodedClip:
+    """:func:`code_clip`'s result: the clip's payload, and after verification its corrections
+    and errors (``None`` without)."""
+
+    payload: bytes
+    corrections: Corrections
+    errors: ClipErrors | None
+
+
+def code_clip(job: ClipJob) -> CodedClip:
+    """Encode one clip (unless its payload is given), then decode it from its bytes, measure
+    it and correct the frames over the bound: the per-clip job of :func:`compress` and
+    :func:`append`, run by :mod:`quatmotion.parallel`."""
+    payload = job.payload
+    if payload is None:
+        payload = job.method.encode_clip(
+            job.library, 0, job.model, quality=job.quality, max_error=job.max_error
+        )
+    if not job.verify:
+        return CodedClip(payload, Corrections.empty(), None)
+    fix, errors = _verify_clip(
+        job.method, job.library, 0, payload, job.decoder_model, job.max_error
+    )
+    return CodedClip(payload, fix, errors)
+
+
+def _verify_clip(
     method: Method,
     library: PreparedLibrary,
-    encoded: EncodedLibrary,
-    models: list,
+    i: int,
+    payload: bytes,
+    model: Any,
     max_error: float | None,
-) -> tuple[list[Corrections], list[ClipErrors]]:
-    """Decode every clip from its bytes, measure it, and correct frames over the bound."""
-    corrections, errors = [], []
-    for i in range(len(library.clips)):
-        clip = library.clips[i]
-        info = library.layouts[clip.layout]
-        context = _clip_context(library, i)
-        X = method.decode(models[clip.layout], encoded.clips[i], context)
-        fix = Corrections.empty()
-        if max_error is not None:
-            fix = find_corrections(
-                clip.channels,
-                X,
-                clip.world,
-                clip.motion.skeleton,
-                info,
-                clip.at_rest,
-                context.active,
-                max_error,
-                library.vertices,
-            )
-            fix.apply(X, correction_lever(info))
-        corrections.append(fix)
-        errors.append(clip_errors(clip.world, library.motion_of(i, X)))
-    return corrections, errors
+) -> tuple[Corrections, ClipErrors]:
+    """Decode clip ``i`` from its bytes, correct the frames over the bound, measure it."""
+    clip = library.clips[i]
+    info = library.layouts[clip.layout]
+    context = _clip_context(library, i)
+    X = method.decode(model, payload, context)
+    fix = Corrections.empty()
+    if max_error is not None:
+        fix = find_corrections(
+            clip.channels,
+            X,
+            clip.world,
+            clip.motion.skeleton,
+            info,
+            clip.at_rest,
+            context.active,
+            max_error,
+            library.vertices,
+        )
+        fix.apply(X, correction_lever(info))
+    return fix, clip_errors(clip.world, library.motion_of(i, X))
 
 
-def _loaded_models(method: Method, library: PreparedLibrary, encoded: EncodedLibrary, given: list):
+def _one_clip(library: PreparedLibrary, i: int) -> PreparedLibrary:
+    """Clip ``i`` alone, with every layout (so its layout index stays valid)."""
+    clip = library.clips[i]
+    members = [[0] if k == clip.layout else [] for k in range(len(library.layouts))]
+    return PreparedLibrary(library.layouts, [clip], members, library.vertices)
+
+
+def _fit_members(library: PreparedLibrary, seed: int) -> list[list[int]]:
+    """The clips each layout's shared model is learned on: all of them, or a seeded sample of
+    :data:`FIT_SAMPLE_CLIPS` in a larger library (learning time then stays flat in its size)."""
+    rng = np.random.default_rng(seed)
     out = []
+    for members in library.members:
+        if len(members) <= FIT_SAMPLE_CLIPS:
+            out.append(list(members))
+        else:
+            out.append(sorted(int(i) for i in rng.choice(members, FIT_SAMPLE_CLIPS, replace=False)))
+    return out
+
+
+@dataclass(frozen=True)
+class _Runner:
+    """Where per-clip jobs run (:mod:`quatmotion.parallel`) and how progress is reported."""
+
+    workers: int | None
+    scheduler: str | Scheduler | None
+    report: Progress
+
+    def run(self, step: str, jobs: list[ClipJob]) -> list[CodedClip]:
+        """``code_clip`` of every job, in input order.
+
+        Raises
+        ------
+        ValueError
+            Naming the first clip whose job failed (nothing is written then).
+        """
+        scheduler = self.scheduler
+        if scheduler is None and self.workers is None and len(jobs) < 2:
+            scheduler = "inline"  # one clip: a process pool would only add its start-up
+        self.report(step, 0, len(jobs))
+        result = run_batch(
+            code_clip,
+            jobs,
+            workers=self.workers,
+            scheduler=scheduler,
+            progress=lambda done, total: self.report(step, done, total),
+        )
+        if result.failures:
+            raise ValueError(str(result.failures[0]))
+        return list(result.results)
+
+
+@dataclass
+class _Coded:
+    """A library coded at one quality: payloads, the models as the decoder reads them, and
+    after verification every clip's corrections and errors."""
+
+    encoded: EncodedLibrary
+    models: list[Any]
+    corrections: list[Corrections] = field(default_factory=list)
+    errors: list[ClipErrors] = field(default_factory=list)
+
+
+def _encode_once(
+    method: Method,
+    library: PreparedLibrary,
+    quality: float,
+    max_error: float | None,
+    seed: int,
+    given: list,
+    runner: _Runner,
+    *,
+    verify: bool,
+) -> _Coded:
+    """Learn the shared models (on a sample), then code every clip as a per-clip job."""
+    runner.report("learn", 0, 1)
+    fitted = method.fit_models(
+        library, _fit_members(library, seed), quality=quality, max_error=max_error, seed=seed,
+        models=given,
+    )  # fmt: skip
+    blobs, models = [], []
     for k, info in enumerate(library.layouts):
         if k < len(given) and given[k] is not None:
-            out.append(given[k])
+            blobs.append(b"")  # already in the file
+            models.append(given[k])
         else:
-            blob = encoded.models[k] if k < len(encoded.models) else b""
-            out.append(method.load_model(blob, info) if blob or library.members[k] else None)
+            blob = method.model_bytes(fitted[k], info) if fitted[k] is not None else b""
+            blobs.append(blob)
+            models.append(method.load_model(blob, info) if blob or library.members[k] else None)
+    jobs = [
+        ClipJob(
+            method,
+            _one_clip(library, i),
+            fitted[clip.layout],
+            models[clip.layout],
+            quality,
+            max_error,
+            verify,
+        )  # fmt: skip
+        for i, clip in enumerate(library.clips)
+    ]
+    coded = runner.run("encode", jobs)
+    out = _Coded(EncodedLibrary(blobs, [c.payload for c in coded]), models)
+    if verify:
+        out.corrections = [c.corrections for c in coded]
+        out.errors = [c.errors for c in coded]
     return out
+
+
+def clip_jobs(
+    clips: Sequence[Motion],
+    *,
+    max_error: float | None = DEFAULT_MAX_ERROR_CM,
+    method: str = "best",
+    quality: float | None = None,
+    seed: int = 0,
+) -> list[ClipJob]:
+    """The per-clip jobs :func:`compress` hands to :mod:`quatmotion.parallel` for ``clips``
+    (shared models learned, every clip prepared): :func:`code_clip` over them gives the
+    clips' payloads, corrections and errors. For measuring the batch step on its own (``bench
+    scale``); :func:`compress` is the way to make a file."""
+    codec = get_method(method)
+    motions = list(clips)
+    _validate(motions, max_error, None)
+    library = prepare_library(motions, [(0, "")] * len(motions))
+    q = quality if quality is not None else codec.default_quality
+    jobs: list[ClipJob] = []
+
+    class _Keep(_Runner):
+        """Keeps the jobs instead of running them."""
+
+        def run(self, step: str, planned: list[ClipJob]) -> list[CodedClip]:
+            jobs.extend(planned)
+            return [CodedClip(b"", Corrections.empty(), None) for _ in planned]
+
+    keep = _Keep(1, "inline", lambda *_: None)
+    _encode_once(codec, library, q, max_error, seed, [], keep, verify=True)
+    return jobs
+
+
+def _verify(
+    method: Method, library: PreparedLibrary, coded: _Coded, max_error: float | None, runner
+) -> _Coded:
+    """Decode, measure and repair every clip of a library coded without verification."""
+    jobs = [
+        ClipJob(
+            method,
+            _one_clip(library, i),
+            None,
+            coded.models[clip.layout],
+            0.0,
+            max_error,
+            True,
+            coded.encoded.clips[i],
+        )  # fmt: skip
+        for i, clip in enumerate(library.clips)
+    ]
+    checked = runner.run("verify", jobs)
+    coded.corrections = [c.corrections for c in checked]
+    coded.errors = [c.errors for c in checked]
+    return coded
 
 
 def _layout_chunks(library: PreparedLibrary, encoded: EncodedLibrary, start: int) -> list[bytes]:
@@ -259,28 +527,27 @@ def _assemble(
     return out.getvalue()
 
 
-def _encode_once(method, library, quality, max_error, seed, given):
-    encoded = method.encode(library, quality=quality, max_error=max_error, seed=seed, models=given)
-    models = _loaded_models(method, library, encoded, given)
-    return encoded, models
-
-
 def _search_ratio(
-    method, library, ratio, seed, given, size_of
-) -> tuple[float, EncodedLibrary, list]:
+    method: Method,
+    library: PreparedLibrary,
+    ratio: float,
+    seed: int,
+    size_of: Callable[[EncodedLibrary], int],
+    runner: _Runner,
+) -> tuple[float, _Coded]:
     """The smallest quality knob (best fidelity) whose file fits ``source / ratio``: doubling
     or halving until the target is bracketed, then geometric bisection."""
     target = sum(c.source_bytes or _text_bytes(c.motion) for c in library.clips) / ratio
     # the sizes below are measured with zeros for the declared errors, which deflate better
     # than the final values: keep room for their 8 bytes per clip
     target -= 8 * len(library.clips) + 8
-    fits: dict[float, tuple] = {}
+    fits: dict[float, _Coded] = {}
     too_big: set[float] = set()
     q = method.default_quality
     for _ in range(24):
-        encoded, models = _encode_once(method, library, q, None, seed, given)
-        if size_of(encoded) <= target:
-            fits[q] = (encoded, models)
+        coded = _encode_once(method, library, q, None, seed, [], runner, verify=False)
+        if size_of(coded.encoded) <= target:
+            fits[q] = coded
         else:
             too_big.add(q)
         smallest_fit = min(fits, default=None)
@@ -298,7 +565,7 @@ def _search_ratio(
     if not fits:
         raise ValueError(f"no setting of {method.name} reaches ratio {ratio:g}")
     q = min(fits)
-    return q, *fits[q]
+    return q, fits[q]
 
 
 def _text_bytes(motion: Motion) -> int:
@@ -326,6 +593,9 @@ def compress(
     sources: Sequence[tuple[int, str]] | None = None,
     seed: int = 0,
     progress: Progress | None = None,
+    workers: int | None = None,
+    scheduler: str | Scheduler | None = None,
+    on_error: str = "raise",
 ) -> CompressionResult:
     """Compress clips into one ``.qmz`` library.
 
@@ -359,6 +629,17 @@ def compress(
         Seed of every random choice (dictionary initialisation): same input and seed, same bytes.
     progress : callable, optional
         Called as ``progress(step_name, done, total)``.
+    workers, scheduler : optional
+        Where the per-clip jobs (encode, decode, repair) run, as for
+        :func:`quatmotion.parallel.run_batch`: by default a local process pool on every core
+        (or ``QUATMOTION_SCHEDULER``), ``"inline"`` in this process, ``tcp://HOST:PORT`` a Dask
+        cluster. The shared models are learned here first (on at most
+        :data:`FIT_SAMPLE_CLIPS` clips of each skeleton structure) and the file is assembled
+        here at the end: every scheduler and number of workers gives the same bytes.
+    on_error : {"raise", "skip"}
+        What a file that cannot be read, or a clip that cannot be stored, does: stop the
+        compression (nothing is written), or be left out and listed in
+        :attr:`CompressionResult.failed`.
 
     Returns
     -------
@@ -374,17 +655,22 @@ def compress(
     """
     t0 = time.perf_counter()
     report = progress or (lambda *_: None)
-    motions, sources = _load_inputs(clips, skeleton, sources)
-    _validate(motions, max_error, ratio)
+    if on_error not in ("raise", "skip"):
+        raise ValueError(f"on_error must be 'raise' or 'skip', got {on_error!r}")
     if bound_on not in ("joints", "vertices"):
         raise ValueError(f"bound_on must be 'joints' or 'vertices', got {bound_on!r}")
     codec = get_method(method)
+    failed: list[tuple[str, str]] = []
+    skip = on_error == "skip"
+    motions, sources = _load_inputs(clips, skeleton, sources, failed if skip else None)
     table = _SkeletonTable()
+    if skip:
+        motions, sources = _admit(motions, sources, table, failed)
+    _validate(motions, max_error, ratio)
     clip_skeleton = [table.index(m.skeleton) for m in motions]
     report("prepare", 0, len(motions))
     library = prepare_library(motions, sources, vertices=bound_on == "vertices")
     layout_skeletons = [table.index(info.skeleton) for info in library.layouts]
-    report("encode", 0, len(motions))
     q = quality if quality is not None else codec.default_quality
 
     def file_size(encoded: EncodedLibrary, corrections=None) -> int:
@@ -420,22 +706,23 @@ def compress(
             chunks,
         )
 
+    runner = _Runner(workers, scheduler, report)
     if ratio is not None:
-        q, encoded, models = _search_ratio(codec, library, ratio, seed, [], file_size)
-        corrections, errors = _verify_and_repair(codec, library, encoded, models, None)
+        q, coded = _search_ratio(codec, library, ratio, seed, file_size, runner)
+        coded = _verify(codec, library, coded, None, runner)
     elif max_error is not None and not codec.controls_bound and quality is None:
         best = None
         for scale in (1.0, 0.5, 0.25, 0.125):
-            encoded, models = _encode_once(codec, library, q * scale, max_error, seed, [])
-            corrections, errors = _verify_and_repair(codec, library, encoded, models, max_error)
-            size = file_size(encoded, corrections)
+            coded = _encode_once(
+                codec, library, q * scale, max_error, seed, [], runner, verify=True
+            )
+            size = file_size(coded.encoded, coded.corrections)
             if best is None or size < best[0]:
-                best = (size, q * scale, encoded, corrections, errors)
-        _, q, encoded, corrections, errors = best
+                best = (size, q * scale, coded)
+        _, q, coded = best
     else:
-        encoded, models = _encode_once(codec, library, q, max_error, seed, [])
-        report("verify", 0, len(motions))
-        corrections, errors = _verify_and_repair(codec, library, encoded, models, max_error)
+        coded = _encode_once(codec, library, q, max_error, seed, [], runner, verify=True)
+    encoded, corrections, errors = coded.encoded, coded.corrections, coded.errors
     data = _build(encoded, corrections, errors)
     path = None
     if out is not None:
@@ -458,6 +745,7 @@ def compress(
         time.perf_counter() - t0,
         q,
         [len(c) for c in corrections],
+        failed,
     )
 
 
@@ -469,12 +757,16 @@ def append(
     quality: float | None = None,
     skeleton: Skeleton | str | Path | None = None,
     seed: int = 0,
+    progress: Progress | None = None,
+    workers: int | None = None,
+    scheduler: str | Scheduler | None = None,
 ) -> CompressionResult:
     """Add clips to an existing ``.qmz`` file (rewritten atomically).
 
     The clips already in the file keep their chunks byte for byte; the new ones are coded with
     the file's method and with its library models where their skeleton structure is known.
-    Names must stay unique.
+    Names must stay unique. ``progress``, ``workers`` and ``scheduler`` are those of
+    :func:`compress`.
     """
     t0 = time.perf_counter()
     path = Path(path)
@@ -503,8 +795,9 @@ def append(
         table.index(info.skeleton) for info in library.layouts[n_old:]
     ]
     q = quality if quality is not None else codec.default_quality
-    encoded, models = _encode_once(codec, library, q, max_error, seed, given)
-    corrections, errors = _verify_and_repair(codec, library, encoded, models, max_error)
+    runner = _Runner(workers, scheduler, progress or (lambda *_: None))
+    coded = _encode_once(codec, library, q, max_error, seed, given, runner, verify=True)
+    encoded, corrections, errors = coded.encoded, coded.corrections, coded.errors
     entries = list(old.clips)
     chunks = list(old_clip_chunks)
     for i, clip in enumerate(library.clips):

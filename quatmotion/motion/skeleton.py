@@ -22,7 +22,7 @@ Conventions
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from types import MappingProxyType
 from typing import Any, Literal
 
@@ -125,6 +125,13 @@ class Skeleton:
         object.__setattr__(self, "channels", tuple(tuple(c) for c in self.channels))
         object.__setattr__(self, "extras", MappingProxyType(dict(self.extras)))
 
+    def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
+        # The read-only extras (a mappingproxy) do not pickle: rebuild through the constructor,
+        # which validates again, so a skeleton can be sent to batch workers.
+        values = {f.name: getattr(self, f.name) for f in fields(self) if f.init}
+        values["extras"] = dict(self.extras)
+        return _rebuild_skeleton, (values,)
+
     @property
     def n_joints(self) -> int:
         return len(self.joint_names)
@@ -170,3 +177,8 @@ class Skeleton:
 
     def __repr__(self) -> str:
         return f"Skeleton(name={self.name!r}, joints={self.n_joints}, sites={self.n_sites})"
+
+
+def _rebuild_skeleton(values: dict[str, Any]) -> Skeleton:
+    """Unpickle a :class:`Skeleton` (see ``Skeleton.__reduce__``)."""
+    return Skeleton(**values)

@@ -37,7 +37,8 @@ class ClipContext:
 
 
 class Method(ABC):
-    """A codec. Subclasses set :attr:`name` and implement the three methods.
+    """A codec. Subclasses set :attr:`name` and implement :meth:`fit_models`,
+    :meth:`model_bytes`, :meth:`encode_clip`, :meth:`load_model` and :meth:`decode`.
 
     ``quality`` is each method's one size knob (larger gives smaller files and larger errors);
     ``None`` means the method's default. ``max_error`` (cm) is passed to methods that control
@@ -53,6 +54,39 @@ class Method(ABC):
     ``quality`` and repairs)."""
 
     @abstractmethod
+    def fit_models(
+        self,
+        library: PreparedLibrary,
+        members: list[list[int]],
+        *,
+        quality: float,
+        max_error: float | None,
+        seed: int,
+        models: list[Any] | None = None,
+    ) -> list[Any]:
+        """The encoder's model of every layout, learned on the clips ``members[k]`` of layout
+        ``k`` (all of them, or a sample). ``models`` holds, per layout, a model already in the
+        file (appending: returned unchanged) or ``None`` (fit one); a layout without members
+        gets ``None``."""
+
+    @abstractmethod
+    def model_bytes(self, model: Any, layout: LayoutInfo) -> bytes:
+        """The ``L`` chunk's model part of a model from :meth:`fit_models`."""
+
+    @abstractmethod
+    def encode_clip(
+        self,
+        library: PreparedLibrary,
+        i: int,
+        model: Any,
+        *,
+        quality: float,
+        max_error: float | None,
+    ) -> bytes:
+        """Clip ``i``'s payload, given its layout's model from :meth:`fit_models`. Pure: it
+        reads only clip ``i``, its layout and ``model``, so clips may be coded in any order or
+        in other processes with the same bytes."""
+
     def encode(
         self,
         library: PreparedLibrary,
@@ -62,9 +96,22 @@ class Method(ABC):
         seed: int,
         models: list[Any] | None = None,
     ) -> EncodedLibrary:
-        """Code every clip of ``library``. ``models`` holds, per layout, a model already in the
-        file (appending: use it unchanged) or ``None`` (fit one); the returned models of given
-        layouts are ignored."""
+        """Code every clip of ``library`` in this process: :meth:`fit_models` on every clip,
+        then :meth:`encode_clip` for each. The returned models of given layouts are
+        ignored."""
+        fitted = self.fit_models(
+            library, library.members, quality=quality, max_error=max_error, seed=seed,
+            models=models,
+        )  # fmt: skip
+        payloads = [
+            self.encode_clip(library, i, fitted[clip.layout], quality=quality, max_error=max_error)
+            for i, clip in enumerate(library.clips)
+        ]
+        blobs = [
+            self.model_bytes(m, info) if m is not None else b""
+            for m, info in zip(fitted, library.layouts, strict=True)
+        ]
+        return EncodedLibrary(blobs, payloads)
 
     @abstractmethod
     def load_model(self, data: bytes, layout: LayoutInfo) -> Any:

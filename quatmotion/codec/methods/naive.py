@@ -29,7 +29,7 @@ from quatmotion.codec.channels import (
     to_channels,
 )
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary
-from quatmotion.codec.methods._base import ClipContext, EncodedLibrary, Method
+from quatmotion.codec.methods._base import ClipContext, Method
 from quatmotion.errors import FormatError
 from quatmotion.quat import identity
 
@@ -59,32 +59,45 @@ class NaiveMethod(Method):
     name = "naive"
     default_quality = 0.8
 
-    def encode(
+    def fit_models(
         self,
         library: PreparedLibrary,
+        members: list[list[int]],
         *,
         quality: float,
         max_error: float | None,
         seed: int,
         models: list[Any] | None = None,
-    ) -> EncodedLibrary:
+    ) -> list[Any]:
+        return [None for _ in library.layouts]  # nothing shared: every clip stands alone
+
+    def model_bytes(self, model: Any, layout: LayoutInfo) -> bytes:
+        return b""
+
+    def encode_clip(
+        self,
+        library: PreparedLibrary,
+        i: int,
+        model: Any,
+        *,
+        quality: float,
+        max_error: float | None,
+    ) -> bytes:
         step = float(quality)
         stride = stride_for(step)
-        payloads = []
-        for clip in library.clips:
-            layout, unit = _file_layout(library.layouts[clip.layout])
-            sk = clip.motion.skeleton
-            values, _ = to_channels(clip.motion, layout, identity((sk.n_joints,)))
-            kept = _kept(len(values), stride)
-            q = np.round(values[kept] * unit / step).astype(np.int64)
-            deltas = np.diff(q, axis=0, prepend=0)
-            if np.abs(deltas).max(initial=0) >= 2**31:
-                raise ValueError(f"clip {clip.motion.name!r}: values too large for the naive codec")
-            packed = lzma.compress(
-                deltas.T.astype("<i4").tobytes(), format=lzma.FORMAT_RAW, filters=_FILTERS
-            )
-            payloads.append(Writer().u8(stride).f32(step).raw(packed).bytes())
-        return EncodedLibrary([b"" for _ in library.layouts], payloads)
+        clip = library.clips[i]
+        layout, unit = _file_layout(library.layouts[clip.layout])
+        sk = clip.motion.skeleton
+        values, _ = to_channels(clip.motion, layout, identity((sk.n_joints,)))
+        kept = _kept(len(values), stride)
+        q = np.round(values[kept] * unit / step).astype(np.int64)
+        deltas = np.diff(q, axis=0, prepend=0)
+        if np.abs(deltas).max(initial=0) >= 2**31:
+            raise ValueError(f"clip {clip.motion.name!r}: values too large for the naive codec")
+        packed = lzma.compress(
+            deltas.T.astype("<i4").tobytes(), format=lzma.FORMAT_RAW, filters=_FILTERS
+        )
+        return Writer().u8(stride).f32(step).raw(packed).bytes()
 
     def load_model(self, data: bytes, layout: LayoutInfo) -> Any:
         return _file_layout(layout)

@@ -39,7 +39,7 @@ from quatmotion.codec import entropy
 from quatmotion.codec.binary import Reader, Writer
 from quatmotion.codec.channels import KIND_ROOT
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary
-from quatmotion.codec.methods._base import ClipContext, EncodedLibrary, Method
+from quatmotion.codec.methods._base import ClipContext, Method
 from quatmotion.errors import FormatError
 from quatmotion.sparse import KSVD, QSSD, quaternion_combination
 
@@ -160,45 +160,55 @@ class SparseMethod(Method):
         return _FIT_CACHE[key]
 
     # ------------------------------------------------------------------ encoding
-    def encode(
+    def _coarse_of(self, library: PreparedLibrary, i: int) -> NDArray[np.float64]:
+        """Clip ``i``'s coarse joint rotations (angular displacements, the lifting scheme's
+        coarse level), ``(T', 3n)``."""
+        clip = library.clips[i]
+        info = library.layouts[clip.layout]
+        d = _displacements(clip.channels, info, _sample_joints(info))
+        return _coarse(d.reshape(clip.channels.shape[0], -1))
+
+    def fit_models(
         self,
         library: PreparedLibrary,
+        members: list[list[int]],
         *,
         quality: float,
         max_error: float | None,
         seed: int,
         models: list[Any] | None = None,
-    ) -> EncodedLibrary:
+    ) -> list[Any]:
         given = list(models or [])
-        blobs: list[bytes] = []
-        payloads: dict[int, bytes] = {}
+        out: list[Any] = []
         for k, info in enumerate(library.layouts):
-            members = library.members[k]
-            joints = _sample_joints(info)
-            coarse = {
-                i: _coarse(
-                    _displacements(library.clips[i].channels, info, joints).reshape(
-                        library.clips[i].channels.shape[0], -1
-                    )
-                )
-                for i in members
-            }
             if k < len(given) and given[k] is not None:
-                model = given[k]
-                est = model["estimator"]
-                blob = b""
-            elif members:
-                Y = np.concatenate([coarse[i] for i in members]).reshape(-1, len(joints), 3) / _GAIN
-                samples = quat.canonicalize(quat.exp(Y / 2.0))
-                est, K, L = self._fit(samples, seed)
+                out.append(given[k])
+            elif members[k]:
+                n = len(_sample_joints(info))
+                Y = np.concatenate([self._coarse_of(library, i) for i in members[k]])
+                samples = quat.canonicalize(quat.exp(Y.reshape(-1, n, 3) / _GAIN / 2.0))
+                est, _, _ = self._fit(samples, seed)
                 model, blob = self._model_bytes(est, info, quality)
+                model["bytes"] = blob
+                out.append(model)
             else:
-                blobs.append(b"")
-                continue
-            blobs.append(blob)
-            for i in members:
-                payloads[i] = self._encode_clip(library, i, info, model, coarse[i], quality)
-        return EncodedLibrary(blobs, [payloads[i] for i in range(len(library.clips))])
+                out.append(None)
+        return out
+
+    def model_bytes(self, model: Any, layout: LayoutInfo) -> bytes:
+        return model.get("bytes", b"")  # a model read from a file is already there
+
+    def encode_clip(
+        self,
+        library: PreparedLibrary,
+        i: int,
+        model: Any,
+        *,
+        quality: float,
+        max_error: float | None,
+    ) -> bytes:
+        info = library.layouts[library.clips[i].layout]
+        return self._encode_clip(library, i, info, model, self._coarse_of(library, i), quality)
 
     def _model_bytes(self, est, info: LayoutInfo, quality: float):
         """Quantise the dictionary; returns the decoder's model and its bytes."""
@@ -222,10 +232,11 @@ class SparseMethod(Method):
         n = len(joints)
         samples = quat.canonicalize(quat.exp(coarse.reshape(-1, n, 3) / _GAIN / 2.0))
         D = model["dictionary"]
+        est = model.get("estimator") or self._coder(D, n)
         if self.learner == "qssd":
-            W = self._code_qssd(model["estimator"], D, samples)
+            W = self._code_qssd(est, D, samples)
         else:
-            W = self._code_ksvd(model["estimator"], D, samples)
+            W = self._code_ksvd(est, D, samples)
         W = sp.csr_matrix(W)
         wstep = quality / _WEIGHT_UNIT
         counts = np.diff(W.indptr)
@@ -256,6 +267,20 @@ class SparseMethod(Method):
             )
         )
         return w.bytes()
+
+    def _coder(self, D: NDArray[np.float64], n: int):
+        """An estimator that codes on ``D`` (a dictionary read from a file, when appending):
+        the fitted state :meth:`_code_qssd` and :meth:`_code_ksvd` use, without learning."""
+        K = D.shape[0]
+        if self.learner == "qssd":
+            est = QSSD(K, sparsity=self._sparsity_for(K))
+            est.dictionary_log_ = D
+            est.dictionary_ = quat.exp(D)
+        else:
+            est = KSVD(K, sparsity=self._sparsity_for(K))
+            est.dictionary_flat_ = D
+        est.n_features_in_ = n
+        return est
 
     def _sparsity_for(self, K: int) -> int:
         return int(min(self.sparsity, K))

@@ -44,7 +44,7 @@ from quatmotion.codec import entropy
 from quatmotion.codec.binary import Reader, Writer
 from quatmotion.codec.channels import joint_channels, joint_rotations
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary, decode_log2, encode_log2
-from quatmotion.codec.methods._base import ClipContext, EncodedLibrary, Method
+from quatmotion.codec.methods._base import ClipContext, Method
 from quatmotion.codec.metrics import frame_errors
 from quatmotion.codec.spline import (
     MIN_SPLINE_FRAMES,
@@ -274,8 +274,19 @@ class SplineMethod(Method):
             return np.maximum(info.lever, 1e-6)
         return np.sqrt(info.weights + self.settings.gamma * info.lever**2 / info.n_points)
 
+    def _breaks(self, library: PreparedLibrary, i: int, bound: float | None) -> tuple[int, ...]:
+        """Where clip ``i``'s spline breaks: at its glitches (``best``), else nowhere."""
+        if not self.settings.glitch_breaks:
+            return ()
+        return tuple(detect_breaks(library.clips[i].positions, bound if bound else 5.0))
+
     def _fit_model(
-        self, library: PreparedLibrary, k: int, breaks_of, bound: float | None, quality: float
+        self,
+        library: PreparedLibrary,
+        k: int,
+        members: list[int],
+        bound: float | None,
+        quality: float,
     ) -> SplineModel:
         """The layout's model, fitted on the spline coefficients of its clips at the knot
         spacing the rate control will start from (prediction depends on the spacing: at 0.2 s
@@ -284,11 +295,11 @@ class SplineMethod(Method):
         scale = decode_log2(encode_log2(self._channel_scale(info)))
         C = info.layout.n_channels
         rows, firsts = [], []
-        for i in library.members[k]:
+        for i in members:
             clip = library.clips[i]
             Y = clip.channels * scale
             spacing = self._spacings(bound, quality, clip.motion.fps)[0]
-            for c in fit_segments(Y, breaks_of(i), spacing):
+            for c in fit_segments(Y, self._breaks(library, i, bound), spacing):
                 firsts.append(c[0])
                 if len(c) > 2:
                     rows.append(c)
@@ -311,37 +322,41 @@ class SplineMethod(Method):
         return SplineModel(scale, a1, a2, initial + 1e-4, start_mean, start_scale).quantised()
 
     # ---------------------------------------------------------------------------- encoding
-    def encode(
+    def fit_models(
         self,
         library: PreparedLibrary,
+        members: list[list[int]],
         *,
         quality: float,
         max_error: float | None,
         seed: int,
         models: list[Any] | None = None,
-    ) -> EncodedLibrary:
-        breaks = {}
-        for i, clip in enumerate(library.clips):
-            found = []
-            if self.settings.glitch_breaks:
-                found = detect_breaks(clip.positions, max_error if max_error else 5.0)
-            breaks[i] = tuple(found)
+    ) -> list[Any]:
         given = list(models or [])
-        models = []
+        out: list[Any] = []
         for k in range(len(library.layouts)):
             if k < len(given) and given[k] is not None:
-                models.append(given[k])
-            elif library.members[k]:
-                models.append(self._fit_model(library, k, lambda i: breaks[i], max_error, quality))
+                out.append(given[k])
+            elif members[k]:
+                out.append(self._fit_model(library, k, members[k], max_error, quality))
             else:
-                models.append(None)
-        payloads = []
-        for i, clip in enumerate(library.clips):
-            payloads.append(
-                self._encode_clip(library, i, models[clip.layout], breaks[i], quality, max_error)
-            )
-        blobs = [m.to_bytes() if m is not None else b"" for m in models]
-        return EncodedLibrary(blobs, payloads)
+                out.append(None)
+        return out
+
+    def model_bytes(self, model: Any, layout: LayoutInfo) -> bytes:
+        return model.to_bytes()
+
+    def encode_clip(
+        self,
+        library: PreparedLibrary,
+        i: int,
+        model: Any,
+        *,
+        quality: float,
+        max_error: float | None,
+    ) -> bytes:
+        breaks = self._breaks(library, i, max_error)
+        return self._encode_clip(library, i, model, breaks, quality, max_error)
 
     def _active(self, library: PreparedLibrary, i: int) -> NDArray[np.bool_]:
         clip = library.clips[i]
