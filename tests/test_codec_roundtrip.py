@@ -61,12 +61,21 @@ def test_generated_clips_meet_the_bound_exactly_described(generated, method):
 
 
 @pytest.mark.parametrize("learner", ["qssd", "ksvd"])
-def test_sparse_codecs_meet_the_bound_after_repair(generated, learner, monkeypatch):
+def test_sparse_codecs_meet_the_bound_after_repair(generated, learner, monkeypatch, tmp_path):
     monkeypatch.setitem(METHODS, learner, SparseMethod(learner, max_iter=2))
     result = codec.compress(generated, max_error=2.0, method=learner)
     with codec.open(result.data) as archive:
         for original in generated:
             _assert_bound(original, archive.read(original.name), 2.0)
+    # appending codes the new clip on the dictionary stored in the file
+    path = tmp_path / f"{learner}.qmz"
+    codec.compress(generated[:1], path, max_error=2.0, method=learner)
+    first = codec.open(path).read(0)
+    codec.append(path, generated[1:], max_error=2.0)
+    with codec.open(path) as archive:
+        assert archive.names() == [m.name for m in generated]
+        np.testing.assert_array_equal(archive.read(0).rotations, first.rotations)
+        _assert_bound(generated[1], archive.read(1), 2.0)
 
 
 def test_tight_vertex_bound(generated):
