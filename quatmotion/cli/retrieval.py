@@ -19,14 +19,16 @@ from rich.table import Table
 from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
+    SchedulerOption,
+    WorkersOption,
     console,
     error_console,
     progress_bar,
     read_clip,
+    report_skipped,
     require_file,
     user_errors,
 )
-from quatmotion.parallel import SCHEDULER_ENV
 
 index_app = typer.Typer(
     help="Build and maintain a clip index (.qidx) for `quatmotion search`.", no_args_is_help=True
@@ -34,7 +36,6 @@ index_app = typer.Typer(
 app.add_typer(index_app, name="index")
 
 _KINDS_HELP = "Feature kinds to compute: motion, qssd, ksvd (comma-separated)."
-_SCHEDULER_HELP = f"Dask scheduler, tcp://HOST:PORT (default: ${SCHEDULER_ENV}, else local)."
 
 
 def _kinds(text: str) -> tuple[str, ...]:
@@ -82,10 +83,7 @@ def _build(
                 scheduler=resolve_scheduler(scheduler, workers=workers),
                 progress=advance,
             )
-    for path, reason in report.failed:
-        error_console.print(
-            f"skipped {path}: {reason}", markup=False, highlight=False, soft_wrap=True
-        )
+    report_skipped(f"{path}: {reason}" for path, reason in report.failed)
     console.print(
         f"{output}: {report.added} clips added, {report.skipped} already indexed, "
         f"{len(report.failed)} failed",
@@ -106,8 +104,8 @@ def build_command(
         Path | None, typer.Option(help="Folder of the AMC clips' ASF files.")
     ] = None,
     kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
-    workers: Annotated[int | None, typer.Option(help="Processes (default: every core).")] = None,
-    scheduler: Annotated[str | None, typer.Option(help=_SCHEDULER_HELP)] = None,
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
 ) -> None:
     """Index clips (a new file, or resume one: clips already indexed are skipped).
 
@@ -126,8 +124,8 @@ def add_command(
         Path | None, typer.Option(help="Folder of the AMC clips' ASF files.")
     ] = None,
     kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
-    workers: Annotated[int | None, typer.Option(help="Processes (default: every core).")] = None,
-    scheduler: Annotated[str | None, typer.Option(help=_SCHEDULER_HELP)] = None,
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
 ) -> None:
     """Add clips to an existing index (skipping those already in it with the same content)."""
     from quatmotion.retrieval.index import ClipIndex
