@@ -24,6 +24,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "EXIT_BAD_INPUT",
+    "asf_path_for",
     "CliInputError",
     "console",
     "error_console",
@@ -32,6 +33,7 @@ __all__ = [
     "read_clip",
     "require_file",
     "user_errors",
+    "write_clip",
 ]
 
 EXIT_BAD_INPUT = 2
@@ -105,3 +107,38 @@ def progress_bar(target: Console | None = None) -> Progress:
         TimeElapsedColumn(),
         console=target or console,
     )
+
+
+def asf_path_for(amc: Path) -> Path:
+    """Where an AMC's ASF goes so that :func:`quatmotion.io.find_asf_for_amc` finds it."""
+    parts = amc.stem.split("_")
+    if len(parts) >= 2 and parts[0].upper() == "HDM":
+        return amc.with_name(f"{parts[0]}_{parts[1]}.asf")
+    if len(parts) >= 2:
+        return amc.with_name(f"{parts[0]}.asf")
+    return amc.with_suffix(".asf")
+
+
+def write_clip(motion: Motion, out: Path) -> list[Path]:
+    """Write ``motion`` to ``out`` by extension; an AMC gets its ASF beside it (the files
+    written, in order)."""
+    from quatmotion.io import MOTION_SUFFIXES, write_asf, write_motion
+
+    suffix = out.suffix.lower()
+    if suffix not in MOTION_SUFFIXES:
+        raise CliInputError(
+            f"{out}: unknown output type {out.suffix!r} (expected {', '.join(MOTION_SUFFIXES)})"
+        )
+    if suffix == ".amc" and motion.skeleton.extras.get("format") != "asf":
+        raise CliInputError(
+            f"{out}: AMC output needs an ASF skeleton; this clip's skeleton "
+            f"({motion.skeleton.name!r}) comes from a BVH, write .bvh instead"
+        )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    written = [out]
+    write_motion(motion, out)
+    if suffix == ".amc":
+        asf = asf_path_for(out)
+        write_asf(motion.skeleton, asf)
+        written.append(asf)
+    return written

@@ -16,44 +16,11 @@ from quatmotion.cli._common import (
     read_clip,
     require_file,
     user_errors,
+    write_clip,
 )
 
 if TYPE_CHECKING:
     from quatmotion.motion import Motion
-
-
-def _asf_path_for(amc: Path) -> Path:
-    """Where an AMC's ASF goes so that :func:`quatmotion.io.find_asf_for_amc` finds it."""
-    parts = amc.stem.split("_")
-    if len(parts) >= 2 and parts[0].upper() == "HDM":
-        return amc.with_name(f"{parts[0]}_{parts[1]}.asf")
-    if len(parts) >= 2:
-        return amc.with_name(f"{parts[0]}.asf")
-    return amc.with_suffix(".asf")
-
-
-def _write(motion: Motion, out: Path) -> list[Path]:
-    """Write ``motion`` to ``out`` by extension; an AMC gets its ASF beside it."""
-    from quatmotion.io import MOTION_SUFFIXES, write_asf, write_motion
-
-    suffix = out.suffix.lower()
-    if suffix not in MOTION_SUFFIXES:
-        raise CliInputError(
-            f"{out}: unknown output type {out.suffix!r} (expected {', '.join(MOTION_SUFFIXES)})"
-        )
-    if suffix == ".amc" and motion.skeleton.extras.get("format") != "asf":
-        raise CliInputError(
-            f"{out}: AMC output needs an ASF skeleton; this clip's skeleton "
-            f"({motion.skeleton.name!r}) comes from a BVH, write .bvh instead"
-        )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    written = [out]
-    write_motion(motion, out)
-    if suffix == ".amc":
-        asf = _asf_path_for(out)
-        write_asf(motion.skeleton, asf)
-        written.append(asf)
-    return written
 
 
 def _motion_summary(motion: Motion, path: str) -> Table:
@@ -135,7 +102,7 @@ def convert(
             raise CliInputError(f"--to must be one of amc, bvh; got {to!r}")
         if len(inputs) == 1 and out.suffix.lower() in MOTION_SUFFIXES:
             motion = read_clip(inputs[0], skeleton)
-            written = _write(motion, out)
+            written = write_clip(motion, out)
             console.print(f"wrote {', '.join(str(w) for w in written)}")
             return
         if out.exists() and not out.is_dir():
@@ -149,7 +116,7 @@ def convert(
             task = progress.add_task("converting", total=len(inputs))
             for path in inputs:
                 motion = read_clip(path, skeleton)
-                _write(motion, out / f"{path.stem}{fmt}")
+                write_clip(motion, out / f"{path.stem}{fmt}")
                 progress.advance(task)
         console.print(f"wrote {len(inputs)} clip(s) to {out}")
 
@@ -167,7 +134,7 @@ def generate(
 
     with user_errors():
         motion = generate_clip(kind, seed, n_frames=frames, fps=fps)
-        written = _write(motion, out)
+        written = write_clip(motion, out)
         console.print(
             f"wrote {', '.join(str(w) for w in written)} "
             f"({motion.n_frames} frames at {motion.fps:g} fps)"

@@ -8,21 +8,34 @@ from __future__ import annotations
 
 from quatmotion.io.asf_amc import (
     asf_bone_end_positions,
+    asf_text,
     find_asf_for_amc,
+    parse_asf,
     read_amc,
     read_asf,
     write_amc,
     write_asf,
 )
-from quatmotion.io.bvh import detect_bvh_scale, read_bvh, to_bvh_skeleton, write_bvh
+from quatmotion.io.bvh import (
+    bvh_text,
+    detect_bvh_scale,
+    parse_bvh,
+    read_bvh,
+    to_bvh_skeleton,
+    write_bvh,
+)
 from quatmotion.io.files import MOTION_SUFFIXES, find_motion_files, read_motion, write_motion
 
 __all__ = [
     "MOTION_SUFFIXES",
     "asf_bone_end_positions",
+    "asf_text",
+    "bvh_text",
     "detect_bvh_scale",
     "find_asf_for_amc",
     "find_motion_files",
+    "parse_asf",
+    "parse_bvh",
     "read_amc",
     "read_asf",
     "read_bvh",

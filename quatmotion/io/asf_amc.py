@@ -57,7 +57,9 @@ from quatmotion.motion import Motion, Skeleton, WorldTransforms, forward_kinemat
 
 __all__ = [
     "asf_bone_end_positions",
+    "asf_text",
     "find_asf_for_amc",
+    "parse_asf",
     "read_amc",
     "read_asf",
     "write_amc",
@@ -191,7 +193,26 @@ def read_asf(path: str | Path) -> Skeleton:
         ``:hierarchy``, unknown bones, bad numbers, cycles, unreachable bones...
     """
     path = Path(path)
-    sections = _AsfSections.split(_asf_lines(read_text(path)), path)
+    return parse_asf(read_text(path), path)
+
+
+def parse_asf(text: str, path: str | Path) -> Skeleton:
+    """Parse the text of an ASF file: :func:`read_asf` without reading a file.
+
+    Parameters
+    ----------
+    text : str
+        The whole ASF text.
+    path : str or Path
+        The name messages give and whose stem names the skeleton (it is not opened).
+
+    Returns
+    -------
+    Skeleton
+        As :func:`read_asf` returns it.
+    """
+    path = Path(path)
+    sections = _AsfSections.split(_asf_lines(text), path)
     units, to_cm, to_rad, angle_unit = _parse_units(sections.body.get("units", []), path)
     root = _parse_root(sections.body["root"], path)
     bones = _parse_bones(sections.body["bonedata"], sections.line["bonedata"], path)
@@ -774,6 +795,11 @@ def write_asf(skeleton: Skeleton, path: str | Path) -> None:
         Read with :func:`read_asf` (``extras["format"] == "asf"``); ``ValueError`` otherwise.
     path : str or Path
     """
+    atomic_write(path, asf_text(skeleton))
+
+
+def asf_text(skeleton: Skeleton) -> str:
+    """The ASF text :func:`write_asf` writes for ``skeleton`` (read from an ASF)."""
     _require_asf(skeleton, "write_asf")
     ex = skeleton.extras
     out = [f":version {ex['asf_version']}", f":name {ex['asf_name'] or skeleton.name}", ":units"]
@@ -809,7 +835,7 @@ def write_asf(skeleton: Skeleton, path: str | Path) -> None:
     out += [":hierarchy", "  begin"]
     out += [f"    {' '.join(h)}" for h in ex["asf_hierarchy"]]
     out += ["  end", ""]
-    atomic_write(path, "\n".join(out))
+    return "\n".join(out)
 
 
 def amc_channel_values(

@@ -46,7 +46,14 @@ from quatmotion.io._text import (
 )
 from quatmotion.motion import Motion, Skeleton
 
-__all__ = ["detect_bvh_scale", "read_bvh", "to_bvh_skeleton", "write_bvh"]
+__all__ = [
+    "bvh_text",
+    "detect_bvh_scale",
+    "parse_bvh",
+    "read_bvh",
+    "to_bvh_skeleton",
+    "write_bvh",
+]
 
 _CHANNEL_TOKENS = {
     "xposition": "tx",
@@ -243,7 +250,26 @@ def read_bvh(path: str | Path, scale: float | Literal["auto"] = "auto") -> Motio
         frame count or value count mismatches, bad or non-finite numbers.
     """
     path = Path(path)
-    text = read_text(path)
+    return parse_bvh(read_text(path), path, scale)
+
+
+def parse_bvh(text: str, path: str | Path, scale: float | Literal["auto"] = "auto") -> Motion:
+    """Parse the text of a BVH file: :func:`read_bvh` without reading a file.
+
+    Parameters
+    ----------
+    text : str
+        The whole BVH text.
+    path : str or Path
+        The name messages give and whose stem names the motion (it is not opened).
+    scale : float or "auto"
+        As for :func:`read_bvh`.
+
+    Returns
+    -------
+    Motion
+    """
+    path = Path(path)
     head_end, motion_line, found = _find_motion_keyword(text)
     hierarchy_tokens = [
         (token, number)
@@ -510,6 +536,12 @@ def write_bvh(motion: Motion, path: str | Path) -> None:
     motion : Motion
     path : str or Path
     """
+    atomic_write(path, bvh_text(motion))
+
+
+def bvh_text(motion: Motion) -> str:
+    """The BVH text :func:`write_bvh` writes for ``motion`` (a zero-frame motion gives the
+    hierarchy alone, with ``Frames: 0``)."""
     sk = motion.skeleton
     if not _bvh_skeleton_matches(sk):
         identity = quat.identity((sk.n_joints,))
@@ -559,4 +591,4 @@ def write_bvh(motion: Motion, path: str | Path) -> None:
     out += ["MOTION", f"Frames: {motion.n_frames}", f"Frame Time: {1.0 / motion.fps:.10g}", ""]
     row = " ".join(["%.10g"] * values.shape[1]) + "\n"
     body = (row * values.shape[0]) % tuple(values.ravel().tolist()) if values.size else ""
-    atomic_write(path, "\n".join(out) + body)
+    return "\n".join(out) + body

@@ -1,0 +1,272 @@
+"""Reading ``.qmz`` files: lazy, random access to clips (decompression).
+
+:func:`open_archive` (``quatmotion.codec.open``) reads the preamble, walks the chunk framing
+and parses the header; nothing else. :meth:`Archive.read` decodes one clip from its own chunk
+plus the skeleton record and library model it needs (each parsed once and cached), so one clip
+decodes without decoding any other.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quatmotion.codec.binary import Reader
+from quatmotion.codec.channels import channel_rotations, from_channels
+from quatmotion.codec.container import (
+    ChunkRef,
+    ClipEntry,
+    Header,
+    read_chunk,
+    read_preamble,
+    scan_chunks,
+)
+from quatmotion.codec.library import LayoutInfo
+from quatmotion.codec.methods import ClipContext, get_method
+from quatmotion.codec.repair import Corrections, read_clip_prefix
+from quatmotion.codec.skeletons import inflate_text, skeleton_from_record
+from quatmotion.errors import FormatError
+from quatmotion.motion import Motion, Skeleton
+
+__all__ = ["Archive", "DecodedChannels", "open_archive"]
+
+
+@dataclass(frozen=True)
+class DecodedChannels:
+    """A clip decoded to channels, before they become a :class:`Motion`."""
+
+    channels: NDArray[np.float64]
+    at_rest: NDArray[np.bool_]
+    layout: LayoutInfo
+    skeleton: Skeleton
+    entry: ClipEntry
+
+
+class Archive:
+    """An open ``.qmz`` file (or bytes). Use as a context manager or call :meth:`close`.
+
+    Attributes
+    ----------
+    path : Path or None
+    header : Header
+    clips : tuple of ClipEntry
+        The index, in file order.
+    """
+
+    def __init__(self, source: str | Path | bytes):
+        if isinstance(source, bytes | bytearray):
+            self.path = None
+            self._name = Path("<bytes>")
+            self._file: BinaryIO = io.BytesIO(bytes(source))
+            size = len(source)
+        else:
+            self.path = Path(source)
+            self._name = self.path
+            self._file = open(self.path, "rb")  # noqa: SIM115 (closed by close())
+            size = os.fstat(self._file.fileno()).st_size
+        try:
+            self.size = size
+            read_preamble(self._file, self._name)
+            chunks = list(scan_chunks(self._file, self._name, size))
+            if not chunks or chunks[0].tag != b"H":
+                raise FormatError("the first chunk is not the header", self._name)
+            self.header = Header.from_bytes(
+                read_chunk(self._file, chunks[0], self._name), self._name
+            )
+            self._split(chunks[1:])
+        except BaseException:
+            self._file.close()
+            raise
+        self.method = get_method(self.header.method) if self.header.method in _known() else None
+        if self.method is None:
+            self._file.close()
+            raise FormatError(f"unknown codec method {self.header.method!r}", self._name)
+        self._records: dict[int, str] = {}
+        self._skeletons: dict[int, Skeleton] = {}
+        self._layouts: dict[int, tuple[LayoutInfo, Any]] = {}
+
+    def _split(self, chunks: list[ChunkRef]) -> None:
+        h = self.header
+        expected = [b"S"] * len(h.records) + [b"L"] * len(h.layouts) + [b"C"] * len(h.clips)
+        tags = [c.tag for c in chunks]
+        if len(tags) < len(expected) and tags == expected[: len(tags)]:
+            raise FormatError(
+                f"truncated: {len(expected) - len(tags)} of {len(expected)} chunks missing",
+                self._name,
+            )
+        if tags != expected:
+            raise FormatError("chunks do not match the header's tables", self._name)
+        n_s, n_l = len(h.records), len(h.layouts)
+        self._record_chunks = chunks[:n_s]
+        self._layout_chunks = chunks[n_s : n_s + n_l]
+        self._clip_chunks = chunks[n_s + n_l :]
+
+    # ------------------------------------------------------------------ context management
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> Archive:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ index
+    @property
+    def clips(self) -> tuple[ClipEntry, ...]:
+        return self.header.clips
+
+    def __len__(self) -> int:
+        return len(self.header.clips)
+
+    def names(self) -> list[str]:
+        return [c.name for c in self.header.clips]
+
+    def index_of(self, clip: int | str) -> int:
+        """The position of a clip given by position or name (``KeyError`` naming it)."""
+        if isinstance(clip, int | np.integer):
+            if not 0 <= clip < len(self):
+                raise KeyError(f"clip index {clip} out of range (the file holds {len(self)})")
+            return int(clip)
+        names = self.names()
+        if clip not in names:
+            raise KeyError(f"no clip named {clip!r} in {self._name}")
+        return names.index(clip)
+
+    def chunk_bytes(self, clip: int | str) -> int:
+        """Size of a clip's own chunk (payload), bytes."""
+        return self._clip_chunks[self.index_of(clip)].length
+
+    # ------------------------------------------------------------------ shared parts
+    def _record_text(self, k: int) -> str:
+        if k not in self._records:
+            rec = self.header.records[k]
+            first = next(i for i, r in enumerate(self.header.records) if r.kind == rec.kind)
+            extra = self._record_text(first) if first != k else ""
+            data = read_chunk(self._file, self._record_chunks[k], self._name)
+            self._records[k] = inflate_text(data, extra, self._name)
+        return self._records[k]
+
+    def skeleton(self, k: int) -> Skeleton:
+        """The ``k``-th skeleton of the header."""
+        if k not in self._skeletons:
+            from dataclasses import replace
+
+            entry = self.header.skeletons[k]
+            rec = self.header.records[entry.record]
+            sk = skeleton_from_record(
+                rec.kind, self._record_text(entry.record), rec.scale, self._name
+            )
+            self._skeletons[k] = sk if sk.name == entry.name else replace(sk, name=entry.name)
+        return self._skeletons[k]
+
+    def layout(self, k: int) -> tuple[LayoutInfo, Any]:
+        """The ``k``-th layout and its method model."""
+        if k not in self._layouts:
+            packed = read_chunk(self._file, self._layout_chunks[k], self._name)
+            try:
+                inflater = zlib.decompressobj(-15)
+                data = inflater.decompress(packed) + inflater.flush()
+                if not inflater.eof or inflater.unused_data:
+                    raise zlib.error("incomplete stream")
+            except zlib.error as error:
+                raise FormatError(
+                    f"library chunk: corrupt deflate stream ({error})", self._name
+                ) from None
+            r = Reader(data, self._name, "library chunk")
+            info = LayoutInfo.read(r, self.skeleton(self.header.layouts[k].skeleton))
+            try:
+                model = self.method.load_model(r.take(r.remaining), info)
+            except FormatError as error:
+                raise FormatError(error.reason, self._name) from None
+            self._layouts[k] = (info, model)
+        return self._layouts[k]
+
+    # ------------------------------------------------------------------ clips
+    def read_channels(self, clip: int | str) -> DecodedChannels:
+        """A clip decoded to channels (corrections applied)."""
+        i = self.index_of(clip)
+        entry = self.header.clips[i]
+        skeleton = self.skeleton(entry.skeleton)
+        info, model = self.layout(entry.layout)
+        if skeleton.n_joints != info.skeleton.n_joints:
+            raise FormatError(f"clip {entry.name!r}: skeleton and layout disagree", self._name)
+        data = read_chunk(self._file, self._clip_chunks[i], self._name)
+        r = Reader(data, self._name, f"clip {entry.name!r}")
+        layout = info.layout
+        at_rest, corrections = read_clip_prefix(
+            r, len(layout.translation_joints), entry.n_frames, layout.n_channels
+        )
+        active = np.ones(layout.n_channels, dtype=bool)
+        for k in range(len(layout.translation_joints)):
+            if at_rest[k]:
+                active[layout.translation_columns(k)] = False
+        context = ClipContext(info, skeleton, entry.n_frames, entry.fps, active)
+        try:
+            X = self.method.decode(model, r.take(r.remaining), context)
+        except FormatError as error:
+            raise FormatError(f"clip {entry.name!r}: {error.reason}", self._name) from None
+        if X.shape != (entry.n_frames, layout.n_channels) or not np.all(np.isfinite(X)):
+            raise FormatError(f"clip {entry.name!r}: decoded channels are invalid", self._name)
+        _apply(corrections, X, info)
+        return DecodedChannels(X, at_rest, info, skeleton, entry)
+
+    def read_rotations(self, clip: int | str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """A clip's root translation ``(T, 3)`` cm and local rotations ``(T, J, 4)``: the
+        decoded arrays without the validation a :class:`Motion` adds (the fast path)."""
+        d = self.read_channels(clip)
+        rotations = channel_rotations(d.channels, d.skeleton, d.layout.layout, d.layout.reference)
+        return d.channels[:, :3], rotations
+
+    def read(self, clip: int | str) -> Motion:
+        """A clip as a :class:`Motion` (skeleton, fps, frames and name exactly as stored)."""
+        d = self.read_channels(clip)
+        return from_channels(
+            d.channels,
+            d.skeleton,
+            d.layout.layout,
+            d.layout.reference,
+            d.at_rest,
+            d.entry.fps,
+            d.entry.name,
+        )
+
+    def __iter__(self):
+        for i in range(len(self)):
+            yield self.read(i)
+
+    def verify(self) -> None:
+        """Read every chunk, checking every CRC (``FormatError`` on the first mismatch)."""
+        for ref in [*self._record_chunks, *self._layout_chunks, *self._clip_chunks]:
+            read_chunk(self._file, ref, self._name)
+
+
+def _apply(corrections: Corrections, X: NDArray[np.float64], info: LayoutInfo) -> None:
+    corrections.apply(X, np.maximum(info.lever, 1e-9))
+
+
+def _known() -> set[str]:
+    from quatmotion.codec.methods import METHODS
+
+    return set(METHODS)
+
+
+def open_archive(source: str | Path | bytes) -> Archive:
+    """Open a ``.qmz`` file (a path, or its bytes) for lazy clip access.
+
+    Raises
+    ------
+    FormatError
+        Wrong magic, a newer format version, truncation, a checksum failure in the header, or
+        tables that do not match the chunks (naming the file).
+    FileNotFoundError
+        If the path does not exist.
+    """
+    return Archive(source)

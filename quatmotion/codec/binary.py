@@ -1,0 +1,157 @@
+"""Little byte-level readers and writers: LEB128 varints, zigzag, IEEE floats, strings.
+
+Conventions
+-----------
+* Unsigned integers are LEB128 varints (7 bits per byte, low bits first, high bit set on all
+  bytes but the last). Signed integers are zigzag-mapped first (``0, -1, 1, -2...`` to
+  ``0, 1, 2, 3...``).
+* Floats are IEEE 754, little-endian (``f32``, ``f64``). Strings are a varint byte count then
+  UTF-8.
+* :class:`Reader` raises :class:`~quatmotion.errors.FormatError` (naming the file and what it was
+  reading) when the data end early or a value is out of range, never ``IndexError``.
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quatmotion.errors import FormatError
+
+__all__ = ["Reader", "Writer"]
+
+_F32 = struct.Struct("<f")
+_F64 = struct.Struct("<d")
+
+
+class Writer:
+    """Appends values to a growing byte string."""
+
+    def __init__(self) -> None:
+        self._parts: list[bytes] = []
+
+    def u8(self, value: int) -> Writer:
+        if not 0 <= value < 256:
+            raise ValueError(f"byte value out of range: {value}")
+        self._parts.append(bytes((value,)))
+        return self
+
+    def uvarint(self, value: int) -> Writer:
+        value = int(value)
+        if value < 0:
+            raise ValueError(f"unsigned varint of a negative number: {value}")
+        out = bytearray()
+        while True:
+            byte = value & 0x7F
+            value >>= 7
+            if value:
+                out.append(byte | 0x80)
+            else:
+                out.append(byte)
+                break
+        self._parts.append(bytes(out))
+        return self
+
+    def svarint(self, value: int) -> Writer:
+        value = int(value)
+        return self.uvarint(2 * value if value >= 0 else -2 * value - 1)
+
+    def f32(self, value: float) -> Writer:
+        self._parts.append(_F32.pack(value))
+        return self
+
+    def f64(self, value: float) -> Writer:
+        self._parts.append(_F64.pack(value))
+        return self
+
+    def raw(self, data: bytes) -> Writer:
+        self._parts.append(bytes(data))
+        return self
+
+    def blob(self, data: bytes) -> Writer:
+        """A varint length, then the bytes."""
+        return self.uvarint(len(data)).raw(data)
+
+    def string(self, text: str) -> Writer:
+        return self.blob(text.encode("utf-8"))
+
+    def array(self, values: NDArray, dtype: str) -> Writer:
+        """Fixed-width little-endian values (``"<i2"``, ``"<u1"``...), count not written."""
+        return self.raw(np.asarray(values).astype(dtype).tobytes())
+
+    def bytes(self) -> bytes:
+        return b"".join(self._parts)
+
+
+class Reader:
+    """Reads what :class:`Writer` wrote; errors name ``source`` and ``what``."""
+
+    def __init__(self, data: bytes, source: str | Path | None = None, what: str = "data"):
+        self._data = memoryview(data)
+        self._pos = 0
+        self._source = source
+        self._what = what
+
+    @property
+    def remaining(self) -> int:
+        return len(self._data) - self._pos
+
+    def _fail(self, message: str) -> FormatError:
+        return FormatError(f"{self._what}: {message}", self._source)
+
+    def take(self, n: int) -> bytes:
+        if n < 0 or self._pos + n > len(self._data):
+            raise self._fail(f"ends early (wanted {n} bytes at offset {self._pos})")
+        out = bytes(self._data[self._pos : self._pos + n])
+        self._pos += n
+        return out
+
+    def u8(self) -> int:
+        return self.take(1)[0]
+
+    def uvarint(self, limit: int = 1 << 62) -> int:
+        value = 0
+        shift = 0
+        while True:
+            byte = self.u8()
+            value |= (byte & 0x7F) << shift
+            if not byte & 0x80:
+                break
+            shift += 7
+            if shift > 63:
+                raise self._fail("varint longer than 64 bits")
+        if value > limit:
+            raise self._fail(f"value {value} exceeds {limit}")
+        return value
+
+    def svarint(self) -> int:
+        u = self.uvarint()
+        return u // 2 if u % 2 == 0 else -(u + 1) // 2
+
+    def f32(self) -> float:
+        return _F32.unpack(self.take(4))[0]
+
+    def f64(self) -> float:
+        return _F64.unpack(self.take(8))[0]
+
+    def blob(self, limit: int = 1 << 40) -> bytes:
+        return self.take(self.uvarint(limit))
+
+    def string(self) -> str:
+        raw = self.blob()
+        try:
+            return raw.decode("utf-8")
+        except UnicodeDecodeError:
+            raise self._fail("a name is not UTF-8") from None
+
+    def array(self, count: int, dtype: str) -> NDArray:
+        size = np.dtype(dtype).itemsize
+        return np.frombuffer(self.take(count * size), dtype=dtype).copy()
+
+    def end(self) -> None:
+        """Raise unless everything was read."""
+        if self.remaining:
+            raise self._fail(f"{self.remaining} unexpected bytes at the end")

@@ -1,0 +1,279 @@
+"""The ``.qmz`` container: preamble, chunks with CRC32, the header and its clip index.
+
+``docs/format.md`` specifies these bytes; this module is its one implementation. It knows
+nothing of how clips are coded: chunk payloads are opaque bytes here.
+
+Conventions
+-----------
+* A file is the 10-byte preamble (:data:`MAGIC`, then the format version as u16 little-endian)
+  followed by chunks. A chunk is a one-byte ASCII tag, the payload length as a varint, the
+  payload, and the CRC32 (u32 little-endian, zlib's polynomial) of the tag, length bytes and
+  payload.
+* Chunk order: one header ``H``; skeleton records ``S``; library models ``L``; one ``C`` per
+  clip. The header's counts say how many of each follow, so truncation is detected at any
+  chunk boundary.
+* The header payload is raw deflate (zlib, level 9) of the :class:`Header` fields (see
+  :meth:`Header.to_bytes`).
+* Every error in reading is a :class:`~quatmotion.errors.FormatError` that names the file and
+  says what is wrong: wrong magic, a newer version, truncation, a checksum mismatch, a value
+  out of range.
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO
+
+from quatmotion.codec.binary import Reader, Writer
+from quatmotion.errors import FormatError
+
+__all__ = [
+    "FORMAT_VERSION",
+    "MAGIC",
+    "ChunkRef",
+    "ClipEntry",
+    "Header",
+    "LayoutEntry",
+    "RecordEntry",
+    "SkeletonEntry",
+    "read_chunk",
+    "scan_chunks",
+    "write_chunk",
+]
+
+MAGIC = b"\x89QMZ\r\n\x1a\n"
+"""First bytes of every ``.qmz`` file (as PNG's: catches text-mode mangling)."""
+FORMAT_VERSION = 1
+"""The version this code writes and the newest it reads."""
+PREAMBLE_BYTES = len(MAGIC) + 2
+TAGS = {b"H": "header", b"S": "skeleton", b"L": "library", b"C": "clip"}
+SOURCE_FORMATS = ("", "amc", "bvh")
+
+
+@dataclass(frozen=True)
+class RecordEntry:
+    """A stored skeleton text: its record kind and BVH scale (cm per unit, 0 for others)."""
+
+    kind: int
+    scale: float
+
+
+@dataclass(frozen=True)
+class SkeletonEntry:
+    """A skeleton: its record (index into the ``S`` chunks) and its name."""
+
+    record: int
+    name: str
+
+
+@dataclass(frozen=True)
+class LayoutEntry:
+    """A library model (index into the ``L`` chunks) and the skeleton whose structure it has."""
+
+    skeleton: int
+
+
+@dataclass(frozen=True)
+class ClipEntry:
+    """One clip of the index.
+
+    Attributes
+    ----------
+    name : str
+        The clip's name (its file stem).
+    skeleton, layout : int
+        Indices into the header's skeletons and layouts.
+    n_frames : int
+    fps : float
+    source_bytes : int
+        Size of the file it came from (AMC or BVH text), 0 when unknown.
+    source_format : str
+        ``"amc"``, ``"bvh"`` or ``""``.
+    max_error, arms : float
+        The clip's largest joint-position error and ARMS as encoded, centimetres.
+    """
+
+    name: str
+    skeleton: int
+    layout: int
+    n_frames: int
+    fps: float
+    source_bytes: int
+    source_format: str
+    max_error: float
+    arms: float
+
+
+@dataclass(frozen=True)
+class Header:
+    """What the ``H`` chunk holds: the method, the tables and the clip index."""
+
+    method: str
+    records: tuple[RecordEntry, ...]
+    skeletons: tuple[SkeletonEntry, ...]
+    layouts: tuple[LayoutEntry, ...]
+    clips: tuple[ClipEntry, ...]
+    settings: bytes = field(default=b"")
+
+    def to_bytes(self) -> bytes:
+        """The deflated header payload."""
+        w = Writer().string(self.method).blob(self.settings)
+        w.uvarint(len(self.records))
+        for r in self.records:
+            w.u8(r.kind).f64(r.scale)
+        w.uvarint(len(self.skeletons))
+        for s in self.skeletons:
+            w.uvarint(s.record).string(s.name)
+        w.uvarint(len(self.layouts))
+        for lay in self.layouts:
+            w.uvarint(lay.skeleton)
+        rates = sorted({c.fps for c in self.clips})
+        w.uvarint(len(rates))
+        for r in rates:
+            w.f64(r)
+        w.uvarint(len(self.clips))
+        for c in self.clips:
+            w.string(c.name).uvarint(c.skeleton).uvarint(c.layout).uvarint(rates.index(c.fps))
+            w.uvarint(c.n_frames).uvarint(c.source_bytes)
+            w.u8(SOURCE_FORMATS.index(c.source_format)).f32(c.max_error).f32(c.arms)
+        compressor = zlib.compressobj(9, zlib.DEFLATED, -15, 9)
+        return compressor.compress(w.bytes()) + compressor.flush()
+
+    @classmethod
+    def from_bytes(cls, payload: bytes, source: str | Path | None = None) -> Header:
+        """Parse a header payload, checking every index against the tables."""
+        try:
+            d = zlib.decompressobj(-15)
+            raw = d.decompress(payload, 1 << 26) + d.flush()
+            if not d.eof or d.unused_data:
+                raise zlib.error("incomplete stream")
+        except zlib.error as error:
+            raise FormatError(f"header: not a valid deflate stream ({error})", source) from None
+        r = Reader(raw, source, "header")
+        method = r.string()
+        settings = r.blob()
+        records = tuple(RecordEntry(r.u8(), r.f64()) for _ in range(r.uvarint(1 << 20)))
+        skeletons = tuple(
+            SkeletonEntry(r.uvarint(len(records) - 1), r.string())
+            for _ in range(r.uvarint(1 << 20))
+        )
+        layouts = tuple(
+            LayoutEntry(r.uvarint(max(0, len(skeletons) - 1))) for _ in range(r.uvarint(1 << 20))
+        )
+        rates = [r.f64() for _ in range(r.uvarint(1 << 20))]
+        clips = []
+        for _ in range(r.uvarint(1 << 32)):
+            name = r.string()
+            sk = r.uvarint(max(0, len(skeletons) - 1))
+            lay = r.uvarint(max(0, len(layouts) - 1))
+            fps = rates[r.uvarint(max(0, len(rates) - 1))]
+            frames = r.uvarint(1 << 40)
+            source_bytes = r.uvarint()
+            fmt = r.u8()
+            if fmt >= len(SOURCE_FORMATS):
+                raise FormatError(f"header: unknown source format code {fmt}", source)
+            clips.append(
+                ClipEntry(
+                    name, sk, lay, frames, fps, source_bytes, SOURCE_FORMATS[fmt], r.f32(), r.f32()
+                )
+            )
+        r.end()
+        if (skeletons or layouts or clips) and not records:
+            raise FormatError("header: clips without skeleton records", source)
+        return cls(method, records, skeletons, layouts, tuple(clips), settings)
+
+
+@dataclass(frozen=True)
+class ChunkRef:
+    """Where a chunk's payload lies in the file."""
+
+    tag: bytes
+    offset: int
+    length: int
+    crc: int
+    header_bytes: bytes
+
+
+def write_chunk(out: BinaryIO, tag: bytes, payload: bytes) -> int:
+    """Write one chunk; returns its size in bytes."""
+    head = tag + Writer().uvarint(len(payload)).bytes()
+    crc = zlib.crc32(payload, zlib.crc32(head))
+    data = head + payload + crc.to_bytes(4, "little")
+    out.write(data)
+    return len(data)
+
+
+def _read_varint(f: BinaryIO, source: Path) -> tuple[int, bytes]:
+    raw = bytearray()
+    value = 0
+    shift = 0
+    while True:
+        b = f.read(1)
+        if not b:
+            raise FormatError("truncated inside a chunk length", source)
+        raw += b
+        value |= (b[0] & 0x7F) << shift
+        if not b[0] & 0x80:
+            return value, bytes(raw)
+        shift += 7
+        if shift > 63:
+            raise FormatError("chunk length varint longer than 64 bits", source)
+
+
+def read_preamble(f: BinaryIO, source: Path) -> int:
+    """Check the magic and version; returns the version."""
+    head = f.read(PREAMBLE_BYTES)
+    if len(head) < len(MAGIC) or head[: len(MAGIC)] != MAGIC:
+        raise FormatError("not a .qmz file (wrong magic bytes)", source)
+    if len(head) < PREAMBLE_BYTES:
+        raise FormatError("truncated in the preamble", source)
+    version = int.from_bytes(head[len(MAGIC) :], "little")
+    if version > FORMAT_VERSION:
+        raise FormatError(
+            f"written in format version {version}, newer than this quatmotion reads "
+            f"({FORMAT_VERSION}); upgrade quatmotion",
+            source,
+        )
+    if version < 1:
+        raise FormatError(f"invalid format version {version}", source)
+    return version
+
+
+def scan_chunks(f: BinaryIO, source: Path, size: int) -> Iterator[ChunkRef]:
+    """Walk the chunks after the preamble without reading payloads."""
+    pos = PREAMBLE_BYTES
+    f.seek(pos)
+    while pos < size:
+        tag = f.read(1)
+        if tag not in TAGS:
+            raise FormatError(f"unknown chunk tag {tag!r} at byte {pos}", source)
+        length, raw = _read_varint(f, source)
+        offset = pos + 1 + len(raw)
+        end = offset + length + 4
+        if end > size:
+            raise FormatError(
+                f"truncated: the {TAGS[tag]} chunk at byte {pos} needs {end - pos} bytes, "
+                f"{size - pos} remain",
+                source,
+            )
+        f.seek(offset + length)
+        crc = int.from_bytes(f.read(4), "little")
+        yield ChunkRef(tag, offset, length, crc, tag + raw)
+        pos = end
+
+
+def read_chunk(f: BinaryIO, ref: ChunkRef, source: Path) -> bytes:
+    """A chunk's payload, its CRC checked."""
+    f.seek(ref.offset)
+    payload = f.read(ref.length)
+    if len(payload) != ref.length:
+        raise FormatError(f"truncated in the {TAGS[ref.tag]} chunk at byte {ref.offset}", source)
+    if zlib.crc32(payload, zlib.crc32(ref.header_bytes)) != ref.crc:
+        raise FormatError(
+            f"checksum mismatch in the {TAGS[ref.tag]} chunk at byte {ref.offset} (corrupt file)",
+            source,
+        )
+    return payload
