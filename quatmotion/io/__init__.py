@@ -6,10 +6,12 @@ input; every writer writes a temporary file and renames it over the target.
 
 from __future__ import annotations
 
+from quatmotion.io._text import decode_text
 from quatmotion.io.asf_amc import (
     asf_bone_end_positions,
     asf_text,
     find_asf_for_amc,
+    parse_amc,
     parse_asf,
     read_amc,
     read_asf,
@@ -24,18 +26,27 @@ from quatmotion.io.bvh import (
     to_bvh_skeleton,
     write_bvh,
 )
-from quatmotion.io.files import MOTION_SUFFIXES, find_motion_files, read_motion, write_motion
+from quatmotion.io.files import (
+    MOTION_SUFFIXES,
+    find_motion_files,
+    parse_motion,
+    read_motion,
+    write_motion,
+)
 
 __all__ = [
     "MOTION_SUFFIXES",
     "asf_bone_end_positions",
     "asf_text",
     "bvh_text",
+    "decode_text",
     "detect_bvh_scale",
     "find_asf_for_amc",
     "find_motion_files",
+    "parse_amc",
     "parse_asf",
     "parse_bvh",
+    "parse_motion",
     "read_amc",
     "read_asf",
     "read_bvh",
