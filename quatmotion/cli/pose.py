@@ -100,8 +100,6 @@ def search_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ) -> None:
     """Find the poses most like frame F of a clip."""
-    import numpy as np
-
     from quatmotion.pose.library import PoseLibrary
 
     with user_errors():
@@ -109,40 +107,25 @@ def search_command(
             raise CliInputError("give exactly one of --clip (an indexed clip) or --file")
         library = PoseLibrary.load(library_path, ef_search=ef)
         if file is not None:
-            query_clip = library.prepare_query(read_clip(file))
-            row = min(max(int(round(frame / query_clip.step)), 0), len(query_clip) - 1)
-            query = library.project(query_clip.poses[row : row + 1].gpd)
+            query, found = library.motion_query(read_clip(file), frame)
             own_clip = -1
-            label = f"{file} frame {row * query_clip.step}"
+            label = f"{file} frame {found}"
         else:
-            item = library.find(clip, frame)
-            query = library.index.vectors([item])
-            own_clip = int(library.clip_of[item])
-            label = f"{library.clip_names[own_clip]} frame {library.frame_of[item]}"
-        n_items = library.index.n_items_
-        want = min(n_items, k if not other_clips else k + int(np.sum(library.clip_of == own_clip)))
+            query, own_clip, found = library.pose_query(clip, frame)
+            label = f"{library.clip_names[own_clip]} frame {found}"
         t0 = time.perf_counter()
-        ids, dist = library.search(query, want)
+        matches = library.nearest(query, k, exclude_clip=own_clip if other_clips else None)
         elapsed = time.perf_counter() - t0
-        ids, dist = ids[0], dist[0]
-        if other_clips:
-            keep = library.clip_of[ids] != own_clip
-            ids, dist = ids[keep], dist[keep]
-        ids, dist = ids[:k], dist[:k]
-    file_fps = library.meta.get("file_fps")
-    results = []
-    for rank_, (i, d) in enumerate(zip(ids, dist, strict=True), start=1):
-        c = int(library.clip_of[i])
-        f = int(library.frame_of[i])
-        results.append(
-            {
-                "rank": rank_,
-                "clip": library.clip_names[c],
-                "frame": f,
-                "seconds": f / file_fps[c] if file_fps else None,
-                "distance": float(d),
-            }
-        )
+    results = [
+        {
+            "rank": m.rank,
+            "clip": m.name,
+            "frame": m.frame,
+            "seconds": m.seconds,
+            "distance": m.distance,
+        }
+        for m in matches
+    ]
     if as_json:
         json.dump(
             {"query": label, "search_ms": 1e3 * elapsed, "results": results}, sys.stdout, indent=2
