@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import re
 
@@ -170,10 +171,19 @@ def test_view_command_writes_the_page_and_reports_bad_input(tmp_path):
     data = _embedded(out.read_text(encoding="utf-8"))
     assert data["pairs"][0]["max_cm"] < 1e-3  # a clip against itself (BVH round trip)
 
+    # Without the codec, .qmz input says it is needed; with it, a missing library is named.
+    has_codec = importlib.util.find_spec("quatmotion.codec") is not None
+    codec_cases = (
+        [(["view", "lib.qmz::clip_7"], "lib.qmz: no such file")]
+        if has_codec
+        else [
+            (["view", "lib.qmz::clip_7"], "needs the codec"),
+            (["view", str(bvh), "--compare-decoded"], "needs the codec"),
+        ]
+    )
     for args, needle in (
         (["view", str(bvh), "--compare", str(bvh), "--compare", str(bvh)], "give one per file"),
-        (["view", "lib.qmz::clip_7"], "needs the codec"),
-        (["view", str(bvh), "--compare-decoded"], "needs the codec"),
+        *codec_cases,
         (["view", str(tmp_path / "missing.bvh")], "no such file"),
         (["view", str(bvh), "--layout", "grid"], "--layout"),
     ):
