@@ -370,20 +370,25 @@ def create_app(
         yield
         catalogue.close()
 
-    app = FastAPIOffline(
-        title="quatmotion",
-        version=quatmotion.__version__,
-        summary="Browse, play, compare and search a motion-capture library.",
-        static_url="/assets/docs",
-        lifespan=lifespan,
-    )
-    app.state.catalogue = catalogue
-    app.add_middleware(SecurityHeaders)
-    app.add_middleware(BodySizeLimit, max_bytes=max_upload)
-    app.add_middleware(TrustedHostMiddleware, allowed_hosts=list(allowed_hosts))
-    _add_error_handlers(app)
-    _add_pages(app)
-    _add_api(app, catalogue, max_upload)
+    try:
+        app = FastAPIOffline(
+            title="quatmotion",
+            version=quatmotion.__version__,
+            summary="Browse, play, compare and search a motion-capture library.",
+            static_url="/assets/docs",
+            lifespan=lifespan,
+        )
+        app.state.catalogue = catalogue
+        # Added last is outermost: the Host check, then the body limit, then the headers.
+        app.add_middleware(SecurityHeaders)
+        app.add_middleware(BodySizeLimit, max_bytes=max_upload)
+        app.add_middleware(TrustedHostMiddleware, allowed_hosts=list(allowed_hosts))
+        _add_error_handlers(app)
+        _add_pages(app)
+        _add_api(app, catalogue, max_upload)
+    except BaseException:
+        catalogue.close()
+        raise
     return app
 
 
