@@ -87,3 +87,42 @@ def artifact_dir() -> Path:
     """``test-artifacts/`` at the project root, created."""
     ARTIFACTS.mkdir(exist_ok=True)
     return ARTIFACTS
+
+
+# A small motion library for the web app tests: generated clips as BVH files, a .qmz library of
+# six of them, a .qidx index of all seven (kick_0 is indexed but not compressed) and a pose index.
+SERVED_KINDS = ("walk", "squat", "jumping_jack")
+
+
+@pytest.fixture(scope="session")
+def motion_library(tmp_path_factory) -> dict[str, Path]:
+    """Paths ``clips`` (folder), ``library`` (.qmz), ``index`` (.qidx), ``poses`` (pose index)."""
+    from quatmotion import codec
+    from quatmotion.io import read_motion, write_motion
+    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.pose.data import PoseClip
+    from quatmotion.pose.library import PoseLibrary
+    from quatmotion.retrieval.build import build_index
+
+    root = tmp_path_factory.mktemp("served")
+    clips = root / "clips"
+    clips.mkdir()
+    names = [f"{kind}_{seed}" for kind in SERVED_KINDS for seed in range(2)]
+    for name in [*names, "kick_0"]:
+        kind, seed = name.rsplit("_", 1)
+        write_motion(generate_clip(kind, int(seed), n_frames=120), clips / f"{name}.bvh")
+    labels = {name: name.rsplit("_", 1)[0] for name in [*names, "kick_0"]}
+    report = build_index([clips], root / "lib.qidx", kinds=("motion",), labels=labels, workers=1)
+    assert report.added == 7 and not report.failed, report
+    codec.compress([clips / f"{n}.bvh" for n in names], root / "lib.qmz", max_error=1.0)
+    prepared = [
+        PoseClip.from_motion(read_motion(f), fps=30, height=170, name=str(f))
+        for f in sorted(clips.glob("*.bvh"))
+    ]
+    PoseLibrary.build(prepared, n_pairs=100, n_unlabeled=500).save(root / "poses.idx")
+    return {
+        "clips": clips,
+        "library": root / "lib.qmz",
+        "index": root / "lib.qidx",
+        "poses": root / "poses.idx",
+    }

@@ -10,8 +10,8 @@ Modules: :mod:`~quatmotion.cli.motion` (``info``, ``convert``, ``generate``),
 :mod:`~quatmotion.cli.codec` (``compress``, ``decompress``, ``ls``, ``append``),
 :mod:`~quatmotion.cli.datasets` (``datasets list|fetch``), :mod:`~quatmotion.cli.pose`
 (``pose index|search``), :mod:`~quatmotion.cli.retrieval` (``index build|add|remove|ls``,
-``search``), :mod:`~quatmotion.cli.viz` (``view``, ``report``), :mod:`~quatmotion.cli.bench`
-(``bench``), :mod:`~quatmotion.cli.demo` (``demo``).
+``search``), :mod:`~quatmotion.cli.viz` (``view``, ``report``), :mod:`~quatmotion.cli.server`
+(``serve``), :mod:`~quatmotion.cli.bench` (``bench``), :mod:`~quatmotion.cli.demo` (``demo``).
 """
 
 from __future__ import annotations
@@ -21,7 +21,17 @@ import importlib
 from quatmotion.cli._app import app
 
 # Importing a command module registers its commands; this order is the order of --help.
-for _module in ("motion", "codec", "datasets", "pose", "retrieval", "viz", "bench", "demo"):
+for _module in (
+    "motion",
+    "codec",
+    "datasets",
+    "pose",
+    "retrieval",
+    "viz",
+    "server",
+    "bench",
+    "demo",
+):
     importlib.import_module(f"quatmotion.cli.{_module}")
 
 __all__ = ["app", "main"]

@@ -235,21 +235,13 @@ def search_command(
                     "between skeletons run larger than within one"
                 )
             with np.errstate(all="ignore"):
-                query_clip = library.prepare_query(motion)
-            row = min(int(round(frame / query_clip.step)), len(query_clip) - 1)
-            query = library.project(query_clip.poses[row : row + 1].gpd)
+                query, found = library.motion_query(motion, frame)
             own_clip = -1
-            query_doc = {"clip": file.stem, "path": str(file), "frame": row * query_clip.step}
+            query_doc = {"clip": file.stem, "path": str(file), "frame": found}
         else:
-            item = library.find(clip, frame)
-            query = library.index.vectors([item])
-            own_clip = int(library.clip_of[item])
+            query, own_clip, found = library.pose_query(clip, frame)
             name = library.clip_names[own_clip]
-            query_doc = {
-                "clip": Path(name).stem,
-                "path": name,
-                "frame": int(library.frame_of[item]),
-            }
+            query_doc = {"clip": Path(name).stem, "path": name, "frame": found}
         n_poses = len(library.clip_of)
         available = int(np.sum(library.clip_of != own_clip)) if other_clips else n_poses
         if not 1 <= k <= available:
@@ -257,33 +249,22 @@ def search_command(
             raise CliInputError(
                 f"-k must be from 1 to {available} (the library's poses{where}), got {k}"
             )
-        want = min(n_poses, k + (n_poses - available))
         t0 = time.perf_counter()
-        ids, dist = library.search(query, want)
+        matches = library.nearest(query, k, exclude_clip=own_clip if other_clips else None)
         elapsed = time.perf_counter() - t0
-        ids, dist = ids[0], dist[0]
-        if other_clips:
-            keep = library.clip_of[ids] != own_clip
-            ids, dist = ids[keep], dist[keep]
-        ids, dist = ids[:k], dist[:k]
-    file_fps = library.meta.get("file_fps")
-    labels = _labels([library.clip_names[int(library.clip_of[i])] for i in ids])
-    results = []
-    for rank_, (i, d) in enumerate(zip(ids, dist, strict=True), start=1):
-        c = int(library.clip_of[i])
-        f = int(library.frame_of[i])
-        path = library.clip_names[c]
-        results.append(
-            {
-                "rank": rank_,
-                "clip": Path(path).stem,
-                "path": path,
-                "label": labels.get(path, ""),
-                "distance": float(d),
-                "frame": f,
-                "seconds": f / file_fps[c] if file_fps else None,
-            }
-        )
+    labels = _labels([m.name for m in matches])
+    results = [
+        {
+            "rank": m.rank,
+            "clip": Path(m.name).stem,
+            "path": m.name,
+            "label": labels.get(m.name, ""),
+            "distance": m.distance,
+            "frame": m.frame,
+            "seconds": m.seconds,
+        }
+        for m in matches
+    ]
     if as_json:
         doc = {
             "query": query_doc,

@@ -6,10 +6,12 @@ input; every writer writes a temporary file and renames it over the target.
 
 from __future__ import annotations
 
+from quatmotion.io._text import decode_text
 from quatmotion.io.asf_amc import (
     asf_bone_end_positions,
     asf_text,
     find_asf_for_amc,
+    parse_amc,
     parse_asf,
     read_amc,
     read_asf,
@@ -32,6 +34,7 @@ from quatmotion.io.files import (
     Doubt,
     find_motion_files,
     implausible_values,
+    parse_motion,
     posed_size_cm,
     read_motion,
     write_motion,
@@ -46,13 +49,16 @@ __all__ = [
     "asf_bone_end_positions",
     "asf_text",
     "bvh_text",
+    "decode_text",
     "detect_bvh_scale",
     "find_asf_for_amc",
     "find_motion_files",
     "implausible_values",
+    "parse_amc",
     "posed_size_cm",
     "parse_asf",
     "parse_bvh",
+    "parse_motion",
     "read_amc",
     "read_asf",
     "read_bvh",

@@ -62,7 +62,29 @@ def read_text(path: str | Path) -> str:
     OSError
         If the file cannot be read.
     """
-    data = Path(path).read_bytes()
+    return decode_text(Path(path).read_bytes(), path)
+
+
+def decode_text(data: bytes, path: str | Path) -> str:
+    """The bytes of a text file as a string: :func:`read_text` without reading a file.
+
+    Parameters
+    ----------
+    data : bytes
+        The whole file.
+    path : str or Path
+        The name messages give (it is not opened).
+
+    Returns
+    -------
+    str
+        Latin-1 text with line endings normalised to ``\\n``.
+
+    Raises
+    ------
+    FormatError
+        If ``data`` holds control bytes that no text file has (naming the line).
+    """
     if data.startswith(_UTF8_BOM):  # Windows editors start text files with one
         data = data[len(_UTF8_BOM) :]
     # bytes.translate deleting every allowed byte is a fast C scan; the regex only locates.

@@ -59,6 +59,7 @@ __all__ = [
     "asf_bone_end_positions",
     "asf_text",
     "find_asf_for_amc",
+    "parse_amc",
     "parse_asf",
     "read_amc",
     "read_asf",
@@ -722,7 +723,32 @@ def read_amc(
     elif not isinstance(skeleton, Skeleton):
         skeleton = read_asf(skeleton)
     _require_asf(skeleton, "read_amc")
-    text = read_text(path)
+    return parse_amc(read_text(path), path, skeleton, fps)
+
+
+def parse_amc(
+    text: str, path: str | Path, skeleton: Skeleton, fps: float = DEFAULT_AMC_FPS
+) -> Motion:
+    """Parse the text of an AMC file: :func:`read_amc` without reading a file.
+
+    Parameters
+    ----------
+    text : str
+        The whole AMC text.
+    path : str or Path
+        The name messages give and whose stem names the motion (it is not opened).
+    skeleton : Skeleton
+        Its ASF skeleton (:func:`read_asf` or :func:`parse_asf`).
+    fps : float
+        Frame rate (AMC files do not store it).
+
+    Returns
+    -------
+    Motion
+        As :func:`read_amc` returns it.
+    """
+    path = Path(path)
+    _require_asf(skeleton, "parse_amc")
     offset, first_line, degrees = _amc_header(text, path)
     if degrees is None:
         degrees = skeleton.extras["angle_unit"] == "deg"

@@ -12,8 +12,10 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from quatmotion.io.asf_amc import read_amc, write_amc
-from quatmotion.io.bvh import BVH_UNITS, PLAUSIBLE_FIGURE_CM, read_bvh, write_bvh
+from quatmotion.errors import FormatError
+from quatmotion.io._text import decode_text
+from quatmotion.io.asf_amc import parse_amc, parse_asf, read_amc, write_amc
+from quatmotion.io.bvh import BVH_UNITS, PLAUSIBLE_FIGURE_CM, parse_bvh, read_bvh, write_bvh
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
 
 __all__ = [
@@ -22,6 +24,7 @@ __all__ = [
     "Doubt",
     "find_motion_files",
     "implausible_values",
+    "parse_motion",
     "posed_size_cm",
     "read_motion",
     "write_motion",
@@ -121,6 +124,56 @@ def read_motion(
         return read_bvh(path, "auto" if units is None else units)
     raise ValueError(
         f"unknown motion file type {path.suffix!r} (expected one of {MOTION_SUFFIXES})"
+    )
+
+
+def parse_motion(
+    data: bytes,
+    name: str,
+    skeleton: Skeleton | bytes | None = None,
+    skeleton_name: str = "skeleton.asf",
+) -> Motion:
+    """Read a motion from the bytes of a file: :func:`read_motion` without a file (an upload).
+
+    Nothing is opened or written: ``name`` and ``skeleton_name`` only choose the parser (by
+    suffix), name the motion (stem) and the skeleton, and appear in error messages.
+
+    Parameters
+    ----------
+    data : bytes
+        The whole ``.amc`` or ``.bvh`` file.
+    name : str
+        Its file name.
+    skeleton : Skeleton, bytes or None
+        For ``.amc`` only, and required there (an AMC holds no skeleton): the skeleton, or the
+        bytes of its ASF file.
+    skeleton_name : str
+        The ASF's file name, when ``skeleton`` is bytes.
+
+    Returns
+    -------
+    Motion
+
+    Raises
+    ------
+    ValueError
+        For another suffix, or a skeleton given for a BVH file.
+    FormatError
+        For malformed bytes (binary content included), or an AMC without its skeleton.
+    """
+    suffix = Path(name).suffix.lower()
+    if suffix == ".bvh":
+        if skeleton is not None:
+            raise ValueError("a BVH file carries its own skeleton; do not pass one")
+        return parse_bvh(decode_text(data, name), name)
+    if suffix == ".amc":
+        if skeleton is None:
+            raise FormatError("an AMC holds no skeleton: give its ASF file too", name)
+        if not isinstance(skeleton, Skeleton):
+            skeleton = parse_asf(decode_text(skeleton, skeleton_name), skeleton_name)
+        return parse_amc(decode_text(data, name), name, skeleton)
+    raise ValueError(
+        f"{name}: unknown motion file type {suffix!r} (expected one of {MOTION_SUFFIXES})"
     )
 
 

@@ -67,6 +67,7 @@ __all__ = [
     "DEFAULT_METRIC",
     "METRICS",
     "PoseLibrary",
+    "PoseMatch",
     "ProjectedClip",
     "load_pose_clip",
     "project_gpd",
@@ -89,6 +90,34 @@ _FAR_APART_S = 1.0  # fallback dissimilar pairs: poses of one clip at least this
 METRICS: tuple[str, ...] = ("GPD+LMS", "GPD+RDSR")
 """The pose distances :meth:`PoseLibrary.build` can learn."""
 DEFAULT_METRIC = "GPD+LMS"
+
+
+@dataclass(frozen=True)
+class PoseMatch:
+    """One pose found by :meth:`PoseLibrary.nearest`.
+
+    Attributes
+    ----------
+    rank : int
+        From 1, nearest first.
+    clip : int
+        Clip number (into ``PoseLibrary.clip_names``).
+    name : str
+        The clip's name as indexed.
+    frame : int
+        Frame number in the clip's file, from 0.
+    seconds : float or None
+        ``frame`` over the file's frame rate (None for a library that does not store it).
+    distance : float
+        Learned pose distance to the query.
+    """
+
+    rank: int
+    clip: int
+    name: str
+    frame: int
+    seconds: float | None
+    distance: float
 
 
 @dataclass
@@ -508,6 +537,56 @@ class PoseLibrary:
     def search(self, vectors: ArrayLike, k: int = 10) -> tuple[IntArray, FloatArray]:
         """Approximate nearest indexed poses of projected query vectors, ``(Q, k)`` each."""
         return self.index.query(vectors, k)
+
+    def pose_query(self, clip: str | int, frame: int) -> tuple[FloatArray, int, int]:
+        """The projected vector ``(1, r)`` of an indexed pose, its clip number and frame.
+
+        The pose is the one indexed nearest in time to ``frame`` of ``clip`` (:meth:`find`).
+        """
+        item = self.find(clip, frame)
+        return self.index.vectors([item]), int(self.clip_of[item]), int(self.frame_of[item])
+
+    def motion_query(self, motion: Motion, frame: int) -> tuple[FloatArray, int]:
+        """The projected vector ``(1, r)`` of a clip's pose near ``frame`` and that pose's
+        frame number (the query prepared as the library was, :meth:`prepare_query`)."""
+        clip = self.prepare_query(motion)
+        row = min(max(int(round(frame / clip.step)), 0), len(clip) - 1)
+        return self.project(clip.poses[row : row + 1].gpd), row * clip.step
+
+    def nearest(
+        self, query: ArrayLike, k: int = 10, *, exclude_clip: int | None = None
+    ) -> list[PoseMatch]:
+        """The ``k`` indexed poses nearest to one projected query vector.
+
+        Parameters
+        ----------
+        query : array_like, shape (1, r)
+            From :meth:`pose_query`, :meth:`motion_query` or :meth:`project`.
+        k : int
+            Poses wanted, at least 1 (fewer when the library holds fewer).
+        exclude_clip : int, optional
+            Leave out the poses of this clip (e.g. the query's own).
+
+        Returns
+        -------
+        list of PoseMatch
+        """
+        if k < 1:
+            raise ValueError(f"k must be at least 1, got {k}")
+        n_items = self.index.n_items_
+        own = 0 if exclude_clip is None else int(np.sum(self.clip_of == exclude_clip))
+        ids, dist = self.search(query, min(n_items, k + own))
+        ids, dist = ids[0], dist[0]
+        if exclude_clip is not None:
+            keep = self.clip_of[ids] != exclude_clip
+            ids, dist = ids[keep], dist[keep]
+        file_fps = self.meta.get("file_fps")
+        out = []
+        for rank, (i, d) in enumerate(zip(ids[:k], dist[:k], strict=True), start=1):
+            c, f = int(self.clip_of[i]), int(self.frame_of[i])
+            seconds = f / file_fps[c] if file_fps else None
+            out.append(PoseMatch(rank, c, self.clip_names[c], f, seconds, float(d)))
+        return out
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write the library to ``path`` (one ``.npz``; temporary file, then rename)."""

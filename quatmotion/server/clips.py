@@ -1,0 +1,558 @@
+"""What the web app serves: the clips of a library, an index and a pose index, joined by name.
+
+Conventions
+-----------
+* A clip is addressed by its **id**, a string made here from the clip's name (letters,
+  digits, ``_ . -``; ``~2``, ``~3``... when names repeat). Ids are only keys of a dictionary
+  built when the catalogue opens: no request value ever becomes a path. The files read are
+  the ones the server was started with and the clip sources those files name.
+* A clip of the ``.qmz`` library and a clip of the ``.qidx`` index are the same clip when their
+  names (file stems) match and each name occurs once on each side; the index then gives the
+  label and the original file (for the comparison with the decoded clip). Index clips not in
+  the library are served from their original files.
+* An original file is used only while it is the file that was indexed: its content hash
+  (the index's SHA-256 of the motion file, then its ASF) must still match.
+* Frames count from 0, positions in centimetres, durations in seconds.
+* Thread safety: the methods may be called from several threads at once (the server runs
+  them in a thread pool). The open ``.qmz`` file and the pose index are read under a lock; the
+  ``.qidx`` index is opened per search (an SQLite connection belongs to one thread).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import threading
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from quatmotion import codec
+from quatmotion.errors import FormatError
+from quatmotion.io import read_motion
+from quatmotion.motion import Motion
+from quatmotion.pose.library import PoseLibrary
+from quatmotion.retrieval.build import skeleton_for
+from quatmotion.retrieval.index import ClipIndex, ClipRow, content_hash
+from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS
+from quatmotion.retrieval.search import method_keys, search
+from quatmotion.viz import frame_data, view_data
+
+__all__ = [
+    "SORT_KEYS",
+    "ClipCatalogue",
+    "ClipInfo",
+    "ClipNotFoundError",
+    "UnavailableError",
+    "PoseHit",
+    "SearchHit",
+]
+
+SORT_KEYS = (
+    "name",
+    "label",
+    "frames",
+    "duration_s",
+    "compressed_bytes",
+    "declared_max_error_cm",
+    "declared_arms_cm",
+)
+"""Columns the clip list sorts by."""
+
+_ID_CHARS = re.compile(r"[^A-Za-z0-9_.-]+")
+_PAYLOAD_CACHE = 16  # decoded clips kept ready to send (a few MB each at most)
+
+
+class ClipNotFoundError(KeyError):
+    """No clip has this id (the message names it)."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else "no such clip"
+
+
+class UnavailableError(LookupError):
+    """The clip exists but what was asked of it cannot be had (no original, no index...)."""
+
+
+@dataclass(frozen=True)
+class ClipInfo:
+    """One clip as the browse page lists it.
+
+    Attributes
+    ----------
+    id : str
+        Its address in the API.
+    name : str
+        The clip's name (its file stem).
+    label : str
+        From the index ('' when unlabelled or not indexed).
+    frames : int
+    fps : float
+    compressed_bytes : int or None
+        Its own chunk in the ``.qmz`` library (None when not in the library).
+    declared_max_error_cm, declared_arms_cm : float or None
+        The largest joint-position error and the ARMS the library file declares for it.
+    in_library, in_index, in_poses : bool
+        Where it is: the ``.qmz`` library, the ``.qidx`` index, the pose index.
+    has_original : bool
+        Its original file (named by the index) exists, so it compares with its decoded version
+        when it is also in the library.
+    """
+
+    id: str
+    name: str
+    label: str
+    frames: int
+    fps: float
+    compressed_bytes: int | None
+    declared_max_error_cm: float | None
+    declared_arms_cm: float | None
+    in_library: bool
+    in_index: bool
+    in_poses: bool
+    has_original: bool
+
+    @property
+    def duration_s(self) -> float:
+        """Length in seconds."""
+        return self.frames / self.fps
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready, ``duration_s`` included."""
+        return {**dataclasses.asdict(self), "duration_s": self.duration_s}
+
+
+@dataclass(frozen=True)
+class SearchHit:
+    """One ranked clip of a search: ``id`` is None for an indexed clip the catalogue lacks."""
+
+    rank: int
+    id: str | None
+    clip: str
+    label: str
+    distance: float | None
+
+
+@dataclass(frozen=True)
+class PoseHit:
+    """One pose found: ``id`` is None for a pose-index clip the catalogue lacks."""
+
+    rank: int
+    id: str | None
+    clip: str
+    frame: int
+    seconds: float | None
+    distance: float
+
+
+@dataclass(frozen=True)
+class _Entry:
+    info: ClipInfo
+    library_position: int | None
+    row: ClipRow | None
+    pose_clip: int | None
+
+
+class ClipCatalogue:
+    """The clips the web app serves, from a ``.qmz`` library, a ``.qidx`` index and a pose
+    index (any of them; at least the library or the index).
+
+    Use :meth:`open`; close with :meth:`close` (or as a context manager).
+
+    Attributes
+    ----------
+    library_path, index_path, poses_path : Path or None
+        The files given.
+    methods : tuple of str
+        Retrieval methods whose features the index holds (the default first).
+    """
+
+    def __init__(
+        self,
+        library_path: Path | None,
+        index_path: Path | None,
+        poses_path: Path | None,
+        archive: codec.Archive | None,
+        rows: Sequence[ClipRow],
+        methods: Sequence[str],
+        poses: PoseLibrary | None,
+    ) -> None:
+        self.library_path = library_path
+        self.index_path = index_path
+        self.poses_path = poses_path
+        self.methods = tuple(methods)
+        self._archive = archive
+        self._poses = poses
+        self._archive_lock = threading.Lock()
+        self._poses_lock = threading.Lock()
+        self._entries: dict[str, _Entry] = {}
+        self._by_row: dict[int, str] = {}
+        self._by_pose_clip: dict[int, str] = {}
+        self._join(rows)
+        self._payload = lru_cache(maxsize=_PAYLOAD_CACHE)(self._encode)
+
+    # ------------------------------------------------------------------ opening
+    @classmethod
+    def open(
+        cls,
+        library: str | Path | None = None,
+        index: str | Path | None = None,
+        poses: str | Path | None = None,
+    ) -> ClipCatalogue:
+        """Open the files and join their clips.
+
+        Parameters
+        ----------
+        library : path, optional
+            A ``.qmz`` library (``quatmotion compress``).
+        index : path, optional
+            A ``.qidx`` index (``quatmotion index build``): labels, search, originals.
+        poses : path, optional
+            A pose index (``quatmotion pose index``): pose search.
+
+        Raises
+        ------
+        ValueError
+            Neither a library nor an index given.
+        FileNotFoundError, FormatError
+            A file missing or not of its format (naming it).
+        """
+        if library is None and index is None:
+            raise ValueError("nothing to serve: give a library (.qmz), an index (.qidx) or both")
+        archive = codec.open(Path(library)) if library is not None else None
+        try:
+            rows: list[ClipRow] = []
+            methods: list[str] = []
+            if index is not None:
+                with ClipIndex.open(index) as idx:
+                    rows = idx.clips()
+                    stored = set().union(*idx.feature_keys().values())
+                methods = [m for m in METHODS if set(method_keys(m)) <= stored]
+                methods.sort(key=lambda m: m != DEFAULT_METHOD)
+            pose_library = PoseLibrary.load(poses) if poses is not None else None
+        except BaseException:
+            if archive is not None:
+                archive.close()
+            raise
+        return cls(
+            Path(library) if library is not None else None,
+            Path(index) if index is not None else None,
+            Path(poses) if poses is not None else None,
+            archive,
+            rows,
+            methods,
+            pose_library,
+        )
+
+    def close(self) -> None:
+        """Close the library file."""
+        if self._archive is not None:
+            self._archive.close()
+
+    def __enter__(self) -> ClipCatalogue:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _join(self, rows: Sequence[ClipRow]) -> None:
+        archive = self._archive
+        library_names = archive.names() if archive is not None else []
+        library_count = Counter(library_names)
+        row_count = Counter(r.name for r in rows)
+        joined: dict[str, ClipRow] = {
+            r.name: r for r in rows if row_count[r.name] == 1 and library_count[r.name] == 1
+        }
+        used: set[str] = set()
+        pose_of = self._pose_clips(rows)
+        if archive is not None:
+            for position, clip in enumerate(archive.clips):
+                row = joined.get(clip.name)
+                info = ClipInfo(
+                    id=_unique_id(clip.name, used),
+                    name=clip.name,
+                    label=row.label if row else "",
+                    frames=clip.n_frames,
+                    fps=clip.fps,
+                    compressed_bytes=archive.chunk_bytes(position),
+                    declared_max_error_cm=float(clip.max_error),
+                    declared_arms_cm=float(clip.arms),
+                    in_library=True,
+                    in_index=row is not None,
+                    in_poses=False,
+                    has_original=row is not None and Path(row.path).is_file(),
+                )
+                self._add(info, position, row, pose_of)
+        for row in rows:
+            if joined.get(row.name) is row:
+                continue
+            info = ClipInfo(
+                id=_unique_id(row.name, used),
+                name=row.name,
+                label=row.label,
+                frames=row.frames,
+                fps=row.fps,
+                compressed_bytes=None,
+                declared_max_error_cm=None,
+                declared_arms_cm=None,
+                in_library=False,
+                in_index=True,
+                in_poses=False,
+                has_original=Path(row.path).is_file(),
+            )
+            self._add(info, None, row, pose_of)
+
+    def _pose_clips(self, rows: Sequence[ClipRow]) -> dict[str, int]:
+        """Pose-index clip number by the name or resolved path it will match."""
+        if self._poses is None:
+            return {}
+        names = self._poses.clip_names
+        stems = Counter(Path(n).stem for n in names)
+        out: dict[str, int] = {}
+        for number, name in enumerate(names):
+            out[f"path:{_resolved(name)}"] = number
+            if stems[Path(name).stem] == 1:
+                out[f"name:{Path(name).stem}"] = number
+        return out
+
+    def _add(
+        self, info: ClipInfo, position: int | None, row: ClipRow | None, pose_of: dict[str, int]
+    ) -> None:
+        pose_clip = None
+        if row is not None:
+            pose_clip = pose_of.get(f"path:{_resolved(row.path)}")
+        if pose_clip is None:
+            pose_clip = pose_of.get(f"name:{info.name}")
+        if pose_clip is not None and pose_clip in self._by_pose_clip:
+            pose_clip = None  # a pose clip answers for one catalogue clip only
+        if pose_clip is not None:
+            info = dataclasses.replace(info, in_poses=True)
+            self._by_pose_clip[pose_clip] = info.id
+        self._entries[info.id] = _Entry(info, position, row, pose_clip)
+        if row is not None:
+            self._by_row[row.id] = info.id
+
+    # ------------------------------------------------------------------ listing
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    @property
+    def has_index(self) -> bool:
+        return self.index_path is not None
+
+    @property
+    def has_poses(self) -> bool:
+        return self._poses is not None
+
+    def clips(
+        self, *, label: str | None = None, sort: str = "name", descending: bool = False
+    ) -> list[ClipInfo]:
+        """The clips, those of ``label`` only if given, sorted by a column of
+        :data:`SORT_KEYS` (clips without a value last, whatever the order)."""
+        if sort not in SORT_KEYS:
+            raise ValueError(f"cannot sort by {sort!r}; choose from {', '.join(SORT_KEYS)}")
+        infos = [e.info for e in self._entries.values()]
+        if label is not None:
+            infos = [i for i in infos if i.label == label]
+        present = [i for i in infos if getattr(i, sort) is not None]
+        absent = [i for i in infos if getattr(i, sort) is None]
+        present.sort(key=lambda i: (getattr(i, sort), i.name, i.id), reverse=descending)
+        return present + absent
+
+    def labels(self) -> list[str]:
+        """The labels in use, sorted ('' for unlabelled clips included when there are some)."""
+        return sorted({e.info.label for e in self._entries.values()})
+
+    def info(self, clip_id: str) -> ClipInfo:
+        """The clip with this id (:class:`ClipNotFoundError` naming it otherwise)."""
+        return self._entry(clip_id).info
+
+    def _entry(self, clip_id: str) -> _Entry:
+        entry = self._entries.get(clip_id)
+        if entry is None:
+            raise ClipNotFoundError(f"no clip with id {clip_id!r}")
+        return entry
+
+    # ------------------------------------------------------------------ motions
+    def motion(self, clip_id: str) -> Motion:
+        """The clip: decoded from the library, else read from its original file."""
+        entry = self._entry(clip_id)
+        if entry.library_position is not None:
+            return self._decoded(entry)
+        return self._original(entry)
+
+    def frames(self, clip_id: str, start: int | None = None, stop: int | None = None) -> dict:
+        """The viewer payload (:func:`quatmotion.viz.frame_data.encode_clip`) of frames
+        ``start:stop`` of a clip (all by default; ``0 <= start < stop <= frames``)."""
+        info = self.info(clip_id)
+        first = 0 if start is None else start
+        last = info.frames if stop is None else stop
+        if not 0 <= first < last <= info.frames:
+            raise ValueError(
+                f"frames {first}:{last} are not within clip {info.name!r} "
+                f"(frames 0 to {info.frames - 1}, stop exclusive)"
+            )
+        return self._payload(clip_id, first, last)
+
+    def _encode(self, clip_id: str, start: int, stop: int) -> dict:
+        motion = self.motion(clip_id)
+        if (start, stop) == (0, motion.n_frames):
+            return frame_data.encode_clip(motion)
+        span = f"frame {start}" if stop == start + 1 else f"frames {start}-{stop - 1}"
+        return frame_data.encode_clip(motion.slice(start, stop), f"{motion.name} {span}")
+
+    def comparison(self, clip_id: str) -> dict:
+        """The viewer document (:func:`quatmotion.viz.view_data`) of a clip's original file
+        (blue) beside its decoded version from the library (green), with the per-joint error.
+
+        Raises
+        ------
+        UnavailableError
+            The clip is not in the library, or its original file is not available.
+        """
+        entry = self._entry(clip_id)
+        if entry.library_position is None:
+            raise UnavailableError(f"clip {entry.info.name!r} is not in the library (.qmz)")
+        original = dataclasses.replace(self._original(entry), name=f"{entry.info.name} (original)")
+        decoded = dataclasses.replace(self._decoded(entry), name=f"{entry.info.name} (decoded)")
+        return view_data([original], [decoded], layout="side")
+
+    def _decoded(self, entry: _Entry) -> Motion:
+        assert self._archive is not None and entry.library_position is not None
+        with self._archive_lock:  # one file handle: its seeks and reads must not interleave
+            return self._archive.read(entry.library_position)
+
+    def _original(self, entry: _Entry) -> Motion:
+        """The clip's original file, read when it is still the file indexed."""
+        row = entry.row
+        if row is None:
+            raise UnavailableError(
+                f"clip {entry.info.name!r} has no original file: it is not in the index (.qidx)"
+            )
+        path = Path(row.path)
+        name = entry.info.name
+        if not path.is_file():
+            raise UnavailableError(f"the original file of clip {name!r} is missing")
+        try:
+            skeleton = skeleton_for(path, None)
+            if content_hash(path, skeleton) != row.sha256:
+                raise UnavailableError(
+                    f"the original file of clip {name!r} changed since it was indexed"
+                )
+            return read_motion(path, skeleton)
+        except (FormatError, OSError) as error:
+            reason = getattr(error, "reason", None) or str(error)
+            raise UnavailableError(
+                f"the original file of clip {name!r} cannot be read: {reason}"
+            ) from None
+
+    # ------------------------------------------------------------------ search
+    def search(
+        self, query: str | Motion, *, method: str | None = None, top: int = 20
+    ) -> tuple[str, list[SearchHit]]:
+        """Rank the indexed clips by likeness to ``query``: a clip id, or a motion (an upload).
+
+        Returns
+        -------
+        (method, hits)
+            The method used (the index's best when None) and the ranked clips.
+
+        Raises
+        ------
+        UnavailableError
+            No index, or a query clip that is not in it.
+        ValueError
+            A method the index has no features for; a query the method cannot compare.
+        """
+        if self.index_path is None:
+            raise UnavailableError("search needs an index (.qidx): start the server with --index")
+        name = method or (self.methods[0] if self.methods else DEFAULT_METHOD)
+        if name not in self.methods:
+            raise ValueError(
+                f"the index has no features for method {name!r}; "
+                f"it has {', '.join(self.methods) or 'none'}"
+            )
+        target: str | Motion = query
+        if isinstance(query, str):
+            entry = self._entry(query)
+            if entry.row is None:
+                raise UnavailableError(f"clip {entry.info.name!r} is not in the index (.qidx)")
+            target = entry.row.path  # unique in the index, unlike a name
+        with ClipIndex.open(self.index_path) as index:
+            by_path = {r.path: r.id for r in index.clips()}
+            results = search(index, target, method=name, top=top)
+        hits = [
+            SearchHit(
+                rank=r.rank,
+                id=self._by_row.get(by_path.get(r.path, -1)),
+                clip=r.clip,
+                label=r.label,
+                distance=r.as_dict()["distance"],  # type: ignore[arg-type]
+            )
+            for r in results
+        ]
+        return name, hits
+
+    def pose_search(
+        self, clip_id: str, frame: int, *, k: int = 10, other_clips: bool = False
+    ) -> tuple[int, list[PoseHit]]:
+        """The poses nearest to frame ``frame`` of a clip under the pose index's learned metric.
+
+        Returns
+        -------
+        (frame, hits)
+            The frame of the indexed pose used as the query (the one nearest in time) and the
+            poses found, nearest first.
+
+        Raises
+        ------
+        UnavailableError
+            No pose index, or a clip that is not in it.
+        """
+        entry = self._entry(clip_id)
+        if self._poses is None:
+            raise UnavailableError("pose search needs a pose index: start the server with --poses")
+        if entry.pose_clip is None:
+            raise UnavailableError(f"clip {entry.info.name!r} is not in the pose index")
+        if not 0 <= frame < entry.info.frames:
+            raise ValueError(
+                f"frame {frame} is not within clip {entry.info.name!r} "
+                f"(frames 0 to {entry.info.frames - 1})"
+            )
+        with self._poses_lock:
+            query, own, found = self._poses.pose_query(entry.pose_clip, frame)
+            matches = self._poses.nearest(query, k, exclude_clip=own if other_clips else None)
+        hits = [
+            PoseHit(
+                rank=m.rank,
+                id=self._by_pose_clip.get(m.clip),
+                clip=Path(m.name).stem,
+                frame=m.frame,
+                seconds=m.seconds,
+                distance=m.distance,
+            )
+            for m in matches
+        ]
+        return found, hits
+
+
+def _unique_id(name: str, used: set[str]) -> str:
+    """An id for ``name``: its safe characters, made unique with ``~2``, ``~3``..."""
+    base = _ID_CHARS.sub("_", name).strip("._") or "clip"
+    base = base[:100]
+    candidate, n = base, 1
+    while candidate in used:
+        n += 1
+        candidate = f"{base}~{n}"
+    used.add(candidate)
+    return candidate
+
+
+def _resolved(path: str) -> str:
+    try:
+        return str(Path(path).resolve())
+    except OSError:
+        return path

@@ -1,0 +1,152 @@
+"""The web app end to end: ``quatmotion serve`` in a subprocess on a free loopback port, its
+pages in a real headless Chromium (the ``browser`` fixture, conftest).
+
+The pages' Content-Security-Policy forbids ``eval``, so the test waits on selectors (the pages
+set ``data-state`` on ``<html>``) and reads state with ``page.evaluate``, never with
+``wait_for_function``.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from PIL import Image
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+@pytest.fixture()
+def served(motion_library, tmp_path) -> Iterator[str]:
+    """``quatmotion serve`` over the test library; its base URL. Stopped after the test."""
+    port = _free_port()
+    log = (tmp_path / "serve.log").open("w")
+    command = [
+        sys.executable,
+        "-c",
+        "from quatmotion.cli import main; main()",
+        "serve",
+        "--library",
+        str(motion_library["library"]),
+        "--index",
+        str(motion_library["index"]),
+        "--poses",
+        str(motion_library["poses"]),
+        "--port",
+        str(port),
+    ]
+    server = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 90
+        while True:
+            if server.poll() is not None:
+                pytest.fail(f"quatmotion serve exited: {(tmp_path / 'serve.log').read_text()}")
+            try:
+                with urllib.request.urlopen(f"{base}/api/info", timeout=2) as response:
+                    assert json.load(response)["clips"] == 7
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    pytest.fail("quatmotion serve did not answer within 90 s")
+                time.sleep(0.25)
+        yield base
+    finally:
+        server.terminate()
+        try:
+            server.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
+        log.close()
+
+
+def _canvas(page) -> np.ndarray:
+    page.evaluate("new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)))")
+    png = page.locator("#viewer .qmv-canvas canvas").screenshot()
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
+
+
+def _state(page, state: str, timeout: float = 30_000) -> None:
+    page.wait_for_selector(
+        f"html[data-state={state}], html[data-error]", state="attached", timeout=timeout
+    )
+    error = page.evaluate("document.documentElement.dataset.error || null")
+    assert error is None, error
+
+
+def test_search_page_finds_and_plays_results_in_a_real_browser(
+    browser, served, motion_library, artifact_dir
+):
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    requests: list[str] = []
+    page.on("request", lambda request: requests.append(request.url))
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+
+    # The library page lists every clip.
+    page.goto(f"{served}/")
+    _state(page, "ready")
+    assert page.locator("#clips tbody tr").count() == 7
+    page.screenshot(path=str(artifact_dir / "server-browse.png"))
+
+    # Search by an indexed clip: the results list, its own kind first.
+    page.goto(f"{served}/search?clip=walk_0")
+    _state(page, "ready")
+    results = page.locator("#results li")
+    assert results.count() == 6  # every other indexed clip
+    assert results.nth(0).get_attribute("data-id") == "walk_1"
+    assert "walk" in results.nth(0).inner_text()
+
+    # Play the first result beside the query; the 3D canvas changes between two frames.
+    results.nth(0).locator("button.play-result").click()
+    page.wait_for_selector("html[data-playing-result=walk_1]", state="attached", timeout=30_000)
+    _state(page, "ready")
+    names = page.evaluate("quatmotionViewer.clips.map((c) => c.name)")
+    assert names == ["walk_0", "walk_1"]
+    first = int(page.evaluate("quatmotionViewer.frame"))
+    page.wait_for_timeout(400)
+    assert page.evaluate("quatmotionViewer.playing") is True
+    assert int(page.evaluate("quatmotionViewer.frame")) != first
+    page.screenshot(path=str(artifact_dir / "server-search-playing.png"))
+    page.evaluate("quatmotionViewer.pause(); quatmotionViewer.seek(0)")
+    before = _canvas(page)
+    page.evaluate("quatmotionViewer.seek(60)")
+    after = _canvas(page)
+    changed = np.any(np.abs(after - before) > 24, axis=-1).mean()
+    assert changed > 0.002, f"only {changed:.4%} of the canvas changed between frames 0 and 60"
+
+    # Search by an uploaded file: the same clip comes first.
+    page.check("input[name=source][value=upload]")
+    page.set_input_files("input[name=file]", str(motion_library["clips"] / "squat_1.bvh"))
+    page.evaluate("document.documentElement.dataset.state = 'asked'")
+    page.click("#run")
+    _state(page, "ready")
+    assert results.nth(0).get_attribute("data-id") == "squat_1"
+    assert page.evaluate("quatmotionViewer.clips[0].name") == "squat_1"  # the query plays
+    page.screenshot(path=str(artifact_dir / "server-upload-results.png"))
+
+    # The comparison page: original beside decoded, the measured error shown.
+    page.goto(f"{served}/compare?clip=walk_0")
+    _state(page, "ready")
+    page.wait_for_selector("html[data-first-play-ms]", state="attached", timeout=30_000)
+    assert "measured: ARMS" in page.locator("#status").inner_text()
+    page.screenshot(path=str(artifact_dir / "server-compare.png"))
+
+    assert not errors, errors
+    assert all(url.startswith(served) for url in requests), [
+        u for u in requests if not u.startswith(served)
+    ]
+    page.close()
