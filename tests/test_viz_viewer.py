@@ -206,3 +206,21 @@ def test_view_reads_qmz_clips_and_decoded_copies(tmp_path):
         assert 0 < data["pairs"][0]["max_cm"] <= 1.0 + 1e-3
     result = runner.invoke(app, ["view", f"{library}::other", "-o", str(tmp_path / "x.html")])
     assert result.exit_code == 2 and "other" in result.stderr
+
+
+def test_view_and_report_keep_an_existing_page_unless_forced(tmp_path):
+    clip = generate_clip("squat", 1, n_frames=30)
+    bvh = tmp_path / "squat.bvh"
+    write_motion(clip, bvh)
+    page = tmp_path / "page.html"
+    page.write_text("mine")
+    runner = CliRunner()
+    for args in (["view", str(bvh)], ["report", str(bvh)]):
+        result = runner.invoke(app, [*args, "-o", str(page)])
+        assert result.exit_code == 2 and "--force" in result.stderr
+        assert page.read_text() == "mine"
+    result = runner.invoke(app, ["view", str(bvh), "-o", str(page), "--force"])
+    assert result.exit_code == 0, result.output
+    assert page.read_text() != "mine"
+    result = runner.invoke(app, ["view", str(bvh), "-o", str(bvh)])
+    assert result.exit_code == 2 and "is also an input" in result.stderr

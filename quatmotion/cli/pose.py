@@ -29,8 +29,10 @@ from quatmotion.cli._common import (
     FRAMES_HELP,
     CliInputError,
     ForceOption,
+    SchedulerOption,
     SkeletonOption,
     UnitsOption,
+    WorkersOption,
     at_least,
     check_frame,
     check_outputs,
@@ -39,11 +41,11 @@ from quatmotion.cli._common import (
     number_in,
     progress_bar,
     read_clip,
+    report_skipped,
     require_file,
     user_errors,
     warn,
 )
-from quatmotion.parallel import SCHEDULER_ENV
 
 pose_app = typer.Typer(
     help="Index a motion library's poses and search it under a learned pose distance.",
@@ -87,22 +89,14 @@ def index_command(
     fit_poses: Annotated[
         int, typer.Option(help="Poses (of clips drawn at random) the distance is learned on.")
     ] = 20_000,
-    workers: Annotated[
-        int | None,
-        typer.Option(help="Worker processes (default: one per CPU; 1 runs in this process)."),
-    ] = None,
+    workers: WorkersOption = None,
     index_threads: Annotated[
         int,
         typer.Option(
             help="Threads inserting poses into the HNSW graph (1: the same file every run)."
         ),
     ] = 1,
-    scheduler: Annotated[
-        str | None,
-        typer.Option(
-            help=f"Dask scheduler, tcp://HOST:PORT (default: ${SCHEDULER_ENV}, else local).",
-        ),
-    ] = None,
+    scheduler: SchedulerOption = None,
     skeleton: Annotated[
         Path | None,
         typer.Option(
@@ -160,8 +154,7 @@ def index_command(
                 log=lambda message: bar.console.print(message, markup=False, highlight=False),
             )
         library.save(output)
-    for failure in failures:
-        error_console.print(f"skipped {failure}", markup=False, highlight=False, soft_wrap=True)
+    report_skipped(failures)
     _echo(
         f"wrote {output}: {len(library.clip_of)} poses of {len(library.clip_names)} clips; "
         f"{len(failures)} of {len(files)} clips failed"

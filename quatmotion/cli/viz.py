@@ -9,7 +9,16 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from quatmotion.cli._app import app
-from quatmotion.cli._common import CliInputError, console, read_clip, require_file, user_errors
+from quatmotion.cli._common import (
+    CliInputError,
+    ForceOption,
+    UnitsOption,
+    check_outputs,
+    console,
+    read_clip,
+    require_file,
+    user_errors,
+)
 
 if TYPE_CHECKING:
     from quatmotion.motion import Motion
@@ -18,7 +27,7 @@ LIBRARY_SEPARATOR = "::"
 """``LIB.qmz::CLIP`` names one clip of a compressed library."""
 
 
-def _read(spec: str, skeleton: Path | None) -> Motion:
+def _read(spec: str, skeleton: Path | None, units: str | None = None) -> Motion:
     """The clip named on the command line: a motion file, or ``LIB.qmz::CLIP``."""
     if LIBRARY_SEPARATOR in spec:
         library, clip = spec.split(LIBRARY_SEPARATOR, 1)
@@ -29,7 +38,7 @@ def _read(spec: str, skeleton: Path | None) -> Motion:
         with codec.open(require_file(Path(library))) as archive:
             motion = archive.read(clip)
         return dataclasses.replace(motion, name=f"{Path(library).name}::{clip}")
-    return read_clip(Path(spec), skeleton)
+    return read_clip(Path(spec), skeleton, units)
 
 
 def _decoded(motion: Motion) -> Motion:
@@ -72,6 +81,8 @@ def view(
     skeleton: Annotated[
         Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC input (else found by name).")
     ] = None,
+    units: UnitsOption = None,
+    force: ForceOption = False,
 ) -> None:
     """Write a standalone 3D viewer page (opens offline; frames count from 0)."""
     from quatmotion.viz import write_view
@@ -81,14 +92,16 @@ def view(
             raise CliInputError("give --compare or --compare-decoded, not both")
         if layout not in (None, "side", "overlay"):
             raise CliInputError(f"--layout must be side or overlay, got {layout!r}")
-        motions = [_read(spec, skeleton) for spec in files]
+        inputs = [Path(spec.split(LIBRARY_SEPARATOR)[0]) for spec in [*files, *(compare or [])]]
+        check_outputs([out], inputs, force=force)
+        motions = [_read(spec, skeleton, units) for spec in files]
         others = None
         if compare:
             if len(compare) != len(files):
                 raise CliInputError(
                     f"{len(compare)} --compare clip(s) for {len(files)} file(s): give one per file"
                 )
-            others = [_read(spec, skeleton) for spec in compare]
+            others = [_read(spec, skeleton, units) for spec in compare]
         elif compare_decoded:
             others = [_decoded(m) for m in motions]
         path = write_view(out, motions, others, ghost=ghost, layout=layout)  # type: ignore[arg-type]
@@ -103,10 +116,12 @@ def report(
         "report.html"
     ),
     title: Annotated[str, typer.Option(help="Page title.")] = "quatmotion benchmarks",
+    force: ForceOption = False,
 ) -> None:
     """Write one standalone page with the tables and figures of benchmark runs."""
     from quatmotion.viz import write_report
 
     with user_errors():
+        check_outputs([out], results, force=force)
         path = write_report(out, results, title=title)
         console.print(f"wrote {path} ({len(results)} benchmark result(s))")
