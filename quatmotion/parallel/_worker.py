@@ -19,13 +19,15 @@ from typing import Any
 # long workers took to start.
 Record = tuple[int, bool, Any, float, float, float]
 
-# Environment read by BLAS, OpenMP and Numba when they load: one thread each, as Dask's nanny
-# does for its workers, because the parallelism of a batch is its worker processes.
+# Environment read by BLAS and OpenMP when they load: one thread each, as Dask's nanny does for
+# its workers, because the parallelism of a batch is its worker processes. Numba is limited by
+# numba.set_num_threads(1) instead: its NUMBA_NUM_THREADS must not change once its threads are
+# launched (Numba re-reads the environment when it compiles and raises if it differs), and the
+# worker may have launched them before this runs.
 SINGLE_THREAD_ENV = {
     "OMP_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
-    "NUMBA_NUM_THREADS": "1",
 }
 
 _process_limited = False
