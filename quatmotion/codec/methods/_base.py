@@ -37,7 +37,7 @@ class ClipContext:
 
 
 class Method(ABC):
-    """A codec. Subclasses set :attr:`name` and implement :meth:`fit_models`,
+    """A codec. Subclasses set :attr:`name` and implement :meth:`fit_layout`,
     :meth:`model_bytes`, :meth:`encode_clip`, :meth:`load_model` and :meth:`decode`.
 
     ``quality`` is each method's one size knob (larger gives smaller files and larger errors);
@@ -53,7 +53,6 @@ class Method(ABC):
     """Whether :meth:`encode` meets ``max_error`` itself (else the orchestrator searches
     ``quality`` and repairs)."""
 
-    @abstractmethod
     def fit_models(
         self,
         library: PreparedLibrary,
@@ -68,6 +67,33 @@ class Method(ABC):
         ``k`` (all of them, or a sample). ``models`` holds, per layout, a model already in the
         file (appending: returned unchanged) or ``None`` (fit one); a layout without members
         gets ``None``."""
+        given = list(models or [])
+        out: list[Any] = []
+        for k in range(len(library.layouts)):
+            if k < len(given) and given[k] is not None:
+                out.append(given[k])
+            elif members[k]:
+                out.append(
+                    self.fit_layout(
+                        library, k, members[k], quality=quality, max_error=max_error, seed=seed
+                    )
+                )
+            else:
+                out.append(None)
+        return out
+
+    @abstractmethod
+    def fit_layout(
+        self,
+        library: PreparedLibrary,
+        k: int,
+        members: list[int],
+        *,
+        quality: float,
+        max_error: float | None,
+        seed: int,
+    ) -> Any:
+        """Layout ``k``'s model learned on the clips ``members`` (at least one)."""
 
     @abstractmethod
     def model_bytes(self, model: Any, layout: LayoutInfo) -> bytes:

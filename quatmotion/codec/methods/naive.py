@@ -59,17 +59,17 @@ class NaiveMethod(Method):
     name = "naive"
     default_quality = 0.8
 
-    def fit_models(
+    def fit_layout(
         self,
         library: PreparedLibrary,
-        members: list[list[int]],
+        k: int,
+        members: list[int],
         *,
         quality: float,
         max_error: float | None,
         seed: int,
-        models: list[Any] | None = None,
-    ) -> list[Any]:
-        return [None for _ in library.layouts]  # nothing shared: every clip stands alone
+    ) -> Any:
+        return None  # nothing shared: every clip stands alone
 
     def model_bytes(self, model: Any, layout: LayoutInfo) -> bytes:
         return b""

@@ -168,32 +168,24 @@ class SparseMethod(Method):
         d = _displacements(clip.channels, info, _sample_joints(info))
         return _coarse(d.reshape(clip.channels.shape[0], -1))
 
-    def fit_models(
+    def fit_layout(
         self,
         library: PreparedLibrary,
-        members: list[list[int]],
+        k: int,
+        members: list[int],
         *,
         quality: float,
         max_error: float | None,
         seed: int,
-        models: list[Any] | None = None,
-    ) -> list[Any]:
-        given = list(models or [])
-        out: list[Any] = []
-        for k, info in enumerate(library.layouts):
-            if k < len(given) and given[k] is not None:
-                out.append(given[k])
-            elif members[k]:
-                n = len(_sample_joints(info))
-                Y = np.concatenate([self._coarse_of(library, i) for i in members[k]])
-                samples = quat.canonicalize(quat.exp(Y.reshape(-1, n, 3) / _GAIN / 2.0))
-                est, _, _ = self._fit(samples, seed)
-                model, blob = self._model_bytes(est, info, quality)
-                model["bytes"] = blob
-                out.append(model)
-            else:
-                out.append(None)
-        return out
+    ) -> Any:
+        info = library.layouts[k]
+        n = len(_sample_joints(info))
+        Y = np.concatenate([self._coarse_of(library, i) for i in members])
+        samples = quat.canonicalize(quat.exp(Y.reshape(-1, n, 3) / _GAIN / 2.0))
+        est, _, _ = self._fit(samples, seed)
+        model, blob = self._model_bytes(est, info, quality)
+        model["bytes"] = blob
+        return model
 
     def model_bytes(self, model: Any, layout: LayoutInfo) -> bytes:
         return model.get("bytes", b"")  # a model read from a file is already there

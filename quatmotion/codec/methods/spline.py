@@ -322,26 +322,17 @@ class SplineMethod(Method):
         return SplineModel(scale, a1, a2, initial + 1e-4, start_mean, start_scale).quantised()
 
     # ---------------------------------------------------------------------------- encoding
-    def fit_models(
+    def fit_layout(
         self,
         library: PreparedLibrary,
-        members: list[list[int]],
+        k: int,
+        members: list[int],
         *,
         quality: float,
         max_error: float | None,
         seed: int,
-        models: list[Any] | None = None,
-    ) -> list[Any]:
-        given = list(models or [])
-        out: list[Any] = []
-        for k in range(len(library.layouts)):
-            if k < len(given) and given[k] is not None:
-                out.append(given[k])
-            elif members[k]:
-                out.append(self._fit_model(library, k, members[k], max_error, quality))
-            else:
-                out.append(None)
-        return out
+    ) -> Any:
+        return self._fit_model(library, k, members, max_error, quality)
 
     def model_bytes(self, model: Any, layout: LayoutInfo) -> bytes:
         return model.to_bytes()
