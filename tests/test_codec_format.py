@@ -142,3 +142,20 @@ def test_unstorable_skeleton_is_a_clear_error_and_no_file(clips, tmp_path):
     with pytest.raises(ValueError, match="cannot be stored"):
         codec.compress([motion], out, max_error=1.0)
     assert not out.exists()
+
+
+def test_a_bvh_skeleton_is_stored_as_its_hierarchy_whether_its_unit_was_given_or_guessed(
+    tmp_path,
+):
+    """The compact BVH record (not the exact JSON fallback, four times its size) holds both a
+    skeleton read at a given unit and one whose unit was guessed, and says which it was."""
+    from quatmotion.codec.skeletons import RECORD_BVH, RECORD_BVH_GUESSED, skeleton_record
+    from quatmotion.io import read_bvh, write_bvh
+
+    path = tmp_path / "walk.bvh"
+    write_bvh(generate_clip("walk", 3, n_frames=20), path)
+    for motion, kind in ((read_bvh(path), RECORD_BVH_GUESSED), (read_bvh(path, 1.0), RECORD_BVH)):
+        assert skeleton_record(motion.skeleton)[0] == kind
+        with codec.open(codec.compress([motion], max_error=1.0).data) as archive:
+            back = archive.read(0).skeleton
+        assert dict(back.extras) == dict(motion.skeleton.extras)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import zlib
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -40,6 +41,7 @@ from quatmotion.motion import Motion, Skeleton
 __all__ = [
     "RECORD_ASF",
     "RECORD_BVH",
+    "RECORD_BVH_GUESSED",
     "RECORD_EXACT",
     "deflate_text",
     "inflate_text",
@@ -48,7 +50,9 @@ __all__ = [
     "skeleton_record",
 ]
 
-RECORD_ASF, RECORD_BVH, RECORD_EXACT = 1, 2, 3
+RECORD_ASF, RECORD_BVH, RECORD_EXACT, RECORD_BVH_GUESSED = 1, 2, 3, 4
+# A BVH read without a given unit says so (``bvh_unit_guessed``); the record keeps that apart,
+# since parsing the text at the stored scale would say the unit was given.
 _DICTIONARY = resources.files("quatmotion.codec").joinpath("skeleton_dictionary.txt").read_bytes()
 
 
@@ -135,8 +139,12 @@ def skeleton_from_record(
     try:
         if kind == RECORD_ASF:
             return parse_asf(text, "record.asf")
-        if kind == RECORD_BVH:
-            return parse_bvh(text, "record.bvh", scale=scale).skeleton
+        if kind in (RECORD_BVH, RECORD_BVH_GUESSED):
+            skeleton = parse_bvh(text, "record.bvh", scale=scale).skeleton
+            if kind == RECORD_BVH_GUESSED:
+                extras = {**skeleton.extras, "bvh_unit_guessed": True}
+                skeleton = replace(skeleton, extras=extras)
+            return skeleton
         if kind == RECORD_EXACT:
             fields = _from_json(json.loads(text))
             return Skeleton(**fields)
@@ -150,8 +158,6 @@ def skeleton_from_record(
 def _with_name(skeleton: Skeleton, name: str) -> Skeleton:
     if skeleton.name == name:
         return skeleton
-    from dataclasses import replace
-
     return replace(skeleton, name=name)
 
 
@@ -169,7 +175,8 @@ def skeleton_record(skeleton: Skeleton) -> tuple[int, str, float]:
         candidates.append((RECORD_ASF, lambda: asf_text(skeleton), 0.0))
     if fmt == "bvh":
         scale = float(skeleton.extras.get("bvh_scale", 1.0))
-        candidates.append((RECORD_BVH, lambda: _bvh_text(skeleton), scale))
+        kind = RECORD_BVH_GUESSED if skeleton.extras.get("bvh_unit_guessed") else RECORD_BVH
+        candidates.append((kind, lambda: _bvh_text(skeleton), scale))
     candidates.append((RECORD_EXACT, lambda: _exact_text(skeleton), 0.0))
     for kind, make, scale in candidates:
         try:
