@@ -26,6 +26,11 @@
 
 ``quick`` uses four clips per set (not ``walk``), two bounds, three dictionary iterations and
 one decoding run: a smoke run of every code path in a few minutes, not numbers to quote.
+
+Compression runs where :func:`quatmotion.codec.compress` runs by default (the local process
+pool, or ``QUATMOTION_SCHEDULER``); its times are per frame of wall time, so a single-process
+figure comparable between codecs needs ``QUATMOTION_SCHEDULER=inline``. The bytes are the same
+either way.
 """
 
 from __future__ import annotations
