@@ -492,6 +492,36 @@ def _verify(
     return coded
 
 
+def _clip_chunks(
+    library: PreparedLibrary,
+    clip_skeleton: list[int],
+    encoded: EncodedLibrary,
+    corrections: list[Corrections] | None,
+    errors: list[ClipErrors] | None,
+) -> tuple[list[ClipEntry], list[bytes]]:
+    """Every clip's index entry and ``C`` payload (its prefix of corrections, then the
+    method's bytes); declared errors of 0 where none are given yet (sizing a try)."""
+    entries, chunks = [], []
+    for i, clip in enumerate(library.clips):
+        fix = corrections[i] if corrections else Corrections.empty()
+        err = errors[i] if errors else None
+        chunks.append(write_clip_prefix(clip.at_rest, fix) + encoded.clips[i])
+        entries.append(
+            ClipEntry(
+                clip.motion.name,
+                clip_skeleton[i],
+                clip.layout,
+                clip.motion.n_frames,
+                clip.motion.fps,
+                clip.source_bytes,
+                clip.source_format,
+                err.max_joint if err else 0.0,
+                err.arms if err else 0.0,
+            )
+        )
+    return entries, chunks
+
+
 def _layout_chunks(library: PreparedLibrary, encoded: EncodedLibrary, start: int) -> list[bytes]:
     """``L`` payloads: raw deflate of the shared layout part and the method's model."""
     out = []
@@ -677,25 +707,7 @@ def compress(
         return len(_build(encoded, corrections, None))
 
     def _build(encoded, corrections, errors) -> bytes:
-        entries = []
-        chunks = []
-        for i, clip in enumerate(library.clips):
-            fix = corrections[i] if corrections else Corrections.empty()
-            err = errors[i] if errors else None
-            chunks.append(write_clip_prefix(clip.at_rest, fix) + encoded.clips[i])
-            entries.append(
-                ClipEntry(
-                    clip.motion.name,
-                    clip_skeleton[i],
-                    clip.layout,
-                    clip.motion.n_frames,
-                    clip.motion.fps,
-                    clip.source_bytes,
-                    clip.source_format,
-                    err.max_joint if err else 0.0,
-                    err.arms if err else 0.0,
-                )
-            )
+        entries, chunks = _clip_chunks(library, clip_skeleton, encoded, corrections, errors)
         return _assemble(
             codec.name,
             table,
@@ -798,23 +810,9 @@ def append(
     runner = _Runner(workers, scheduler, progress or (lambda *_: None))
     coded = _encode_once(codec, library, q, max_error, seed, given, runner, verify=True)
     encoded, corrections, errors = coded.encoded, coded.corrections, coded.errors
-    entries = list(old.clips)
-    chunks = list(old_clip_chunks)
-    for i, clip in enumerate(library.clips):
-        chunks.append(write_clip_prefix(clip.at_rest, corrections[i]) + encoded.clips[i])
-        entries.append(
-            ClipEntry(
-                clip.motion.name,
-                clip_skeleton[i],
-                clip.layout,
-                clip.motion.n_frames,
-                clip.motion.fps,
-                clip.source_bytes,
-                clip.source_format,
-                errors[i].max_joint,
-                errors[i].arms,
-            )
-        )
+    new_entries, new_chunks = _clip_chunks(library, clip_skeleton, encoded, corrections, errors)
+    entries = list(old.clips) + new_entries
+    chunks = list(old_clip_chunks) + new_chunks
     data = _assemble(
         old.method,
         table,
