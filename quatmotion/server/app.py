@@ -78,6 +78,16 @@ a page of another site that resolves its own name to 127.0.0.1 is refused)."""
 PAGES = ("browse", "play", "compare", "search", "poses")
 """The pages: ``/`` (browse) and ``/play``, ``/compare``, ``/search``, ``/poses``."""
 
+# Each page is its <main> fragment (static/NAME.html) in the one layout (static/_layout.html):
+# its title, and whether it shows the 3D viewer (which brings three.js and the viewer's files).
+_PAGE_TITLES = {"browse": "library", "play": "play", "compare": "compare", "search": "search",
+                "poses": "poses"}  # fmt: skip
+_VIEWER_STYLE = '<link rel="stylesheet" href="/assets/viewer/viewer.css">\n'
+_VIEWER_SCRIPTS = (
+    '<script src="/assets/viewer/three.min.js"></script>\n'
+    '<script src="/assets/viewer/viewer.js"></script>\n'
+)
+
 MAX_TOP = 200
 _CLIP_ID = r"^[A-Za-z0-9_.~-]{1,120}$"
 _PAGE_POLICY = (
@@ -417,12 +427,27 @@ def _add_error_handlers(app: FastAPI) -> None:
         return _error(400, error)
 
 
+def _page(layout: str, name: str, fragment: Any) -> str:
+    """Page ``name``: its ``<main>`` fragment in the layout, with the viewer's files if it uses
+    the viewer (any page that has a ``#viewer`` element)."""
+    main = fragment.read_text(encoding="utf-8")
+    viewer = 'id="viewer"' in main
+    return layout.format(
+        title=_PAGE_TITLES[name],
+        page=name,
+        main=main,
+        viewer_style=_VIEWER_STYLE if viewer else "",
+        viewer_scripts=_VIEWER_SCRIPTS if viewer else "",
+    )
+
+
 def _add_pages(app: FastAPI) -> None:
     pages = resources.files("quatmotion.server").joinpath("static")
     app.mount("/assets/app", StaticFiles(directory=str(pages)), name="app-assets")
     app.mount("/assets/viewer", StaticFiles(directory=str(static_folder())), name="viewer-assets")
 
-    texts = {name: pages.joinpath(f"{name}.html").read_text(encoding="utf-8") for name in PAGES}
+    layout = pages.joinpath("_layout.html").read_text(encoding="utf-8")
+    texts = {name: _page(layout, name, pages.joinpath(f"{name}.html")) for name in PAGES}
 
     def page_endpoint(name: str) -> Any:
         def endpoint() -> HTMLResponse:
