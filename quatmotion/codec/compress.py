@@ -610,6 +610,41 @@ def _text_bytes(motion: Motion) -> int:
     return len(bvh_text(motion))
 
 
+def _result(
+    data: bytes,
+    path: Path | None,
+    method: str,
+    library: PreparedLibrary,
+    errors: list[ClipErrors],
+    corrections: list[Corrections],
+    started: float,
+    quality: float,
+    *,
+    first: int = 0,
+    failed: list[tuple[str, str]] | None = None,
+) -> CompressionResult:
+    """What :func:`compress` or :func:`append` made; ``first`` is the file's index of the
+    library's first clip (the clips before it were already in the file)."""
+    with open_archive(data) as archive:
+        clip_bytes = [archive.chunk_bytes(i) for i in range(first, len(archive))]
+    return CompressionResult(
+        data,
+        path,
+        method,
+        errors,
+        clip_bytes,
+        [c.source_bytes for c in library.clips],
+        [
+            4 * sum(len(ch) for ch in c.motion.skeleton.channels) * c.motion.n_frames
+            for c in library.clips
+        ],
+        time.perf_counter() - started,
+        quality,
+        [len(c) for c in corrections],
+        list(failed or []),
+    )
+
+
 def compress(
     clips: Sequence[Motion | str | Path],
     out: str | Path | None = None,
@@ -741,24 +776,7 @@ def compress(
         path = Path(out)
         atomic_write_bytes(path, data)
     report("done", len(motions), len(motions))
-    with open_archive(data) as archive:
-        clip_bytes = [archive.chunk_bytes(i) for i in range(len(archive))]
-    return CompressionResult(
-        data,
-        path,
-        codec.name,
-        errors,
-        clip_bytes,
-        [c.source_bytes for c in library.clips],
-        [
-            4 * sum(len(ch) for ch in c.motion.skeleton.channels) * c.motion.n_frames
-            for c in library.clips
-        ],
-        time.perf_counter() - t0,
-        q,
-        [len(c) for c in corrections],
-        failed,
-    )
+    return _result(data, path, codec.name, library, errors, corrections, t0, q, failed=failed)
 
 
 def append(
@@ -823,20 +841,6 @@ def append(
         chunks,
     )
     atomic_write_bytes(path, data)
-    with open_archive(data) as archive:
-        clip_bytes = [archive.chunk_bytes(i) for i in range(len(archive))]
-    return CompressionResult(
-        data,
-        path,
-        codec.name,
-        errors,
-        clip_bytes[len(old.clips) :],
-        [c.source_bytes for c in library.clips],
-        [
-            4 * sum(len(ch) for ch in c.motion.skeleton.channels) * c.motion.n_frames
-            for c in library.clips
-        ],
-        time.perf_counter() - t0,
-        q,
-        [len(c) for c in corrections],
+    return _result(
+        data, path, codec.name, library, errors, corrections, t0, q, first=len(old.clips)
     )
