@@ -118,12 +118,14 @@ def test_every_skeleton_family_stays_whole_in_view(
     browser, real_clips, figures_in_view, tmp_path, artifact_dir
 ):
     """The whole figure inside the canvas at the first, middle and last frames, on one clip of
-    each family and beside its decoded copy."""
+    each family, beside its decoded copy and beside a clip of another skeleton and length."""
     clips = {name: read_motion(path) for name, path in real_clips.items()}
-    bandai = clips["bandai1_walk"]
+    bandai, cmu = clips["bandai1_walk"], clips["cmu_walk"]
     pages = {name: ([motion], None, None) for name, motion in clips.items()}
     pages["bandai1_walk_decoded"] = ([bandai], [_decoded(bandai)], None)
     pages["hdm05_jog_decoded"] = ([clips["hdm05_jog"]], [_decoded(clips["hdm05_jog"])], None)
+    pages["bandai1_vs_cmu"] = ([bandai], [cmu], None)
+    pages["bandai1_vs_cmu_overlay"] = ([bandai], [cmu], "overlay")
     problems: list[str] = []
     for name, (motions, compare, layout) in pages.items():
         path = write_view(tmp_path / f"{name}.html", motions, compare, layout=layout)
@@ -142,6 +144,14 @@ def test_every_skeleton_family_stays_whole_in_view(
             expected = [sk.n_joints + sk.n_sites - 1, sk.n_joints - 2 + sk.n_sites, 1, True]
             if drawn != expected:
                 problems.append(f"{name}: spheres, bones, followed point, following {drawn}")
+        if name.startswith("bandai1_vs_cmu"):
+            # Two skeletons, two lengths: both play, no per-frame error, and the page says why.
+            panel = page.locator(".qmv-error").inner_text()
+            assert "no per-frame error: their skeletons differ" in panel, panel
+            assert page.locator(".qmv-strip").count() == 0
+            assert page.evaluate("quatmotionViewer.nFrames") == bandai.n_frames  # the longer
+            page.evaluate(f"quatmotionViewer.seek({bandai.n_frames - 1})")
+            assert "ended, holds frame 342" in page.locator(".qmv-labels").inner_text()
         assert not errors, errors
         page.close()
     assert not problems, "\n".join(problems)

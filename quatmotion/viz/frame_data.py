@@ -46,6 +46,7 @@ from quatmotion.viz.framing import BodyFraming, body_framing, skeleton_bones
 __all__ = [
     "FORMAT",
     "clip_points",
+    "comparison_obstacle",
     "decode_block",
     "decode_clip",
     "encode_clip",
@@ -222,6 +223,33 @@ def point_errors(positions: NDArray[np.float64], other: NDArray[np.float64]) -> 
     return np.linalg.norm(positions - other, axis=-1)
 
 
+def comparison_obstacle(reference: Motion, compared: Motion) -> str | None:
+    """Why no per-frame error can be shown between two clips (None when it can).
+
+    A per-frame error pairs frame ``t`` of one clip with frame ``t`` of the other and point
+    ``p`` with point ``p``: it needs the same skeleton (joint and end-site names and
+    hierarchy), the same frame rate and the same frame count. Nothing here aligns two takes
+    in time (resampling to one duration would pair frames that show different moments).
+    """
+    sa, sb = reference.skeleton, compared.skeleton
+    same_names = (sa.joint_names, sa.site_names) == (sb.joint_names, sb.site_names)
+    if not (
+        same_names
+        and np.array_equal(sa.parents, sb.parents)
+        and np.array_equal(sa.site_parents, sb.site_parents)
+    ):
+        shape = f"{sa.n_joints} and {sb.n_joints} joints, {sa.n_sites} and {sb.n_sites} end sites"
+        return f"their skeletons differ ({shape}{'' if same_names else ', other names'})"
+    if reference.fps != compared.fps:
+        return f"their frame rates differ ({reference.fps:g} and {compared.fps:g} fps)"
+    if reference.n_frames != compared.n_frames:
+        return (
+            f"their lengths differ ({reference.n_frames} and {compared.n_frames} frames); "
+            "a per-frame error needs the same skeleton and frame count"
+        )
+    return None
+
+
 def encode_comparison(
     reference: Motion, compared: Motion, reference_name: str = "", compared_name: str = ""
 ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
@@ -245,20 +273,17 @@ def encode_comparison(
     (reference payload, compared payload, errors)
         ``errors`` holds ``block`` (``(T, P)`` cm, ``uint16-delta-planes``), ``arms_cm`` (mean
         over frames of the RMS over points), ``max_cm`` and ``max_quantisation_cm``.
+
+    Raises
+    ------
+    ValueError
+        When :func:`comparison_obstacle` finds one, saying which.
     """
+    reason = comparison_obstacle(reference, compared)
+    if reason:
+        raise ValueError(f"cannot compare {compared.name!r} with {reference.name!r}: {reason}")
     a, names, _ = clip_points(reference)
-    b, names_b, _ = clip_points(compared)
-    if names != names_b or a.shape != b.shape:
-        raise ValueError(
-            f"cannot compare {compared.name!r} ({b.shape[0]} frames, {b.shape[1]} points) with "
-            f"{reference.name!r} ({a.shape[0]} frames, {a.shape[1]} points): "
-            "the clips need the same skeleton and frame count"
-        )
-    if reference.fps != compared.fps:
-        raise ValueError(
-            f"cannot compare {compared.name!r} at {compared.fps:g} fps with "
-            f"{reference.name!r} at {reference.fps:g} fps"
-        )
+    b, _, _ = clip_points(compared)
     framing = body_framing(reference.skeleton, a)
     errors = point_errors(a, b)
     block = encode_uint16(errors, min_step=ERROR_STEP_CM)
