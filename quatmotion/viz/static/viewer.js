@@ -334,10 +334,11 @@
       this.stats = this.clips.map(clipStats);
       const height = Math.max(...this.stats.map((s) => s.height));
       this.bodyHeight = height;
-      // A body that travels further than a few of its heights: follow it (its centre, the
-      // payload's `follow` point, never a root left behind at the origin).
+      // A body that travels further than twice its height: follow it (its centre, the
+      // payload's `follow` point, never a root left behind at the origin). Unfollowed, the
+      // camera takes in the whole path, and a walk towards it shows the far end small.
       const travel = Math.max(...this.stats.map((s) => s.travel));
-      this.follow = options.follow !== undefined ? !!options.follow : travel > 4 * height;
+      this.follow = options.follow !== undefined ? !!options.follow : travel > 2 * height;
       this.offsets = this.clips.map(() => new THREE.Vector3());
       // Per-pair colours: reference blue, compared green; other clips from the palette.
       const colours = this.clips.map((_, i) => PALETTE[i % PALETTE.length]);
@@ -478,9 +479,12 @@
 
     _clipFrameAt(i, frame) {
       // The clip's frame at the master frame's time; a clip that has ended holds its last.
+      return Math.min(this._clipTime(i, frame), this.clips[i].nFrames - 1);
+    }
+
+    _clipTime(i, frame) {
       const clip = this.clips[i];
-      const t = clip.fps === this.fps ? frame : Math.floor(((frame + 1e-6) / this.fps) * clip.fps);
-      return Math.min(t, clip.nFrames - 1);
+      return clip.fps === this.fps ? frame : Math.floor(((frame + 1e-6) / this.fps) * clip.fps);
     }
 
     _clipFrame(i) { return this._clipFrameAt(i, this.frame); }
@@ -556,7 +560,7 @@
       const clip = this.clips[i], t = this._clipFrame(i);
       const notes = [];
       if (clip.fps !== this.fps) notes.push('frame ' + t + ' at ' + clip.fps + ' fps');
-      if ((this.frame + 1) / this.fps > clip.nFrames / clip.fps + 1e-9) notes.push('ended, holds frame ' + t);
+      if (this._clipTime(i, this.frame) > clip.nFrames - 1) notes.push('ended, holds frame ' + t);
       if (this.moved && this.moved[i]) notes.push('start aligned with ' + this.clips[this._groups().find((g) => g.includes(i))[0]].name);
       return clip.name + (notes.length ? ' (' + notes.join('; ') + ')' : '');
     }
