@@ -183,6 +183,8 @@ def test_play_compare_and_search_pages_keep_every_family_in_view(
         page = browser.new_page(viewport={"width": 1280, "height": 800})
         errors: list[str] = []
         page.on("pageerror", lambda error: errors.append(str(error)))
+        requests: list[str] = []
+        page.on("request", lambda request: requests.append(request.url))
         problems: list[str] = []
         for name, path in real_clips.items():
             clip = path.stem
@@ -197,5 +199,6 @@ def test_play_compare_and_search_pages_keep_every_family_in_view(
                 problems += [f"{kind} {name}: {p}" for p in figures_in_view(page, _CANVAS)]
                 page.screenshot(path=str(artifact_dir / f"server-{kind}-{name}.png"))
         assert not errors, errors
+        assert all(url.startswith(served) for url in requests), requests
         page.close()
     assert not problems, "\n".join(problems)

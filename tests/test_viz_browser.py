@@ -107,9 +107,12 @@ def _open(browser, path):
     page = browser.new_page(viewport={"width": 1200, "height": 760})
     errors: list[str] = []
     page.on("pageerror", lambda error: errors.append(str(error)))
+    requests: list[str] = []
+    page.on("request", lambda request: requests.append(request.url))
     page.goto(path.as_uri())
     page.wait_for_selector("html[data-first-play-ms], html[data-error]", state="attached")
     assert page.evaluate("document.documentElement.dataset.error || null") is None
+    assert requests == [path.as_uri()]  # nothing fetched
     return page, errors
 
 
