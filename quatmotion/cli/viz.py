@@ -63,8 +63,9 @@ def view(
     compare: Annotated[
         list[str] | None,
         typer.Option(
-            help="A clip to compare with each FILE, in order (repeat the option): shown in green "
-            "beside the original in blue, with the per-joint error (same skeleton, frames, fps)."
+            help="A clip to play with each FILE, in order (repeat the option): in green beside "
+            "(or over) the FILE in blue, each at its own length (the shorter holds its last "
+            "frame); the per-joint error when both share skeleton, frame rate and frame count."
         ),
     ] = None,
     compare_decoded: Annotated[
@@ -86,6 +87,7 @@ def view(
 ) -> None:
     """Write a standalone 3D viewer page (opens offline; frames count from 0)."""
     from quatmotion.viz import write_view
+    from quatmotion.viz.frame_data import comparison_obstacle
 
     with user_errors():
         if compare and compare_decoded:
@@ -107,6 +109,10 @@ def view(
         path = write_view(out, motions, others, ghost=ghost, layout=layout)  # type: ignore[arg-type]
         frames = sum(m.n_frames for m in motions)
         console.print(f"wrote {path} ({len(motions)} clip(s), {frames} frames)")
+        for motion, other in zip(motions, others or (), strict=False):
+            reason = comparison_obstacle(motion, other)
+            if reason:
+                console.print(f"no per-frame error for {motion.name} vs {other.name}: {reason}")
 
 
 @app.command()
