@@ -33,6 +33,7 @@ from quatmotion.codec.methods import ClipContext, get_method
 from quatmotion.codec.repair import Corrections, correction_lever, read_clip_prefix
 from quatmotion.codec.skeletons import inflate_text, skeleton_from_record
 from quatmotion.errors import FormatError
+from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion, Skeleton
 
 __all__ = ["Archive", "DecodedChannels", "open_archive"]
@@ -130,15 +131,17 @@ class Archive:
         return [c.name for c in self.header.clips]
 
     def index_of(self, clip: int | str) -> int:
-        """The position of a clip given by position or name (``KeyError`` naming it)."""
-        if isinstance(clip, int | np.integer):
-            if not 0 <= clip < len(self):
-                raise KeyError(f"clip index {clip} out of range (the file holds {len(self)})")
-            return int(clip)
-        names = self.names()
-        if clip not in names:
-            raise KeyError(f"no clip named {clip!r} in {self._name}")
-        return names.index(clip)
+        """The position of a clip given by position or name: its name, file name (``walk.bvh``)
+        or number, as every command reads a clip name (:func:`quatmotion.io.names.match_clip`).
+
+        Raises
+        ------
+        KeyError
+            (:class:`~quatmotion.errors.ClipNameError`) No such clip, or several.
+        """
+        if isinstance(clip, int | np.integer) and 0 <= clip < len(self):
+            return int(clip)  # the fast path of every read
+        return match_clip(clip, self.names(), str(self._name))
 
     def chunk_bytes(self, clip: int | str) -> int:
         """Size of a clip's own chunk (payload), bytes."""

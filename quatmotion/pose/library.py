@@ -38,7 +38,6 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import functools
 import json
 import os
@@ -54,6 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from quatmotion._atomic import atomic_output
 from quatmotion.errors import FormatError
+from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion
 from quatmotion.parallel import Failure, Scheduler, imap_batch
 from quatmotion.pose import labels
@@ -498,41 +498,16 @@ class PoseLibrary:
         clip : str or int
             The clip's name (its path as indexed), a unique end of it (the file name, its stem,
             or trailing folders), or its number from 0; digits are read as a number only when
-            no clip is named so.
+            no clip is named so (:func:`quatmotion.io.names.match_clip`, the rule of every
+            command).
 
         Raises
         ------
         ValueError
-            Naming up to five close names when none matches, or the matches when several do.
+            (:class:`~quatmotion.errors.ClipNameError`) Naming up to five close names when none
+            matches, or the matches when several do.
         """
-        names = self.clip_names
-        if isinstance(clip, (int, np.integer)):
-            if not 0 <= clip < len(names):
-                raise ValueError(f"clip number {clip} is out of range 0 to {len(names) - 1}")
-            return int(clip)
-        text = str(clip)
-        matches = [i for i, n in enumerate(names) if n == text]
-        if not matches:
-            matches = [i for i, n in enumerate(names) if _names_end(n, text)]
-        if not matches and text.isdigit():
-            return self.clip_number(int(text))
-        if len(matches) == 1:
-            return matches[0]
-        if matches:
-            listed = ", ".join(names[i] for i in matches[:5])
-            more = f" and {len(matches) - 5} more" if len(matches) > 5 else ""
-            raise ValueError(
-                f"clip {text!r} matches {len(matches)} indexed clips ({listed}{more}); "
-                "give more of the path"
-            )
-        stems = [pathlib.PurePath(n).stem for n in names]
-        close = [m for m in stems if text.lower() in m.lower()][:5]
-        close = close or difflib.get_close_matches(text, stems, n=5, cutoff=0.5)
-        hint = f"; close names: {', '.join(close)}" if close else ""
-        raise ValueError(
-            f"no indexed clip is named {text!r} ({len(names)} clips, numbered 0 to "
-            f"{len(names) - 1}){hint}"
-        )
+        return match_clip(clip, self.clip_names, "the pose library")
 
     def search(self, vectors: ArrayLike, k: int = 10) -> tuple[IntArray, FloatArray]:
         """Approximate nearest indexed poses of projected query vectors, ``(Q, k)`` each."""
@@ -647,12 +622,6 @@ class PoseLibrary:
             # np.load's own message (pickled data, a bad zip...) says nothing about what the
             # file should have been.
             raise FormatError(_NOT_A_LIBRARY, path) from exc
-
-
-def _names_end(name: str, text: str) -> bool:
-    """Whether ``text`` is the end of path ``name`` (whole components) or its file's stem."""
-    path, tail = pathlib.PurePath(name), pathlib.PurePath(text)
-    return path.stem == text or path.parts[-len(tail.parts) :] == tail.parts
 
 
 def _labelled_pairs(

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from quatmotion.errors import FormatError
+from quatmotion.io.names import match_clip
 from quatmotion.retrieval import features as feat
 from quatmotion.retrieval.methods import Library
 
@@ -247,9 +248,17 @@ class ClipIndex:
             out.setdefault(int(clip), set()).add(key)
         return out
 
-    def find(self, name: str) -> list[ClipRow]:
-        """Clips whose name or path is ``name``."""
-        return [c for c in self.clips() if name in (c.name, c.path)]
+    def find(self, name: str) -> ClipRow:
+        """The clip ``name`` names: its path, a unique end of it (file name, stem, trailing
+        folders) or its number (:func:`quatmotion.io.names.match_clip`, every command's rule).
+
+        Raises
+        ------
+        ValueError
+            (:class:`~quatmotion.errors.ClipNameError`) No such clip, or several.
+        """
+        rows = self.clips()
+        return rows[match_clip(name, [r.path for r in rows], str(self.path))]
 
     def load(self, keys: Iterable[str]) -> tuple[list[ClipRow], Library]:
         """The clips that have every feature array in ``keys``, and a :class:`Library` of them."""
@@ -292,14 +301,13 @@ class ClipIndex:
         return n
 
     def remove(self, names: Iterable[str]) -> list[str]:
-        """Remove the clips named (by name or path); returns the paths removed."""
-        removed: list[str] = []
+        """Remove the clips named (as :meth:`find` reads a name; nothing is removed when one
+        of them names no clip or several); returns the paths removed."""
+        rows = [self.find(name) for name in names]
         with self._db:
-            for name in names:
-                for row in self.find(name):
-                    self._db.execute("DELETE FROM clips WHERE id = ?", (row.id,))
-                    removed.append(row.path)
-        return removed
+            for row in rows:
+                self._db.execute("DELETE FROM clips WHERE id = ?", (row.id,))
+        return list(dict.fromkeys(row.path for row in rows))
 
     def set_labels(self, labels: dict[str, str]) -> int:
         """Set the label of clips named in ``labels`` (by name or path); returns the count."""
