@@ -53,6 +53,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from quatmotion._atomic import atomic_output
 from quatmotion.errors import FormatError
+from quatmotion.io import Doubt
 from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion
 from quatmotion.parallel import Failure, Scheduler, imap_batch
@@ -253,6 +254,7 @@ class PoseLibrary:
         index_threads: int = 1,
         progress: Callable[[str, int, int], None] | None = None,
         log: Callable[[str], None] | None = None,
+        on_doubt: Callable[[str, Doubt], None] | None = None,
     ) -> tuple[PoseLibrary, list[Failure]]:
         """Build a library of any size in bounded memory, the clips prepared in parallel.
 
@@ -301,6 +303,9 @@ class PoseLibrary:
             sample, out of all clips; stops when the sample is complete) or ``"index"``.
         log : callable, optional
             Called with progress messages.
+        on_doubt : callable, optional
+            ``on_doubt(clip name, doubt)`` for each of a clip's :attr:`PoseClip.doubts`, once,
+            in the index pass.
 
         Returns
         -------
@@ -402,6 +407,8 @@ class PoseLibrary:
                     )
                     failed[where] = Failure(where, sources[where], message)
                     continue
+                for doubt in clip.doubts if on_doubt is not None else ():
+                    on_doubt(clip.name, doubt)
                 names.append(clip.name)
                 lengths.append(len(clip.vectors))
                 steps.append(clip.step)
@@ -793,6 +800,8 @@ class ProjectedClip:
         The skeleton family it came from.
     vectors : ndarray of float32, shape (T, r)
         Every pose projected into the index space.
+    doubts : tuple of Doubt
+        :attr:`PoseClip.doubts`.
     """
 
     name: str
@@ -802,6 +811,7 @@ class ProjectedClip:
     file_frames: int | None
     skeleton_kind: str | None
     vectors: NDArray[np.float32]
+    doubts: tuple[Doubt, ...] = ()
 
 
 def projected_clip(source: Any, *, load: Callable[[Any], PoseClip], model: dict) -> ProjectedClip:
@@ -809,8 +819,9 @@ def projected_clip(source: Any, *, load: Callable[[Any], PoseClip], model: dict)
     clip = load(source)
     vectors = project_gpd(clip.poses.gpd, model).astype(np.float32)
     return ProjectedClip(
-        clip.name, clip.fps, clip.step, clip.height, clip.file_frames, clip.skeleton_kind, vectors
-    )
+        clip.name, clip.fps, clip.step, clip.height, clip.file_frames, clip.skeleton_kind,
+        vectors, clip.doubts,
+    )  # fmt: skip
 
 
 def load_pose_clip(
@@ -831,14 +842,15 @@ def load_pose_clip(
     fps, height : float
         As for :meth:`PoseClip.from_motion`.
     skeleton : str or Path, optional
-        The ASF of AMC files whose own is not found by name.
+        The ASF of AMC files (else each one's is found by name).
     units : str, optional
         Length unit of a BVH file (:data:`quatmotion.io.BVH_UNITS`); guessed when None.
 
     Returns
     -------
     PoseClip
-        Named by ``str(path)``.
+        Named by ``str(path)``, with the file's unit and frame-rate doubts
+        (:attr:`PoseClip.doubts`).
 
     Raises
     ------
@@ -846,20 +858,16 @@ def load_pose_clip(
         For a clip with coordinates beyond a kilometre: not human motion capture, and its
         features would overflow.
     """
-    from quatmotion.io import find_asf_for_amc, implausible_values, read_motion
+    from quatmotion.io import implausible_values, read_motion
 
     path = pathlib.Path(path)
     amc = path.suffix.lower() == ".amc"
-    asf = None
-    if amc and skeleton is not None:
-        try:
-            find_asf_for_amc(path)
-        except FormatError:
-            asf = skeleton
-    motion = read_motion(path, asf, units=None if amc else units)
-    for doubt in implausible_values(motion):
+    motion = read_motion(path, skeleton if amc else None, units=None if amc else units)
+    doubts = implausible_values(motion)
+    for doubt in doubts:
         if doubt.kind == "far":
             raise ValueError(f"{path}: {doubt.message}: not human motion capture")
     # A clip that cannot be described fails with a message, not NumPy's overflow warnings.
     with np.errstate(all="ignore"):
-        return PoseClip.from_motion(motion, fps=fps, height=height, name=str(path))
+        clip = PoseClip.from_motion(motion, fps=fps, height=height, name=str(path))
+    return dataclasses.replace(clip, doubts=tuple(doubts))
