@@ -114,9 +114,13 @@ def user_errors() -> Iterator[None]:
         yield
     except FormatError as error:
         raise fail(str(error)) from None
-    except (DataNotFoundError, FileNotFoundError, IsADirectoryError, NotADirectoryError) as error:
+    except DataNotFoundError as error:
         raise fail(_os_message(error)) from None
-    except (CliInputError, FetchError, ValueError, KeyError, PermissionError) as error:
+    except OSError as error:  # a file that cannot be read or written: no disk, no permission
+        if getattr(error, "filename", None) is None and not isinstance(error, FileNotFoundError):
+            raise  # not about a file the user named: a bug, shown in full
+        raise fail(_os_message(error)) from None
+    except (CliInputError, FetchError, ValueError, KeyError) as error:
         text = error.args[0] if isinstance(error, KeyError) and error.args else error
         raise fail(str(text)) from None
 

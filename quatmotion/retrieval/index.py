@@ -18,11 +18,13 @@ Conventions
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
 import io
 import json
 import sqlite3
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,6 +124,16 @@ def _from_blob(b: bytes) -> np.ndarray:
     return np.load(io.BytesIO(b), allow_pickle=False)
 
 
+@contextlib.contextmanager
+def _writing(path: Path) -> Iterator[None]:
+    """SQLite's write errors as an ``OSError`` naming the index file ("unable to open database
+    file", "attempt to write a readonly database", "database or disk is full")."""
+    try:
+        yield
+    except sqlite3.OperationalError as error:
+        raise OSError(errno.EIO, f"cannot write the index ({error})", str(path)) from None
+
+
 class ClipIndex:
     """An open clip index (use as a context manager, or call :meth:`close`).
 
@@ -143,7 +155,7 @@ class ClipIndex:
         path.parent.mkdir(parents=True, exist_ok=True)
         db = sqlite3.connect(path)
         try:
-            with db:
+            with _writing(path), db:
                 db.executescript(_SCHEMA)
                 db.executemany(
                     "INSERT INTO meta VALUES (?, ?)",
@@ -285,7 +297,7 @@ class ClipIndex:
             Clips written.
         """
         n = 0
-        with self._db:
+        with _writing(self.path), self._db:
             for r in records:
                 self._db.execute("DELETE FROM clips WHERE path = ?", (r.path,))
                 cur = self._db.execute(
@@ -304,7 +316,7 @@ class ClipIndex:
         """Remove the clips named (as :meth:`find` reads a name; nothing is removed when one
         of them names no clip or several); returns the paths removed."""
         rows = [self.find(name) for name in names]
-        with self._db:
+        with _writing(self.path), self._db:
             for row in rows:
                 self._db.execute("DELETE FROM clips WHERE id = ?", (row.id,))
         return list(dict.fromkeys(row.path for row in rows))
@@ -312,7 +324,7 @@ class ClipIndex:
     def set_labels(self, labels: dict[str, str]) -> int:
         """Set the label of clips named in ``labels`` (by name or path); returns the count."""
         n = 0
-        with self._db:
+        with _writing(self.path), self._db:
             for row in self.clips():
                 label = labels.get(row.path, labels.get(row.name))
                 if label is not None and label != row.label:
