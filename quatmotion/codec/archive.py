@@ -31,7 +31,12 @@ from quatmotion.codec.container import (
 from quatmotion.codec.library import LayoutInfo
 from quatmotion.codec.methods import ClipContext, get_method
 from quatmotion.codec.repair import Corrections, correction_lever, read_clip_prefix
-from quatmotion.codec.skeletons import inflate_text, skeleton_from_record
+from quatmotion.codec.skeletons import (
+    RECORD_BVH,
+    RECORD_BVH_GUESSED,
+    inflate_text,
+    skeleton_from_record,
+)
 from quatmotion.errors import FormatError
 from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion, Skeleton
@@ -180,6 +185,15 @@ class Archive:
             )
             self._skeletons[k] = sk if sk.name == entry.name else replace(sk, name=entry.name)
         return self._skeletons[k]
+
+    def bvh_unit(self, k: int) -> tuple[float, bool] | None:
+        """The ``k``-th skeleton's BVH length unit, centimetres per file unit, and whether it
+        was guessed, from the header alone (no record parsed: ``ls`` of a library of thousands
+        of skeletons); ``None`` for a skeleton that did not come from a BVH file."""
+        rec = self.header.records[self.header.skeletons[k].record]
+        if rec.kind not in (RECORD_BVH, RECORD_BVH_GUESSED):
+            return None
+        return rec.scale, rec.kind == RECORD_BVH_GUESSED
 
     def layout(self, k: int) -> tuple[LayoutInfo, Any]:
         """The ``k``-th layout and its method model."""
