@@ -221,3 +221,40 @@ def motion_library(tmp_path_factory) -> dict[str, Path]:
         "index": root / "lib.qidx",
         "poses": root / "poses.idx",
     }
+
+
+@pytest.fixture()
+def studio_walk() -> Callable[[float, float], tuple[Any, Any]]:
+    """``make(height_cm, cm_per_unit) -> (truth, studio)``: a generated walk of a figure
+    ``height_cm`` tall (the truth, in centimetres), and the same walk laid out as issue 17's
+    studio library writes it, in a length unit of ``cm_per_unit``: position channels on every
+    joint (they carry the body; the OFFSETs do not), a rest pose lying along X at four times
+    the body's bone lengths. The rest pose's size misleads the unit guess, as it did there (a
+    135 cm figure in inches read as 53 cm)."""
+    import dataclasses
+
+    import numpy as np
+
+    from quatmotion import io
+    from quatmotion.motion import Motion
+    from quatmotion.motion.synthetic import cmu_skeleton, generate_clip
+
+    def make(height_cm: float, cm_per_unit: float) -> tuple[Motion, Motion]:
+        truth = generate_clip("walk", 3, n_frames=120, skeleton=cmu_skeleton(height_cm))
+        twin = io.to_bvh_skeleton(truth.skeleton, [True] * truth.skeleton.n_joints)
+        lying = np.zeros_like(twin.offsets)
+        lying[:, 0] = 4.0 * np.linalg.norm(twin.offsets, axis=1)
+        skeleton = dataclasses.replace(
+            twin,
+            offsets=lying,
+            channels=tuple(("tx", "ty", "tz", "rz", "ry", "rx") for _ in twin.joint_names),
+            extras={**twin.extras, "bvh_scale": cm_per_unit},
+            name="studio",
+        )
+        carried = np.broadcast_to(twin.offsets, (truth.n_frames, twin.n_joints, 3)).copy()
+        studio = Motion(
+            skeleton, truth.fps, truth.root_translation, truth.rotations, carried, name="studio"
+        )
+        return truth, studio
+
+    return make

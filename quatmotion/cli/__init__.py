@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import importlib
 
-from quatmotion.cli._app import app
+from quatmotion.cli._app import app, reflow_all_help
 
 # Importing a command module registers its commands; this order is the order of --help.
 for _module in (
@@ -33,6 +33,7 @@ for _module in (
     "demo",
 ):
     importlib.import_module(f"quatmotion.cli.{_module}")
+reflow_all_help(app)
 
 __all__ = ["app", "main"]
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -12,8 +13,10 @@ from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
+    SkeletonOption,
     UnitsOption,
     check_outputs,
+    check_units,
     console,
     read_clip,
     require_file,
@@ -79,9 +82,7 @@ def view(
     layout: Annotated[
         str | None, typer.Option(help="side (a viewport per clip) or overlay (one viewport).")
     ] = None,
-    skeleton: Annotated[
-        Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC input (else found by name).")
-    ] = None,
+    skeleton: SkeletonOption = None,
     units: UnitsOption = None,
     force: ForceOption = False,
 ) -> None:
@@ -94,8 +95,9 @@ def view(
             raise CliInputError("give --compare or --compare-decoded, not both")
         if layout not in (None, "side", "overlay"):
             raise CliInputError(f"--layout must be side or overlay, got {layout!r}")
+        check_units(units)
         inputs = [Path(spec.split(LIBRARY_SEPARATOR)[0]) for spec in [*files, *(compare or [])]]
-        check_outputs([out], inputs, force=force)
+        check_outputs([out], [*inputs, skeleton], force=force)
         motions = [_read(spec, skeleton, units) for spec in files]
         others = None
         if compare:
@@ -125,9 +127,15 @@ def report(
     force: ForceOption = False,
 ) -> None:
     """Write one standalone page with the tables and figures of benchmark runs."""
+    from quatmotion.errors import FormatError
     from quatmotion.viz import write_report
+    from quatmotion.viz.report import load_result
 
     with user_errors():
-        check_outputs([out], results, force=force)
+        figures = []  # the PNGs the page embeds are inputs too
+        for path in results:
+            with contextlib.suppress(FormatError, OSError):  # reported by write_report
+                figures += load_result(path).figures
+        check_outputs([out], [*results, *figures], force=force)
         path = write_report(out, results, title=title)
         console.print(f"wrote {path} ({len(results)} benchmark result(s))")
