@@ -116,58 +116,21 @@ def find_skeleton(amc: Path, skeleton: str | Path | None = None) -> Path:
 
     Raises
     ------
+    FileNotFoundError
+        A ``skeleton`` given that does not exist.
     FormatError
         Naming the AMC, where it looked, and the candidates when several fit.
     """
     from quatmotion.io import find_asf_for_amc
 
-    if skeleton is not None:
-        given = Path(skeleton)
-        if given.is_file():
-            return given
-        if not given.is_dir():
-            raise FileNotFoundError(2, "no such skeleton file or folder", str(given))
-        for candidate in _convention_names(amc):
-            if (given / candidate).is_file():
-                return given / candidate
-        return _only_asf(amc, given, f"in {given}")
-    try:
+    if skeleton is None:
         return find_asf_for_amc(amc)
-    except FormatError as error:
-        try:
-            return _only_asf(amc, amc.parent, "beside it")
-        except FormatError as only:
-            if "holds" in only.reason and "ASF files" in only.reason:
-                raise only from None
-            raise error from None
-
-
-def _convention_names(amc: Path) -> list[str]:
-    stem = amc.stem
-    names = [f"{stem}.asf"]
-    parts = stem.split("_")
-    if len(parts) >= 2:
-        names.append(f"{parts[0]}.asf")
-        names.append(f"{parts[0]}_{parts[1]}.asf")
-    return names
-
-
-def _only_asf(amc: Path, folder: Path, where: str) -> Path:
-    found = sorted(p for p in folder.glob("*") if p.suffix.lower() == ".asf" and p.is_file())
-    if len(found) == 1:
-        return found[0]
-    if not found:
-        raise FormatError(
-            f"cannot find the ASF skeleton for this AMC (no ASF file {where}); "
-            "pass it with --skeleton (a file or a folder)",
-            amc,
-        )
-    listed = ", ".join(p.name for p in found[:6]) + (" ..." if len(found) > 6 else "")
-    raise FormatError(
-        f"cannot tell which ASF skeleton goes with this AMC: the folder {folder} holds "
-        f"{len(found)} ASF files ({listed}); pass one with --skeleton",
-        amc,
-    )
+    given = Path(skeleton)
+    if given.is_file():
+        return given
+    if not given.is_dir():
+        raise FileNotFoundError(2, "no such skeleton file or folder", str(given))
+    return find_asf_for_amc(amc, given)
 
 
 def find_clips(
