@@ -388,6 +388,10 @@ def test_pose_commands_take_skeleton_and_units(pose_library, tmp_path):
     amc = tmp_path / "walk_01.amc"
     assert _invoke("generate", "walk", amc, "--frames", "60").exit_code == 0
     amc.with_suffix(".asf").rename(tmp_path / "body.asf")
+    # the folder's only ASF is the AMC's; with two, neither named for it, the user must choose
+    only = _invoke("pose", "search", library, "--file", amc, "--frame", "0", "-k", "1")
+    assert only.exit_code == 0, only.output
+    (tmp_path / "other.asf").write_bytes((tmp_path / "body.asf").read_bytes())
     _assert_bad_input(
         _invoke("pose", "search", library, "--file", amc, "--frame", "0"), "--skeleton"
     )
