@@ -253,9 +253,7 @@ def test_every_command_that_reads_motion_takes_units_and_skeleton(clips, tmp_pat
     _assert_bad_input(_invoke(*args, "--skeleton", missing), "missing.asf")
 
 
-def test_compress_reads_a_studio_layout_in_its_unit_and_warns_about_a_giant(
-    tmp_path, studio_walk
-):
+def test_compress_reads_a_studio_layout_in_its_unit_and_warns_about_a_giant(tmp_path, studio_walk):
     """Issue 17's case: a 135 cm figure written in inches, its rest pose laid out along X, read
     as 53 cm (guessed cm) when the guess looked at the rest pose. The stature chain reads it in
     inches (issue 21, item 7); a figure no unit makes human (300 cm in cm) is warned about, and

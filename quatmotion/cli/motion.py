@@ -48,7 +48,10 @@ FPS_RANGE = (1.0, 1000.0)  # frames per second of motion capture
 
 
 def _cm(value: float) -> str:
-    """A length for a table: one decimal, or 3 significant digits when absurdly large."""
+    """A length for a table: one decimal, or 3 significant digits when absurdly large; ``-``
+    for none (NaN)."""
+    if value != value:
+        return "-"
     return f"{value:.1f}" if abs(value) < 1e6 else f"{value:.3g}"
 
 
@@ -155,6 +158,8 @@ def _skeleton_doc(skeleton: Skeleton, asf: str | None = None) -> dict[str, objec
 
 def _frame_count(motion: Motion) -> str:
     n = motion.n_frames
+    if n == 0:
+        return "0 (no frames)"
     amc = motion.skeleton.extras.get("format") == "asf"
     numbering = f"; numbered 1 to {n} in the AMC file" if amc else ""
     return f"{n} (frames 0 to {n - 1}{numbering})"
@@ -172,11 +177,14 @@ def _pelvis(motion: Motion) -> int:
 
 
 def _motion_measures(motion: Motion) -> tuple[float, str, list[float]]:
-    """Median vertical extent over frames, the pelvis joint and its position at frame 0."""
+    """Median vertical extent over frames, the pelvis joint and its position at frame 0 (NaN
+    for a clip of no frames)."""
     import numpy as np
 
     from quatmotion.motion import forward_kinematics, standing_height
 
+    if motion.n_frames == 0:
+        return float("nan"), motion.skeleton.joint_names[_pelvis(motion)], [float("nan")] * 3
     # Absurd but finite values (reported as warnings) may overflow on the way: show what comes.
     with np.errstate(all="ignore"):
         step = max(1, motion.n_frames // 200)

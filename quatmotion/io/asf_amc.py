@@ -599,16 +599,19 @@ def match_asf_for_amc(path: str | Path, folder: str | Path | None = None) -> Asf
 
 
 def _amc_header(text: str, path: Path) -> tuple[int, int, bool | None]:
-    """Offset and line number where frames start, and whether angles are degrees (None: unsaid)."""
+    """Offset and line number where frames start (the end of the text for a header without
+    frames: a clip of no frames), and whether angles are degrees (None: unsaid)."""
     degrees: bool | None = None
     offset = 0
     line = 1
+    header = False
     while offset < len(text):
         end = text.find("\n", offset)
         end = len(text) if end < 0 else end
         stripped = text[offset:end].strip()
         if stripped and not stripped.startswith("#"):
             if stripped.startswith(":"):
+                header = True
                 key = stripped.split()[0].upper()
                 if key == ":DEGREES":
                     degrees = True
@@ -620,7 +623,9 @@ def _amc_header(text: str, path: Path) -> tuple[int, int, bool | None]:
                 raise FormatError(f"expected a frame number, got {stripped[:40]!r}", path, line)
         offset = end + 1
         line += 1
-    raise FormatError("no frames (file empty or truncated?)", path, line)
+    if header:
+        return len(text), line, degrees
+    raise FormatError("no frames and no header (file empty or truncated?)", path, line)
 
 
 def _amc_layout(
@@ -824,6 +829,13 @@ def parse_amc(
     if degrees is None:
         degrees = skeleton.extras["angle_unit"] == "deg"
     body = text[offset:]
+    if not body.strip():
+        names = ["root"] + [b["name"] for b in skeleton.extras["asf_bones"] if b["dof"]]
+        counts = [len(skeleton.channels[0])] + [
+            len(b["dof"]) for b in skeleton.extras["asf_bones"] if b["dof"]
+        ]
+        values = np.zeros((0, sum(counts)))
+        return _motion_from_values(skeleton, values, names, counts, True, fps, path.stem)
     names, counts = _amc_layout(skeleton, body, path, first_line)
     values = _amc_values_fast(body, names, counts)
     if values is None:

@@ -16,13 +16,15 @@ Conventions
   :data:`TRANSLATION_MODES`): ``absolute``, the translation itself, replacing the ``OFFSET``
   component by component (Truebones and Bandai write the offsets there), or ``relative``, added
   to the ``OFFSET`` (MakeHuman writes zeros); ``root-only`` ignores them on every joint but the
-  root. ``translations="auto"`` (the default) detects which when joints other than the root have
-  position channels: values near zero (their median under a tenth of the offsets') are relative,
+  root. The root's own channels are relative in relative mode only when they hold values near
+  zero too (a T-pose's), else they are its position. ``translations="auto"`` (the default)
+  detects the mode when joints other than the root have position channels: values near zero
+  (their median under a tenth of the offsets') are relative,
   since read as absolute they would put every joint on its parent; any others are absolute
   (values equal to the offsets, or a studio's bones under offsets that only lay the skeleton
   out). A relative reading detected is said in a :class:`~quatmotion.errors.FormatWarning`. The
-  mode is kept in ``Skeleton.extras`` (``bvh_translations``, ``bvh_translations_guessed``) and
-  the writer writes in it.
+  mode is kept in ``Skeleton.extras`` (``bvh_translations``, ``bvh_translations_guessed``,
+  ``bvh_root_relative``) and the writer writes in it.
 * Units: BVH has no unit field. ``read_bvh(path, scale=...)`` takes the unit, by name
   (:data:`BVH_UNITS`: ``mm``, ``cm``, ``dm``, ``m``, ``in`` and ``asf``, the CMU/ASF unit of 1/0.45
   inch) or as centimetres per file unit; ``scale="auto"`` (the default) weighs every named unit
@@ -394,7 +396,10 @@ def parse_bvh(
                 name=path.stem,
                 extras={"format": "bvh", "bvh_scale": 1.0},
             )
-            in_file_units = _motion_from_table(skeleton, values, _fps(frame_time), path.stem, mode)
+            root_relative = mode == "relative" and _near_zero(channels, offsets_units, values, 0)
+            in_file_units = _motion_from_table(
+                skeleton, values, _fps(frame_time), path.stem, mode, root_relative
+            )
             guessed = cm_per_unit is None
             if cm_per_unit is None:
                 cm_per_unit = guess_length_unit(body_size(in_file_units)) or 1.0
@@ -405,6 +410,8 @@ def parse_bvh(
             }
             if mode_guessed is not None:
                 extras |= {"bvh_translations": mode, "bvh_translations_guessed": mode_guessed}
+            if root_relative:
+                extras["bvh_root_relative"] = True
             return rescaled(in_file_units, cm_per_unit, extras)
     except ValueError as error:  # e.g. values so large they overflow once scaled
         raise FormatError(str(error), path) from error
@@ -413,6 +420,26 @@ def parse_bvh(
 def _fps(frame_time: float) -> float:
     fps = 1.0 / frame_time
     return float(round(fps)) if abs(fps - round(fps)) <= 1e-4 * fps else fps
+
+
+def _near_zero(
+    channels: list[tuple[str, ...]],
+    offsets: NDArray[np.float64],
+    values: NDArray[np.float64],
+    joint: int,
+) -> bool:
+    """Whether joint ``joint``'s position channels hold values near zero against its offset
+    (their median length under a tenth of the offset's): the root's test in relative mode."""
+    column = sum(len(c) for c in channels[:joint])
+    cols, axes = [], []
+    for k, c in enumerate(channels[joint]):
+        if c[0] == "t":
+            cols.append(column + k)
+            axes.append("xyz".index(c[1]))
+    size = float(np.linalg.norm(offsets[joint, axes])) if cols else 0.0
+    if not size or not len(values):
+        return False
+    return float(np.median(np.linalg.norm(values[:, cols], axis=1))) < _NEAR_ZERO * size
 
 
 def _translation_mode(
@@ -503,10 +530,16 @@ def _motion_header(section: str, motion_line: int, path: Path) -> tuple[int, flo
 
 
 def _motion_from_table(
-    skeleton: Skeleton, values: NDArray[np.float64], fps: float, name: str, mode: str
+    skeleton: Skeleton,
+    values: NDArray[np.float64],
+    fps: float,
+    name: str,
+    mode: str,
+    root_relative: bool = False,
 ) -> Motion:
     """The clip of a frame table in the skeleton's units, position channels read per ``mode``
-    (:data:`TRANSLATION_MODES`; the root's are read alike, but never ignored)."""
+    (:data:`TRANSLATION_MODES`); the root's are never ignored, and relative only with
+    ``root_relative``."""
     J = skeleton.n_joints
     T = values.shape[0]
     columns = np.full((J, 3), -1, dtype=np.int64)
@@ -521,7 +554,8 @@ def _motion_from_table(
                 letters[j] += c[1]
             elif j == 0 or mode != "root-only":
                 axis = "xyz".index(c[1])
-                base = skeleton.offsets[j, axis] if mode == "relative" else 0.0
+                relative = mode == "relative" and (j > 0 or root_relative)
+                base = skeleton.offsets[j, axis] if relative else 0.0
                 translations[:, j, axis] = base + values[:, column]
                 moves_joints = moves_joints or j > 0
             column += 1
@@ -607,7 +641,10 @@ def bvh_channel_values(motion: Motion) -> NDArray[np.float64]:
     )
     translations[:, 0] = motion.root_translation
     if sk.extras.get("bvh_translations") == "relative":
+        root = translations[:, 0].copy()
         translations -= sk.offsets
+        if not sk.extras.get("bvh_root_relative"):
+            translations[:, 0] = root
     groups: dict[str, tuple[list[int], list[list[int]]]] = {}
     column = 0
     for j, chans in enumerate(sk.channels):

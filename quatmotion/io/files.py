@@ -17,6 +17,7 @@ from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.io._text import decode_text
 from quatmotion.io.asf_amc import parse_amc, parse_asf, read_amc, write_amc
 from quatmotion.io.bvh import parse_bvh, read_bvh, write_bvh
+from quatmotion.io.gltf import GLTF_SUFFIXES, parse_gltf, read_gltf, write_gltf
 from quatmotion.io.units import (
     LENGTH_UNITS,
     PLAUSIBLE_FIGURE_CM,
@@ -42,7 +43,7 @@ __all__ = [
     "write_motion",
 ]
 
-MOTION_SUFFIXES = (".amc", ".bvh")
+MOTION_SUFFIXES = (".amc", ".bvh", *GLTF_SUFFIXES)
 """File suffixes of motion clips (compared case-insensitively)."""
 
 
@@ -99,24 +100,27 @@ def read_motion(
     *,
     units: str | float | None = None,
     translations: str = "auto",
+    animation: str | int | None = None,
 ) -> Motion:
     """Read a motion file, choosing the reader by extension.
 
     Parameters
     ----------
     path : str or Path
-        ``.amc`` (Acclaim; the skeleton is found by naming convention unless given) or
-        ``.bvh``.
+        ``.amc`` (Acclaim; the skeleton is found by naming convention unless given),
+        ``.bvh``, or glTF 2.0 ``.glb`` / ``.gltf`` (:func:`quatmotion.io.gltf.read_gltf`).
     skeleton : Skeleton, str, Path or None
         For ``.amc`` only: the skeleton or its ASF path (see :func:`read_amc`).
     units : str, float or None
         The file's length unit, a name of :data:`LENGTH_UNITS` or centimetres per unit.
-        ``None``: a BVH's is guessed (see :func:`read_bvh`), an ASF's is the one it states;
-        given, it replaces the ASF's (an exporter that wrote ``:units length 0.01`` for
-        metres).
+        ``None``: a BVH's is guessed (see :func:`read_bvh`), an ASF's is the one it states,
+        glTF's is the metre; given, it replaces the ASF's or the metre (an exporter that wrote
+        ``:units length 0.01`` for metres, or centimetres into a glTF).
     translations : str
         For ``.bvh`` only: what position channels mean (:data:`TRANSLATION_MODES` or
         ``"auto"``, see :func:`read_bvh`).
+    animation : str, int or None
+        For glTF only: the animation's name or position (the first when None).
 
     Returns
     -------
@@ -137,6 +141,10 @@ def read_motion(
         if skeleton is not None:
             raise ValueError("a BVH file carries its own skeleton; do not pass one")
         return read_bvh(path, "auto" if units is None else units, translations)
+    if suffix in GLTF_SUFFIXES:
+        if skeleton is not None:
+            raise ValueError("a glTF file carries its own skeleton; do not pass one")
+        return read_gltf(path, animation, units=units)
     raise ValueError(
         f"unknown motion file type {path.suffix!r} (expected one of {MOTION_SUFFIXES})"
     )
@@ -148,13 +156,16 @@ def read_motion_checked(
     *,
     units: str | float | None = None,
     translations: str = "auto",
+    animation: str | int | None = None,
 ) -> tuple[Motion, list[Doubt]]:
     """:func:`read_motion`, and what is doubtful in the clip: what the reader tolerated or
     assumed (its :class:`~quatmotion.errors.FormatWarning`, as doubts of kind ``"read"``)
     followed by :func:`implausible_values`. What every command and batch job reads with."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", FormatWarning)
-        motion = read_motion(path, skeleton, units=units, translations=translations)
+        motion = read_motion(
+            path, skeleton, units=units, translations=translations, animation=animation
+        )
     doubts = []
     for warning in caught:
         message = warning.message
@@ -180,7 +191,8 @@ def parse_motion(
     Parameters
     ----------
     data : bytes
-        The whole ``.amc`` or ``.bvh`` file.
+        The whole ``.amc``, ``.bvh``, ``.glb`` or ``.gltf`` file (a ``.gltf`` with its data
+        embedded).
     name : str
         Its file name.
     skeleton : Skeleton, bytes or None
@@ -205,6 +217,10 @@ def parse_motion(
         if skeleton is not None:
             raise ValueError("a BVH file carries its own skeleton; do not pass one")
         return parse_bvh(decode_text(data, name), name)
+    if suffix in GLTF_SUFFIXES:
+        if skeleton is not None:
+            raise ValueError("a glTF file carries its own skeleton; do not pass one")
+        return parse_gltf(data, name)
     if suffix == ".amc":
         if skeleton is None:
             raise FormatError("an AMC holds no skeleton: give its ASF file too", name)
@@ -221,7 +237,8 @@ def write_motion(motion: Motion, path: str | Path) -> None:
 
     ``.amc`` writes only the AMC (the motion's skeleton must come from an ASF; write the
     skeleton with :func:`write_asf` where it is needed). ``.bvh`` writes any motion (an ASF
-    motion goes through :func:`to_bvh_skeleton`).
+    motion goes through :func:`to_bvh_skeleton`); so do ``.glb`` and ``.gltf``
+    (:func:`quatmotion.io.gltf.write_gltf`, in metres).
 
     Parameters
     ----------
@@ -234,6 +251,8 @@ def write_motion(motion: Motion, path: str | Path) -> None:
         write_amc(motion, path)
     elif suffix == ".bvh":
         write_bvh(motion, path)
+    elif suffix in GLTF_SUFFIXES:
+        write_gltf(motion, path)
     else:
         raise ValueError(
             f"unknown motion file type {path.suffix!r} (expected one of {MOTION_SUFFIXES})"
