@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import base64
 import json
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -304,7 +305,7 @@ def parse_gltf(
             text = data.decode("utf-8-sig")
             json.loads(text)  # a clear error for text that is no JSON
             gltf = pygltflib.GLTF2.from_json(text)
-    except (ValueError, UnicodeDecodeError, TypeError, KeyError) as error:
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError, struct.error) as error:
         raise FormatError(f"not a glTF 2.0 file ({error})", path) from None
     version = str(getattr(gltf.asset, "version", "") or "")
     if not version.startswith("2."):
