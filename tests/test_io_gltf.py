@@ -69,7 +69,7 @@ def test_an_amc_through_gltf_keeps_joint_positions(tmp_path):
     assert error <= ROUND_TRIP_CM
 
 
-def test_the_file_is_glTF_as_other_tools_read_it(tmp_path):
+def test_the_file_is_gltf_as_other_tools_read_it(tmp_path):
     import pygltflib
 
     clip = generate_clip("walk", 1, n_frames=30)
