@@ -313,7 +313,11 @@ def test_position_channels_near_zero_are_relative_and_near_the_offsets_absolute(
     np.testing.assert_allclose(_positions(absolute), _positions(in_cm), atol=1e-9)
     # Written back in the mode read: the file's numbers come back.
     io.write_bvh(relative, tmp_path / "again.bvh")
-    assert io.read_bvh(tmp_path / "again.bvh").skeleton.extras["bvh_translations"] == "relative"
+    with pytest.warns(FormatWarning, match="read as relative"):
+        again = io.read_bvh(tmp_path / "again.bvh")
+    assert again.skeleton.extras["bvh_translations"] == "relative"
+    last = [(p.read_text().splitlines()[-1]).split() for p in (tmp_path / "again.bvh", zero)]
+    np.testing.assert_array_equal(np.array(last[0], float), np.array(last[1], float))
     # Given, not detected: root-only ignores them, absolute collapses the figure as asked.
     ignored = io.read_bvh(zero, translations="root-only")
     np.testing.assert_allclose(_positions(ignored), _positions(plain), atol=1e-9)
@@ -326,6 +330,15 @@ def test_position_channels_near_zero_are_relative_and_near_the_offsets_absolute(
     assert given.exit_code == 0 and "ignored (root only) (given)" in given.stdout
     bad = _cli("info", zero, "--bvh-translations", "sideways")
     assert bad.exit_code == 2 and "root-only" in bad.stderr
+    # The collection's read settings carry the option, validated once.
+    from quatmotion.collection import find_clips, read_clip
+
+    with pytest.raises(ValueError, match="translations"):
+        ReadSettings(translations="sideways")
+    settings = ReadSettings(translations="root-only")
+    (source,) = find_clips([zero], settings)
+    read = read_clip(source, settings)
+    assert read.motion.skeleton.extras["bvh_translations"] == "root-only" and read.doubts == []
 
 
 # --- 9. an ASF whose :units length means metres ---------------------------------------------------

@@ -52,9 +52,11 @@ class ReadSettings(Settings):
     Attributes
     ----------
     units : str, float or None
-        Length unit of the input: a name of :data:`quatmotion.io.LENGTH_UNITS` or centimetres
-        per unit; None guesses a BVH's from the figure's stature (and says so in every clip's
-        reference) and takes an ASF's as it states it; given, it replaces an ASF's too.
+        Length unit of the BVH and glTF input: a name of :data:`quatmotion.io.LENGTH_UNITS` or
+        centimetres per unit; None guesses a BVH's from the figure's stature (and says so in
+        every clip's reference) and takes glTF's metre. An ASF's stated unit is kept in a
+        collection (a mixed library's BVH unit never rescales its CMU skeletons); one AMC read
+        alone takes a unit (:func:`quatmotion.io.read_motion`).
     skeleton : str or None
         An ASF file (the skeleton of every AMC) or a folder of ASF files; None finds each
         AMC's by the conventions of :func:`find_skeleton`.
@@ -228,7 +230,7 @@ def read_clip(source: ClipSource | ClipRef, read: ReadSettings | None = None) ->
         motion, doubts = read_motion_checked(
             source.path,
             source.skeleton_path if amc else None,
-            units=read.units,
+            units=None if amc else read.units,
             translations=read.translations if bvh else "auto",
         )
     if motion.name != source.name:

@@ -378,7 +378,9 @@ def parse_bvh(
         raise FormatError("no joint has channels", path, motion_line)
     values = _frame_values(block, block_line, n_frames, n_channels, path)
     offsets_units = np.asarray(offsets, dtype=np.float64)
-    mode, mode_guessed = _translation_mode(translations, channels, offsets_units, values, path)
+    mode, mode_guessed, root_relative = _translation_mode(
+        translations, channels, offsets_units, values, path
+    )
     site_units = np.asarray(site_offsets, dtype=np.float64).reshape(-1, 3)
     try:
         # Huge values overflow once scaled: the Skeleton and Motion checks then name them, so
@@ -396,7 +398,6 @@ def parse_bvh(
                 name=path.stem,
                 extras={"format": "bvh", "bvh_scale": 1.0},
             )
-            root_relative = mode == "relative" and _near_zero(channels, offsets_units, values, 0)
             in_file_units = _motion_from_table(
                 skeleton, values, _fps(frame_time), path.stem, mode, root_relative
             )
@@ -422,24 +423,34 @@ def _fps(frame_time: float) -> float:
     return float(round(fps)) if abs(fps - round(fps)) <= 1e-4 * fps else fps
 
 
-def _near_zero(
-    channels: list[tuple[str, ...]],
-    offsets: NDArray[np.float64],
-    values: NDArray[np.float64],
-    joint: int,
-) -> bool:
-    """Whether joint ``joint``'s position channels hold values near zero against its offset
-    (their median length under a tenth of the offset's): the root's test in relative mode."""
-    column = sum(len(c) for c in channels[:joint])
-    cols, axes = [], []
-    for k, c in enumerate(channels[joint]):
-        if c[0] == "t":
-            cols.append(column + k)
-            axes.append("xyz".index(c[1]))
-    size = float(np.linalg.norm(offsets[joint, axes])) if cols else 0.0
-    if not size or not len(values):
-        return False
-    return float(np.median(np.linalg.norm(values[:, cols], axis=1))) < _NEAR_ZERO * size
+def _position_table(
+    channels: list[tuple[str, ...]], values: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Every joint's position channels as ``(T, J, 3)`` (0 where a component has none), and
+    which components have one ``(J, 3)``."""
+    T, J = values.shape[0], len(channels)
+    table = np.zeros((T, J, 3))
+    present = np.zeros((J, 3), dtype=bool)
+    column = 0
+    for j, chans in enumerate(channels):
+        for c in chans:
+            if c[0] == "t":
+                axis = "xyz".index(c[1])
+                table[:, j, axis] = values[:, column]
+                present[j, axis] = True
+            column += 1
+    return table, present
+
+
+def _near_zero_joints(
+    table: NDArray[np.float64], present: NDArray[np.bool_], offsets: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per joint: the length of its offset's components that have channels, and the median
+    length over frames of those channels' values."""
+    size = np.linalg.norm(np.where(present, offsets, 0.0), axis=1)
+    if not len(table):
+        return size, np.zeros_like(size)
+    return size, np.median(np.linalg.norm(table, axis=2), axis=0)
 
 
 def _translation_mode(
@@ -448,39 +459,37 @@ def _translation_mode(
     offsets: NDArray[np.float64],
     values: NDArray[np.float64],
     path: Path,
-) -> tuple[str, bool | None]:
-    """The translations mode and whether it was detected (None: no joint but the root has
-    position channels, so the mode does not matter and is not recorded)."""
-    columns: list[tuple[int, list[int], list[int]]] = []  # joint, its columns, their axes
-    column = 0
-    for j, chans in enumerate(channels):
-        positions = [(column + k, "xyz".index(c[1])) for k, c in enumerate(chans) if c[0] == "t"]
-        if j > 0 and positions:
-            columns.append((j, [c for c, _ in positions], [a for _, a in positions]))
-        column += len(chans)
-    if not columns:
-        return ("absolute" if given == "auto" else given), None
+) -> tuple[str, bool | None, bool]:
+    """The translations mode, whether it was detected (None: no joint but the root has
+    position channels, so the mode does not matter and is not recorded), and whether the
+    root's channels are relative too (relative mode, and values near zero: a T-pose's)."""
+    table, present = _position_table(channels, values)
+    moved = np.flatnonzero(present[1:].any(axis=1)) + 1
+    size, typical = _near_zero_joints(table, present, offsets)
+    root_relative = bool(present[0].any() and size[0] and typical[0] < _NEAR_ZERO * size[0])
+    if not len(moved):
+        mode = "absolute" if given == "auto" else given
+        return mode, None, mode == "relative" and root_relative
     if given != "auto":
-        return given, False
-    sizes, from_zero = [], []
-    for j, cols, axes in columns:
-        offset = offsets[j, axes]
-        if not np.any(offset) or not len(values):
-            continue  # both readings agree: no evidence
-        sizes.append(np.linalg.norm(offset))
-        from_zero.append(np.median(np.linalg.norm(values[:, cols], axis=1)))
+        return given, False, given == "relative" and root_relative
+    evidence = moved[size[moved] > 0]  # a zero offset: both readings agree
     # Values near zero read as absolute would put every joint on its parent: no figure at all.
-    if sizes and np.median(from_zero) < _NEAR_ZERO * np.median(sizes):
+    near_zero = (
+        len(evidence) > 0
+        and len(values) > 0
+        and np.median(typical[evidence]) < _NEAR_ZERO * np.median(size[evidence])
+    )
+    if near_zero:
         warnings.warn(
             FormatWarning(
-                f"position channels on {len(columns)} joints hold values near zero, not near "
+                f"position channels on {len(moved)} joints hold values near zero, not near "
                 "their offsets: read as relative to the offsets (--bvh-translations relative)",
                 path,
             ),
             stacklevel=3,
         )
-        return "relative", True
-    return "absolute", True
+        return "relative", True, root_relative
+    return "absolute", True, False
 
 
 def _find_motion_keyword(text: str) -> tuple[int, int, bool]:
