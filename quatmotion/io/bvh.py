@@ -447,10 +447,11 @@ def _near_zero_joints(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per joint: the length of its offset's components that have channels, and the median
     length over frames of those channels' values."""
-    size = np.linalg.norm(np.where(present, offsets, 0.0), axis=1)
-    if not len(table):
-        return size, np.zeros_like(size)
-    return size, np.median(np.linalg.norm(table, axis=2), axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):  # absurd values: a doubt of their own
+        size = np.linalg.norm(np.where(present, offsets, 0.0), axis=1)
+        if not len(table):
+            return size, np.zeros_like(size)
+        return size, np.median(np.linalg.norm(table, axis=2), axis=0)
 
 
 def _translation_mode(

@@ -176,6 +176,12 @@ class _Tree(NamedTuple):
 
 
 def _tree(skeleton: Skeleton, motion: Motion | None = None) -> _Tree:
+    # Absurd but finite lengths (doubts of their own) may overflow here: inf says enough.
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _tree_of(skeleton, motion)
+
+
+def _tree_of(skeleton: Skeleton, motion: Motion | None) -> _Tree:
     offsets = np.asarray(skeleton.offsets, dtype=np.float64)
     lengths = np.linalg.norm(offsets, axis=1)
     if motion is not None and motion.joint_translations is not None and motion.n_frames:
