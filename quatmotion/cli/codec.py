@@ -94,6 +94,10 @@ def compress(
             if not path.exists():
                 raise CliInputError(f"{path}: no such file or folder")
         check_outputs([out], [p for p in inputs if p.is_file()], force=force)
+        from quatmotion.cli.warmup import ensure_kernels
+
+        groups = ("read", "codec", "learn") if method in ("qssd", "ksvd") else ("read", "codec")
+        ensure_kernels(*groups, workers=workers, scheduler=scheduler)
         with progress_bar() as progress:
             result = run_compress(
                 inputs, out, max_error=max_error, ratio=ratio, method=method,
@@ -203,6 +207,9 @@ def append(
         require_file(library)
         if skeleton is not None:
             require_file(skeleton)
+        from quatmotion.cli.warmup import ensure_kernels
+
+        ensure_kernels("read", "codec", workers=workers, scheduler=scheduler)
         with progress_bar() as progress:
             result = run_append(
                 library, inputs, max_error=max_error, skeleton=skeleton,

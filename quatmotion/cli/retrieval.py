@@ -67,6 +67,10 @@ def _build(
         if skeletons is not None and not skeletons.is_dir():
             raise CliInputError(f"{skeletons}: --skeletons must be a folder of ASF files")
         kind_tuple = _kinds(kinds)
+        from quatmotion.cli.warmup import ensure_kernels
+
+        learn = ("learn",) if {"qssd", "ksvd"} & set(kind_tuple) else ()
+        ensure_kernels("read", *learn, "retrieval", workers=workers, scheduler=scheduler)
         with progress_bar(error_console) as bar:
             task = bar.add_task("indexing", total=None)
 
