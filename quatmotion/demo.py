@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,14 @@ from quatmotion._atomic import atomic_write_text
 from quatmotion.motion import Motion, angular_displacements, forward_kinematics, standing_height
 from quatmotion.viz import pyplot, save_figure
 
-__all__ = ["plot_stick_figure", "run_demo", "sample_step"]
+__all__ = [
+    "BuiltLibrary",
+    "build_library",
+    "plot_stick_figure",
+    "run_demo",
+    "sample_step",
+    "write_clips",
+]
 
 _MAX_SAMPLE_FPS = 20.0
 _MAX_USER_CLIPS = 60
@@ -331,3 +339,155 @@ def _dictionary_comparison(
         "quaternions_per_sample": int(Y.shape[1]),
         "methods": rows,
     }
+
+
+# --- a browsable, searchable library built from clips (the demo's ending, `quatmotion serve`) --
+
+
+@dataclass(frozen=True)
+class BuiltLibrary:
+    """What :func:`build_library` wrote.
+
+    Attributes
+    ----------
+    files : list of Path
+        The motion files it read (the clips written, or those found under the sources).
+    library : Path
+        The ``.qmz`` library: every clip within 1 cm.
+    index : Path
+        The ``.qidx`` clip index (motion features: search by example with the default method).
+    poses : Path or None
+        The pose index (pose search), when asked for.
+    failed : list of str
+        ``"file: reason"`` of each clip left out.
+    """
+
+    files: list[Path]
+    library: Path
+    index: Path
+    poses: Path | None
+    failed: list[str] = field(default_factory=list)
+
+
+BuildProgress = Callable[[str, int, int], None]
+"""``progress(step, done, total)`` of :func:`build_library`: steps ``compress: ...`` (the
+codec's steps), ``index`` and ``poses: ...``."""
+
+
+def write_clips(clips: Sequence[tuple[Motion, str]], folder: str | Path) -> dict[Path, str]:
+    """Each clip written as ``<folder>/<name>.bvh``; returns file -> label, in clip order."""
+    from quatmotion.io import write_motion
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    out = {}
+    for motion, label in clips:
+        path = folder / f"{motion.name}.bvh"
+        write_motion(motion, path)
+        out[path] = label
+    return out
+
+
+def build_library(
+    folder: str | Path,
+    sources: Sequence[str | Path] = (),
+    *,
+    seed: int = 0,
+    poses: bool = True,
+    progress: BuildProgress | None = None,
+    workers: int | None = None,
+) -> BuiltLibrary:
+    """Compress, index (and pose-index) clips into ``folder``, ready to serve or search.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Where the files go (created): ``library.qmz``, ``library.qidx``, ``poses.idx``, and
+        ``clips/`` when the clips are generated.
+    sources : sequence of paths
+        Clips or folders of clips (``.amc`` with their ASF found by name, ``.bvh``); empty: the
+        demo's generated library (two clips of every kind, labelled by kind).
+    seed : int
+        Seed of the generated clips and of the learners.
+    poses : bool
+        Build the pose index too.
+    progress : callable, optional
+        See :data:`BuildProgress`.
+    workers : int, optional
+        Processes of the batch steps (default: every core).
+
+    Returns
+    -------
+    BuiltLibrary
+
+    Raises
+    ------
+    ValueError
+        No clip could be read (naming the sources).
+    """
+    from quatmotion import codec
+    from quatmotion.io import find_motion_files
+    from quatmotion.retrieval.build import build_index
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    report = progress or (lambda _step, _done, _total: None)
+    if sources:
+        files, labels = find_motion_files(sources), None
+    else:
+        from quatmotion.motion.synthetic import generate_library
+
+        generated = generate_library(2, seed=seed)
+        report("clips", 0, len(generated))
+        written = write_clips(generated, folder / "clips")
+        report("clips", len(generated), len(generated))
+        files, labels = list(written), {p.stem: label for p, label in written.items()}
+    failed: dict[str, str] = {}
+    library = folder / "library.qmz"
+
+    def step(prefix: str) -> BuildProgress:
+        return lambda name, done, total: report(f"{prefix}: {name}", done, total)
+
+    result = codec.compress(
+        files,
+        library,
+        max_error=codec.DEFAULT_MAX_ERROR_CM,
+        seed=seed,
+        workers=workers,
+        on_error="skip",
+        progress=step("compress"),
+    )
+    failed.update(dict(result.failed))
+    bad = {str(Path(name)) for name in failed}
+    good = [f for f in files if str(f) not in bad and f.stem not in failed]
+    if not good:
+        where = ", ".join(str(s) for s in sources) or "the generated library"
+        raise ValueError(f"{where}: no clip could be read ({next(iter(failed.values()), '')})")
+    index = folder / "library.qidx"
+    built = build_index(
+        good,
+        index,
+        kinds=("motion",),
+        labels=labels,
+        workers=workers,
+        progress=lambda done, total: report("index", done, total),
+    )
+    failed.update(dict(built.failed))
+    pose_path = None
+    if poses:
+        import functools
+
+        from quatmotion.pose.library import PoseLibrary, load_pose_clip
+
+        pose_library, pose_failures = PoseLibrary.build_streamed(
+            good,
+            functools.partial(load_pose_clip, fps=30.0, height=170.0),
+            seed=seed,
+            workers=workers,
+            progress=step("poses"),
+        )
+        for failure in pose_failures:
+            failed.setdefault(str(failure.item), failure.message)
+        pose_path = folder / "poses.idx"
+        pose_library.save(pose_path)
+    return BuiltLibrary(files, library, index, pose_path, [f"{k}: {v}" for k, v in failed.items()])
