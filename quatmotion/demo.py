@@ -4,7 +4,10 @@ Steps: generate a labelled library of procedural clips (or read the clips given)
 they are, draw one as a stick figure (PNG), learn a QSSD dictionary and a K-SVD dictionary
 on the clips' angular displacements and compare their reconstruction errors on held-out frames,
 then compress the clips into a ``.qmz`` library with every joint within 1 cm (the default codec
-beside the spline and naive baselines) and, when the data folder is present, one real clip.
+beside the spline and naive baselines) and, when the data folder is present, one real clip;
+last, index the clips and search them by example (the first clip), and write ``view.html``,
+the example beside its best match. :func:`build_library` makes the library ``quatmotion serve``
+serves without files (the same clips) or from a folder.
 
 Conventions
 -----------
@@ -15,7 +18,9 @@ Conventions
   120 frames/s are near-duplicates); 80 % of the frames train, 20 % test (random split).
 * Errors are the mean rotation angle between sample and reconstruction, degrees per joint per
   frame (METRICS.md "Angular error", with the factor 2).
-* Outputs go to ``out_dir``: ``stick_<clip>.png`` and ``summary.json`` (written atomically).
+* Outputs go to ``out_dir``: ``stick_<clip>.png``, the ``.qmz`` files, ``library.qidx``,
+  ``view.html``, ``clips/`` (the generated clips as BVH, for the index) and ``summary.json``
+  (written atomically).
 """
 
 from __future__ import annotations
@@ -215,10 +220,75 @@ def run_demo(
     }
     summary.update(_dictionary_comparison(clips, seed, quick, console))
     summary["compression"] = _compression(clips, out_dir, seed, quick, console)
+    summary["search"] = _search_by_example(clips, list(paths), out_dir, console)
     summary["seconds"] = time.perf_counter() - start
     atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
     console.print(f"summary: {out_dir / 'summary.json'} ({summary['seconds']:.1f} s)")
+    console.print(
+        f"next: open {summary['search']['view']} in a browser (offline; space plays); "
+        "`quatmotion serve` shows the same library in the web app",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
     return summary
+
+
+def _search_by_example(
+    clips: list[tuple[Motion, str]], paths: list[Path], out_dir: Path, console: Console
+) -> dict[str, Any]:
+    """Index the clips (motion features), search with the first one as the example, and
+    write ``view.html``: the example beside its best match."""
+    from quatmotion.io import find_motion_files
+    from quatmotion.retrieval import DEFAULT_METHOD, ClipIndex, build_index, search
+    from quatmotion.viz import write_view
+
+    if paths:
+        files = find_motion_files(paths)[:_MAX_USER_CLIPS]
+        labels = {f.stem: label for f, (_, label) in zip(files, clips, strict=True)}
+    else:
+        labels = {f.stem: label for f, label in write_clips(clips, out_dir / "clips").items()}
+        files = [out_dir / "clips" / f"{m.name}.bvh" for m, _ in clips]
+    index_path = out_dir / "library.qidx"
+    index_path.unlink(missing_ok=True)  # built afresh: the demo runs with --force
+    report = build_index(files, index_path, kinds=("motion",), labels=labels)
+    query = clips[0][0]
+    with ClipIndex.open(index_path) as index:
+        results = search(index, query.name, top=5)
+    console.print(
+        f"search by example: {report.added} clips indexed ({index_path}); the clips most like "
+        f"{query.name} under {DEFAULT_METHOD}, the example itself left out",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
+    table = Table(title=f"clips like {query.name}", title_justify="left")
+    for column in ("rank", "clip", "label", "distance"):
+        table.add_column(column, justify="right" if column in ("rank", "distance") else "left")
+    for hit in results:
+        table.add_row(str(hit.rank), hit.clip, hit.label, f"{hit.distance:.3f}")
+    console.print(table)
+    rows = [
+        {"rank": h.rank, "clip": h.clip, "label": h.label, "distance": h.distance} for h in results
+    ]
+    if not results:
+        return {"index": str(index_path), "query": query.name, "results": rows, "view": None}
+    by_name = {m.name: m for m, _ in clips}
+    best = by_name.get(results[0].clip) or _read(results[0].path)
+    view = write_view(out_dir / "view.html", [query, best], title=f"{query.name} and {best.name}")
+    console.print(
+        f"view: {view} (the example beside its best match, {best.name})",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
+    return {"index": str(index_path), "query": query.name, "results": rows, "view": str(view)}
+
+
+def _read(path: str) -> Motion:
+    from quatmotion.io import read_motion
+
+    return read_motion(path)
 
 
 def _compression(
@@ -307,9 +377,10 @@ def _dictionary_comparison(
     )
     rows = _compare(train, test, seed, quick)
     result = Table(
-        title="reconstruction of angular displacements "
-        "(mean rotation error, degrees per joint per frame)",
+        title="reconstruction of angular displacements",
+        caption="errors: mean rotation angle, degrees per joint per frame",
         title_justify="left",
+        caption_justify="left",
     )
     columns = (
         "method",
