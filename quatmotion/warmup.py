@@ -67,8 +67,8 @@ KERNEL_MODULES: tuple[str, ...] = (
 GROUPS: dict[str, str] = {
     "read": "reading files and kinematics",
     "codec": "compression and decompression (best, spline, naive)",
-    "learn": "dictionary learning and its codecs (QSSD, K-SVD)",
-    "retrieval": "clip index and search (every method)",
+    "learn": "dictionary learning, its codecs and clip features (QSSD, K-SVD)",
+    "retrieval": "clip index and search by motion features",
     "pose": "pose index and search (both distances)",
 }
 """Group name -> what it compiles, in the order :func:`warm_up` runs them."""
@@ -263,6 +263,7 @@ def _learn(space: _Workspace) -> None:
     rank1(rng.standard_normal((400, 120)), rng.standard_normal(120))  # a large one: a kernel
     dtw_path(Y[:20].reshape(20, -1), Y[5:30].reshape(25, -1))
     _compress(space, _DICTIONARY_CODECS)
+    _index_and_search(space, ("qssd", "ksvd"))  # the clip index's dictionary features
 
 
 def _compress(space: _Workspace, methods: Iterable[str]) -> None:
@@ -285,17 +286,26 @@ def _codec(space: _Workspace) -> None:
 _DICTIONARY_CODECS = ("qssd", "ksvd")
 
 
-def _retrieval(space: _Workspace) -> None:
+def _index_and_search(space: _Workspace, kinds: tuple[str, ...]) -> None:
+    """Index the clips with feature ``kinds``, then search with every method they serve."""
     from quatmotion.io import read_motion
     from quatmotion.retrieval import METHODS, ClipIndex, build_index, search, search_within
 
-    out = space.folder / "clips.qidx"
-    build_index(space.files, out, workers=1)
+    out = space.folder / f"clips-{'-'.join(kinds)}.qidx"
+    build_index(space.files, out, kinds=kinds, workers=1)
     query = read_motion(space.files[0])
     with ClipIndex.open(out) as index:
         for method in METHODS:
-            search(index, query, method=method, top=2)
-        search_within(index, query, top=2)
+            if set(METHODS[method].kinds) <= set(kinds):
+                search(index, query, method=method, top=2)
+        if "motion" in kinds:
+            search_within(index, query, top=2)
+
+
+def _retrieval(space: _Workspace) -> None:
+    # Motion features only, the default method's (what `quatmotion serve` builds); the
+    # dictionary features are the learn group's.
+    _index_and_search(space, ("motion",))
 
 
 def _pose(space: _Workspace) -> None:
