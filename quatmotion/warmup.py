@@ -1,11 +1,11 @@
 """Compile every cached Numba kernel of quatmotion once: ``quatmotion warm-up``.
 
 Numba compiles a kernel the first time it is called with given argument types and keeps the
-machine code in its cache (:mod:`quatmotion._jit` says where); later processes load it in
-milliseconds. A first run compiles for minutes: on a cold cache a two-worker ``index build`` of
-12 clips took 100-200 s where the same build warm takes about 12 s, because every worker
-compiled every kernel on its own. The warm-up compiles them once, in this process, by running
-the real code on a tiny generated library, so the argument types are those of real use.
+machine code in its cache (:mod:`quatmotion._jit` says where); later processes load it from
+there. On a cold cache every worker of a pool compiles every kernel it runs on its own, all at
+once. The warm-up compiles them once, in this process, by running the real code on a tiny
+generated library, so that the argument types are those of real use (docs/performance.md has
+the cold and warm times).
 
 Conventions
 -----------
@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import hashlib
 import importlib
-import importlib.util
 import json
 import os
 import platform
@@ -67,7 +66,7 @@ KERNEL_MODULES: tuple[str, ...] = (
 GROUPS: dict[str, str] = {
     "read": "reading files and kinematics",
     "codec": "compression and decompression (best, spline, naive)",
-    "learn": "dictionary learning, its codecs and clip features (QSSD, K-SVD)",
+    "learn": "QSSD and K-SVD: learning, codecs, clip features",
     "retrieval": "clip index and search by motion features",
     "pose": "pose index and search (both distances)",
 }
@@ -100,10 +99,9 @@ def cache_key() -> str:
     digest = hashlib.sha256()
     for part in (sys.version, numba.__version__, platform.machine(), llvm.get_host_cpu_name()):
         digest.update(part.encode() + b"\0")
-    for name in KERNEL_MODULES:
-        spec = importlib.util.find_spec(name)
-        if spec is not None and spec.origin:
-            digest.update(name.encode() + b"\0" + Path(spec.origin).read_bytes())
+    for name in KERNEL_MODULES:  # read as files: importing them would cost a batch command
+        source = _jit.PACKAGE_DIR.joinpath(*name.split(".")[1:]).with_suffix(".py")
+        digest.update(name.encode() + b"\0" + source.read_bytes())
     return digest.hexdigest()
 
 
@@ -158,46 +156,97 @@ def _counts(kernels: Sequence[Any]) -> tuple[int, int]:
 
 
 def warm_up(
-    groups: Iterable[str] = GROUPS, *, report: Callable[[GroupReport], None] | None = None
+    groups: Iterable[str] = GROUPS,
+    *,
+    report: Callable[[GroupReport], None] | None = None,
+    workers: int | None = None,
 ) -> list[GroupReport]:
-    """Compile (or load) the kernels of ``groups`` in this process and stamp each group warm.
+    """Compile (or load) the kernels of ``groups`` and stamp each group warm.
+
+    ``read`` (the kernels every group runs) goes first, in this process; the other groups
+    then compile side by side, one per worker process, longest first: they share few kernels,
+    and Numba compiles one kernel at a time in a process.
 
     Parameters
     ----------
     groups : iterable of str
-        Keys of :data:`GROUPS` (default all), run in the order of :data:`GROUPS`.
+        Keys of :data:`GROUPS` (default all).
     report : callable, optional
-        Called with each group's :class:`GroupReport` as it finishes.
+        Called with each group's :class:`GroupReport` as it finishes (in the order of
+        :data:`GROUPS` for those run here, then longest first).
+    workers : int, optional
+        Processes compiling groups at once (default: the CPUs available); 1 runs every group
+        in this process.
 
     Returns
     -------
     list of GroupReport
+        One per group asked for.
     """
-    wanted = set(groups)
-    unknown = wanted - set(GROUPS)
+    from quatmotion.parallel import available_cpus, run_batch
+
+    wanted = [g for g in GROUPS if g in set(groups)]
+    unknown = set(groups) - set(GROUPS)
     if unknown:
         raise ValueError(
             f"unknown warm-up groups {sorted(unknown)}; choose from {', '.join(GROUPS)}"
         )
-    kernels = cached_kernels()
+    n = available_cpus() if workers is None else workers
+    side_by_side = [g for g in _LONGEST_FIRST if g in wanted and g != "read"] if n > 1 else []
+    if len(side_by_side) < 2:
+        side_by_side = []
+    here = [g for g in GROUPS if g in wanted and g not in side_by_side]
+    if side_by_side and "read" not in here:
+        here.insert(0, "read")  # every group reads clips: compiled once, before the workers
     key = cache_key()
     reports = []
-    with tempfile.TemporaryDirectory(prefix="quatmotion-warm-up-") as folder:
-        space = _Workspace(Path(folder))
-        for group in (g for g in GROUPS if g in wanted):
-            before = _counts(kernels)
-            start = time.perf_counter()
-            if not space.files:
-                _write_library(space)  # generating clips runs kernels too: the first group's
-            _RUNNERS[group](space)
-            seconds = time.perf_counter() - start
-            after = _counts(kernels)
-            done = GroupReport(group, seconds, after[0] - before[0], after[1] - before[1])
+
+    def finished(done: GroupReport) -> None:
+        _write_stamp(done.group, key, done)
+        if done.group in wanted:
             reports.append(done)
-            _write_stamp(group, key, done)
             if report is not None:
                 report(done)
+
+    with tempfile.TemporaryDirectory(prefix="quatmotion-warm-up-") as folder:
+        kernels = cached_kernels()
+        start = time.perf_counter()
+        files = _write_library(Path(folder))  # forward kinematics: counted in the first group
+        setup = (time.perf_counter() - start, *_counts(kernels))
+        for group in here:
+            done = _run_group((group, folder, files))
+            if group == here[0]:
+                done = GroupReport(
+                    group, done.seconds + setup[0], done.compiled + setup[1], done.loaded + setup[2]
+                )
+            finished(done)
+        if side_by_side:
+            jobs = [(group, folder, files) for group in side_by_side]
+            result = run_batch(_run_group, jobs, workers=min(n, len(jobs)))
+            if result.failures:
+                failure = result.failures[0]
+                raise RuntimeError(f"warm-up of {failure.item[0]!r} failed: {failure.message}")
+            for done in result.results:
+                assert done is not None
+                finished(done)
     return reports
+
+
+# The groups run side by side, longest first (measured cold: learn far the longest).
+_LONGEST_FIRST = ("learn", "pose", "codec", "retrieval", "read")
+
+
+def _run_group(job: tuple[str, str, tuple[str, ...]]) -> GroupReport:
+    """Run one group on the library in ``folder`` (a batch job: module level)."""
+    group, folder, files = job
+    kernels = cached_kernels()
+    before = _counts(kernels)
+    start = time.perf_counter()
+    _RUNNERS[group](_Workspace(Path(folder), [Path(f) for f in files]))
+    after = _counts(kernels)
+    return GroupReport(
+        group, time.perf_counter() - start, after[0] - before[0], after[1] - before[1]
+    )
 
 
 def _write_stamp(group: str, key: str, done: GroupReport) -> None:
@@ -212,20 +261,22 @@ def _write_stamp(group: str, key: str, done: GroupReport) -> None:
 # --- the work of each group, on a tiny library ------------------------------------------------
 
 
-def _write_library(space: _Workspace) -> None:
-    """Three short generated clips: two as BVH, one as AMC with its ASF."""
+def _write_library(folder: Path) -> tuple[str, ...]:
+    """Three short generated clips in ``folder``: two as BVH, one as AMC with its ASF."""
     from quatmotion.io import write_asf, write_motion
     from quatmotion.motion.synthetic import generate_clip
 
+    files = []
     for k, kind in enumerate(("walk", "jump", "squat")):
         motion = generate_clip(kind, seed=k, n_frames=60, fps=30.0)
         if kind == "squat":
-            path = space.folder / f"{kind}.amc"
+            path = folder / f"{kind}.amc"
             write_asf(motion.skeleton, path.with_suffix(".asf"))
         else:
-            path = space.folder / f"{kind}.bvh"
+            path = folder / f"{kind}.bvh"
         write_motion(motion, path)
-        space.files.append(path)
+        files.append(str(path))
+    return tuple(files)
 
 
 def _read(space: _Workspace) -> None:

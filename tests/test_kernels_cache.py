@@ -133,7 +133,7 @@ def test_the_warm_up_calls_every_cached_kernel() -> None:
     # their own); inlined helpers have none of their own: they are compiled into their callers.
     code = (
         "from quatmotion import warmup\n"
-        "warmup.warm_up()\n"
+        "warmup.warm_up(workers=1)\n"  # every group in this process, to look at its kernels
         "kernels = warmup.cached_kernels()\n"
         "by_name = {k.__name__: k for k in kernels}\n"
         "todo = [k for k in kernels if k.signatures]\n"
@@ -159,7 +159,7 @@ def test_the_warm_up_calls_every_cached_kernel() -> None:
 def test_groups_are_stale_until_warmed_and_again_when_a_kernel_changes(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setenv(_jit.CACHE_ENV, str(tmp_path))  # where the stamps go
+    monkeypatch.setattr(warmup, "_stamp", lambda group: tmp_path / f"{group}.json")
     assert warmup.stale_groups(["read"]) == ["read"]
     reports = warmup.warm_up(["read"])
     assert [r.group for r in reports] == ["read"]
@@ -168,6 +168,21 @@ def test_groups_are_stale_until_warmed_and_again_when_a_kernel_changes(
     assert warmup.stale_groups(["read"]) == ["read"]
     with pytest.raises(ValueError, match="unknown warm-up group"):
         warmup.stale_groups(["everything"])
+
+
+def test_groups_compile_side_by_side_and_report_each(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The stamps go to tmp_path; the kernels stay in the cache (the workers' too).
+    monkeypatch.setattr(warmup, "_stamp", lambda group: tmp_path / f"{group}.json")
+    seen: list[str] = []
+    reports = warmup.warm_up(
+        ["codec", "retrieval"], workers=2, report=lambda r: seen.append(r.group)
+    )
+    assert sorted(r.group for r in reports) == sorted(seen) == ["codec", "retrieval"]
+    assert all(r.seconds > 0 for r in reports)
+    # read ran first, here, and is stamped too; the two groups ran in workers
+    assert warmup.stale_groups() == ["learn", "pose"]
 
 
 def test_a_batch_on_the_pool_compiles_its_groups_first_and_says_so_once(
@@ -181,7 +196,7 @@ def test_a_batch_on_the_pool_compiles_its_groups_first_and_says_so_once(
         calls.append(list(groups))
         return []
 
-    monkeypatch.setenv(_jit.CACHE_ENV, str(tmp_path / "no stamps yet"))
+    monkeypatch.setattr(warmup, "_stamp", lambda group: tmp_path / "no stamps yet" / group)
     monkeypatch.setattr(warmup, "warm_up", fake_warm_up)
     monkeypatch.setattr(cli_warmup, "_said", False)
     clips = [tmp_path / "walk.bvh"]

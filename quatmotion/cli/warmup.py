@@ -54,11 +54,13 @@ def say_when_compiling() -> None:
 def _run(groups: list[str], target: Console, *, each: bool) -> list[GroupReport]:
     from quatmotion.warmup import GROUPS, warm_up
 
+    width = max(len(text) for text in GROUPS.values())
+
     def report(done: GroupReport) -> None:
         if each:
             how = f"{done.compiled} compiled" if done.compiled else "all from the cache"
             target.print(
-                f"  {GROUPS[done.group]:<52} {done.seconds:6.1f} s  ({how})",
+                f"  {GROUPS[done.group]:<{width}} {done.seconds:6.1f} s  ({how})",
                 markup=False,
                 highlight=False,
             )
