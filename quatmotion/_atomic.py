@@ -26,18 +26,26 @@ def atomic_output(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
     writers pick the format from the name (``".png"``). Missing parent folders are created.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
-    os.close(handle)
+    temp = ""
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+        os.close(handle)
         yield Path(temp)
         # mkstemp creates the file readable by its owner only; give it the permissions a plain
         # open() would (the umask's), or those of the file it replaces.
         os.chmod(temp, _permissions(path))
         os.replace(temp, path)
+    except OSError as error:
+        # The temporary file is no name the user knows: errors name the target instead.
+        named = getattr(error, "filename", None)
+        if error.errno is None or not named or not Path(named).name.startswith(f".{path.name}."):
+            raise
+        raise type(error)(error.errno, error.strerror, str(path)) from error
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(temp)
+        if temp:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(temp)
 
 
 def _permissions(path: Path) -> int:

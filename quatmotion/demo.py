@@ -122,16 +122,22 @@ def plot_stick_figure(motion: Motion, path: str | Path, n_poses: int = 8) -> Pat
 
 
 def _load(
-    paths: Sequence[Path], seed: int, quick: bool, units: str | None = None
+    paths: Sequence[Path],
+    seed: int,
+    quick: bool,
+    units: str | None = None,
+    skeleton: str | Path | None = None,
 ) -> list[tuple[Motion, str]]:
     if paths:
         from quatmotion.io import find_motion_files, read_motion
 
         files = find_motion_files(paths)[:_MAX_USER_CLIPS]
-        return [
-            (read_motion(p, units=units if p.suffix.lower() == ".bvh" else None), p.parent.name)
-            for p in files
-        ]
+        out = []
+        for p in files:
+            amc = p.suffix.lower() == ".amc"
+            motion = read_motion(p, skeleton if amc else None, units=None if amc else units)
+            out.append((motion, p.parent.name))
+        return out
     from quatmotion.motion.synthetic import generate_library
 
     return generate_library(1 if quick else 2, seed=seed)
@@ -177,6 +183,7 @@ def run_demo(
     quick: bool = False,
     console: Console | None = None,
     units: str | None = None,
+    skeleton: str | Path | None = None,
 ) -> dict[str, Any]:
     """Run the demo and print a Rich summary; returns what it wrote to ``summary.json``.
 
@@ -195,6 +202,8 @@ def run_demo(
     units : str, optional
         Length unit of the BVH clips given (see :func:`quatmotion.io.read_motion`); ``None``
         guesses it.
+    skeleton : str or Path, optional
+        The ASF of the AMC clips given (else each one's is found by name).
 
     Returns
     -------
@@ -204,7 +213,7 @@ def run_demo(
     console = console or Console()
     out_dir = Path(out_dir)
     start = time.perf_counter()
-    clips = _load(list(paths), seed, quick, units)
+    clips = _load(list(paths), seed, quick, units, skeleton)
     source = "given clips" if paths else "generated library"
     console.print(_clip_table(clips, source))
     figure = plot_stick_figure(clips[0][0], out_dir / f"stick_{clips[0][0].name}.png")

@@ -27,3 +27,14 @@ class FormatError(ValueError):
             where += ": "
         super().__init__(f"{where}{message}")
         self.reason = message
+
+
+class ClipNameError(KeyError, ValueError):
+    """A clip name that names no clip of a collection, or several (the message lists them).
+
+    Both a ``KeyError`` (a name looked up, as :meth:`quatmotion.codec.Archive.index_of` raises)
+    and a ``ValueError`` (a bad argument, as the pose library and the clip index raise).
+    """
+
+    def __str__(self) -> str:  # KeyError's would quote the message
+        return str(self.args[0]) if self.args else ""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import http.server
+import io
 import os
 import threading
 from collections.abc import Callable, Iterator
@@ -89,6 +90,100 @@ def artifact_dir() -> Path:
     return ARTIFACTS
 
 
+# The viewer's framing, read back from a page showing a viewer (window.quatmotionViewer): at its
+# first, middle and last frames every drawn point of every figure lands inside its own viewport
+# and in front of the camera (QuatmotionViewer's projectedPoints), and what the canvas shows in
+# colour (the figures; background, grid and label text are grey) lies where those points are,
+# around them within a joint's size: nothing drawn elsewhere (no bone from a root the viewer
+# does not show) and each figure really drawn (its pixels span its points).
+FIGURE_SATURATION = 60  # max - min of R, G, B: the figures' colours, never the greys
+
+
+def _saturated_box(image: Any, left: int, right: int) -> tuple[int, int, int, int] | None:
+    import numpy as np
+
+    part = image[:, left:right].astype(np.int16)
+    mask = (part.max(axis=-1) - part.min(axis=-1)) > FIGURE_SATURATION
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if not rows.size:
+        return None
+    return left + int(cols[0]), left + int(cols[-1]), int(rows[0]), int(rows[-1])
+
+
+def _check_figures_in_view(page: Any, canvas: str = ".qmv-canvas canvas") -> list[str]:
+    """Seek the page's viewer to its first, middle and last frames and check the framing there;
+    the problems found (an empty list when the framing holds)."""
+    import numpy as np
+    from PIL import Image
+
+    problems = []
+    page.evaluate("quatmotionViewer.pause()")
+    n = int(page.evaluate("quatmotionViewer.nFrames"))
+    for frame in sorted({0, n // 2, n - 1}):
+        page.evaluate(f"quatmotionViewer.seek({frame})")
+        page.evaluate(
+            "new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)))"
+        )
+        shown = page.evaluate("quatmotionViewer.projectedPoints()")
+        png = page.locator(canvas).screenshot()
+        image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+        height = shown["height"]
+        for port in shown["viewports"]:
+            left, right = port["x"], port["x"] + port["width"]
+            where = f"frame {frame}, viewport of clips {port['clips']}"
+            xy = np.array([p[2:4] for p in port["points"]], dtype=float)
+            if not xy.size:
+                problems.append(f"{where}: no points drawn")
+                continue
+            outside = (xy[:, 0] < left) | (xy[:, 0] > right) | (xy[:, 1] < 0) | (xy[:, 1] > height)
+            behind = sum(not p[4] for p in port["points"])
+            (px0, py0), (px1, py1) = xy.min(axis=0), xy.max(axis=0)
+            extent = f"x {px0:.0f}..{px1:.0f}, y {py0:.0f}..{py1:.0f}"
+            if outside.any() or behind:
+                problems.append(
+                    f"{where}: {int(outside.sum())} points outside [{left}, {right}] x "
+                    f"[0, {height}], {behind} behind the camera; points at {extent}"
+                )
+            box = _saturated_box(image, left, right)
+            span = py1 - py0
+            margin = 14 + 0.06 * max(span, px1 - px0)
+            if box is None:
+                problems.append(f"{where}: no figure drawn")
+                continue
+            x0, x1, y0, y1 = box
+            if x0 < px0 - margin or x1 > px1 + margin or y0 < py0 - margin or y1 > py1 + margin:
+                problems.append(
+                    f"{where}: coloured pixels at x {x0}..{x1}, y {y0}..{y1} reach beyond the "
+                    f"figure's points at {extent}"
+                )
+            if y1 - y0 < 0.7 * span:
+                problems.append(f"{where}: the figure's pixels span {y1 - y0} px of its {span:.0f}")
+    return problems
+
+
+@pytest.fixture()
+def figures_in_view() -> Callable[..., list[str]]:
+    """``check(page, canvas=".qmv-canvas canvas")``: the framing problems of the viewer on
+    ``page`` at its first, middle and last frames (an empty list when it holds)."""
+    return _check_figures_in_view
+
+
+REAL_CLIPS = {
+    "bandai1_walk": "bandai1/clips/dataset-1_walk_active_001.bvh",  # a static joint_Root
+    "cmu_walk": "cmu/02/02_01.amc",
+    "hdm05_jog": "hdm05/clips/jogLeftCircle4StepsRstart/"
+    "HDM_bd_jogLeftCircle4StepsRstart_001_120.amc",
+    "cmu_bvh_walk": "cmu_bvh/07/07_01.bvh",
+}
+
+
+@pytest.fixture(scope="session")
+def real_clips() -> dict[str, Path]:
+    """A clip of each skeleton family in the mocap data folder, by a short name (tests that use
+    it carry ``needs_data``)."""
+    return {name: _DATA / path for name, path in REAL_CLIPS.items()}
+
+
 # A small motion library for the web app tests: generated clips as BVH files, a .qmz library of
 # six of them, a .qidx index of all seven (kick_0 is indexed but not compressed) and a pose index.
 SERVED_KINDS = ("walk", "squat", "jumping_jack")
@@ -126,3 +221,40 @@ def motion_library(tmp_path_factory) -> dict[str, Path]:
         "index": root / "lib.qidx",
         "poses": root / "poses.idx",
     }
+
+
+@pytest.fixture()
+def studio_walk() -> Callable[[float, float], tuple[Any, Any]]:
+    """``make(height_cm, cm_per_unit) -> (truth, studio)``: a generated walk of a figure
+    ``height_cm`` tall (the truth, in centimetres), and the same walk laid out as issue 17's
+    studio library writes it, in a length unit of ``cm_per_unit``: position channels on every
+    joint (they carry the body; the OFFSETs do not), a rest pose lying along X at four times
+    the body's bone lengths. The rest pose's size misleads the unit guess, as it did there (a
+    135 cm figure in inches read as 53 cm)."""
+    import dataclasses
+
+    import numpy as np
+
+    from quatmotion import io
+    from quatmotion.motion import Motion
+    from quatmotion.motion.synthetic import cmu_skeleton, generate_clip
+
+    def make(height_cm: float, cm_per_unit: float) -> tuple[Motion, Motion]:
+        truth = generate_clip("walk", 3, n_frames=120, skeleton=cmu_skeleton(height_cm))
+        twin = io.to_bvh_skeleton(truth.skeleton, [True] * truth.skeleton.n_joints)
+        lying = np.zeros_like(twin.offsets)
+        lying[:, 0] = 4.0 * np.linalg.norm(twin.offsets, axis=1)
+        skeleton = dataclasses.replace(
+            twin,
+            offsets=lying,
+            channels=tuple(("tx", "ty", "tz", "rz", "ry", "rx") for _ in twin.joint_names),
+            extras={**twin.extras, "bvh_scale": cm_per_unit},
+            name="studio",
+        )
+        carried = np.broadcast_to(twin.offsets, (truth.n_frames, twin.n_joints, 3)).copy()
+        studio = Motion(
+            skeleton, truth.fps, truth.root_translation, truth.rotations, carried, name="studio"
+        )
+        return truth, studio
+
+    return make

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from quatmotion._atomic import atomic_output, atomic_write_text
+from quatmotion._atomic import atomic_output, atomic_write_bytes, atomic_write_text
 
 
 def test_new_file_gets_the_umask_permissions(tmp_path: Path) -> None:
@@ -38,3 +38,29 @@ def test_failed_write_leaves_the_target_and_no_temporary(tmp_path: Path) -> None
         raise RuntimeError("writer failed")
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
+
+
+def test_a_write_error_names_the_target_not_the_temporary_file(tmp_path, monkeypatch):
+    """Issue 17: a write that failed named '.x.qmz.uppijxpq.tmp', a file the user never saw."""
+    import tempfile as tempfile_module
+
+    def refuse(dir, prefix, suffix):  # noqa: A002 (mkstemp's keyword)
+        raise PermissionError(13, "Permission denied", f"{dir}/{prefix}abc123{suffix}")
+
+    monkeypatch.setattr(tempfile_module, "mkstemp", refuse)
+    with pytest.raises(PermissionError) as caught:
+        atomic_write_bytes(tmp_path / "x.qmz", b"data")
+    assert caught.value.filename == str(tmp_path / "x.qmz")
+
+
+def test_an_index_that_cannot_be_written_names_its_file(tmp_path):
+    """SQLite's "attempt to write a readonly database" (or "unable to open database file")
+    becomes an OSError naming the index, which the command line turns into one error line."""
+    from quatmotion.retrieval.index import ClipIndex, ClipRecord
+
+    path = tmp_path / "x.qidx"
+    ClipIndex.create(path).close()
+    record = ClipRecord("walk", "walk.bvh", "0" * 64, "", 10, 30.0, "s", {})
+    with ClipIndex.open(path) as index, pytest.raises(OSError) as caught:  # opened read-only
+        index.add([record])
+    assert caught.value.filename == str(path) and "readonly" in caught.value.strerror

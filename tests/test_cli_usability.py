@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ from quatmotion.cli import app
 from quatmotion.datasets import data_root
 
 DATA = data_root(must_exist=False)
+ROOT = Path(__file__).resolve().parents[1]
 BANDAI_WALK = DATA / "bandai1" / "clips" / "dataset-1_walk_normal_001.bvh"
 
 runner = CliRunner()
@@ -64,6 +66,47 @@ def test_version_option_prints_the_package_version():
     result = _invoke("--version")
     assert result.exit_code == 0, result.output
     assert result.stdout.strip() == f"quatmotion {__version__}"
+
+
+def test_version_is_the_one_in_pyproject_and_the_release_being_documented():
+    from importlib.metadata import version
+
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    result = _invoke("--version")
+    assert result.stdout.strip() == f"quatmotion {declared}"
+    assert version("quatmotion") == declared
+    performance = (ROOT / "docs" / "performance.md").read_text()
+    newest = re.search(r"^## (\d+\.\d+\.\d+)", performance, re.MULTILINE)
+    assert newest and newest.group(1) == declared  # the release the docs are collecting numbers for
+
+
+def _commands(group, prefix=()):
+    import click
+
+    for name, command in group.commands.items():
+        yield (*prefix, name)
+        if isinstance(command, click.Group):
+            yield from _commands(command, (*prefix, name))
+
+
+@pytest.mark.parametrize("width", [80, 120])
+def test_no_help_page_breaks_a_sentence_where_the_source_did(width, monkeypatch):
+    """A line of a command's description ends where the next word would not fit, or where a
+    paragraph ends: never early ("same bytes on / any / scheduler")."""
+    import typer.main
+
+    monkeypatch.setenv("COLUMNS", str(width))
+    for command in _commands(typer.main.get_command(app)):
+        result = _invoke(*command, "--help")
+        assert result.exit_code == 0, (command, result.output)
+        lines = result.stdout.splitlines()
+        start = next(i for i, line in enumerate(lines) if line.strip().startswith("Usage:")) + 1
+        stop = next((i for i, line in enumerate(lines) if line.startswith("╭")), len(lines))
+        described = [line.rstrip() for line in lines[start:stop]]
+        for line, following in zip(described, described[1:], strict=False):
+            if line.strip() and following.strip():
+                room = width - len(line) - 1
+                assert len(following.split()[0]) > room - 2, (command, line, following)
 
 
 def test_generate_help_lists_the_motion_kinds():
@@ -345,6 +388,10 @@ def test_pose_commands_take_skeleton_and_units(pose_library, tmp_path):
     amc = tmp_path / "walk_01.amc"
     assert _invoke("generate", "walk", amc, "--frames", "60").exit_code == 0
     amc.with_suffix(".asf").rename(tmp_path / "body.asf")
+    # the folder's only ASF is the AMC's; with two, neither named for it, the user must choose
+    only = _invoke("pose", "search", library, "--file", amc, "--frame", "0", "-k", "1")
+    assert only.exit_code == 0, only.output
+    (tmp_path / "other.asf").write_bytes((tmp_path / "body.asf").read_bytes())
     _assert_bad_input(
         _invoke("pose", "search", library, "--file", amc, "--frame", "0"), "--skeleton"
     )

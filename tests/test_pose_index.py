@@ -126,7 +126,7 @@ def test_clips_are_found_by_name_path_end_stem_or_number() -> None:
     with pytest.raises(ValueError, match="close names: walk"):
         lib.clip_number("wlak")
     twice = _named_library(["a/walk.bvh", "b/walk.bvh"])
-    with pytest.raises(ValueError, match=r"matches 2 indexed clips \(a/walk.bvh, b/walk.bvh\)"):
+    with pytest.raises(ValueError, match=r"matches 2 clips \(a/walk.bvh, b/walk.bvh\)"):
         twice.clip_number("walk")
     assert twice.clip_number("b/walk.bvh") == 1
 

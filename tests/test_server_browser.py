@@ -8,6 +8,7 @@ set ``data-state`` on ``<html>``) and reads state with ``page.evaluate``, never 
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import socket
@@ -16,6 +17,7 @@ import sys
 import time
 import urllib.request
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,35 +30,23 @@ def _free_port() -> int:
         return int(probe.getsockname()[1])
 
 
-@pytest.fixture()
-def served(motion_library, tmp_path) -> Iterator[str]:
-    """``quatmotion serve`` over the test library; its base URL. Stopped after the test."""
+@contextlib.contextmanager
+def _serve(log_path, *files: str) -> Iterator[str]:
+    """``quatmotion serve FILES...`` in a subprocess on a free loopback port; its base URL once
+    it answers. Stopped on exit."""
     port = _free_port()
-    log = (tmp_path / "serve.log").open("w")
-    command = [
-        sys.executable,
-        "-c",
-        "from quatmotion.cli import main; main()",
-        "serve",
-        "--library",
-        str(motion_library["library"]),
-        "--index",
-        str(motion_library["index"]),
-        "--poses",
-        str(motion_library["poses"]),
-        "--port",
-        str(port),
-    ]
-    server = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+    log = log_path.open("w")
+    command = [sys.executable, "-c", "from quatmotion.cli import main; main()", "serve", *files]
+    server = subprocess.Popen([*command, "--port", str(port)], stdout=log, stderr=subprocess.STDOUT)
     base = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + 90
         while True:
             if server.poll() is not None:
-                pytest.fail(f"quatmotion serve exited: {(tmp_path / 'serve.log').read_text()}")
+                pytest.fail(f"quatmotion serve exited: {log_path.read_text()}")
             try:
                 with urllib.request.urlopen(f"{base}/api/info", timeout=2) as response:
-                    assert json.load(response)["clips"] == 7
+                    json.load(response)
                 break
             except OSError:
                 if time.monotonic() > deadline:
@@ -73,9 +63,38 @@ def served(motion_library, tmp_path) -> Iterator[str]:
         log.close()
 
 
+@pytest.fixture()
+def served(motion_library, tmp_path) -> Iterator[str]:
+    """``quatmotion serve`` over the test library; its base URL. Stopped after the test."""
+    files = []
+    for kind in ("library", "index", "poses"):
+        files += [f"--{kind}", str(motion_library[kind])]
+    with _serve(tmp_path / "serve.log", *files) as base:
+        with urllib.request.urlopen(f"{base}/api/info", timeout=10) as response:
+            assert json.load(response)["clips"] == 7
+        yield base
+
+
+@pytest.fixture(scope="module")
+def real_library(real_clips, tmp_path_factory) -> dict[str, Path]:
+    """A ``.qmz`` library and a ``.qidx`` index of one clip of each skeleton family."""
+    from quatmotion import codec
+    from quatmotion.retrieval.build import build_index
+
+    root = tmp_path_factory.mktemp("real")
+    paths = list(real_clips.values())
+    codec.compress(paths, root / "real.qmz", max_error=1.0)
+    report = build_index(paths, root / "real.qidx", kinds=("motion",), workers=1)
+    assert report.added == len(paths) and not report.failed, report
+    return {"library": root / "real.qmz", "index": root / "real.qidx"}
+
+
+_CANVAS = "#viewer .qmv-canvas canvas"
+
+
 def _canvas(page) -> np.ndarray:
     page.evaluate("new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)))")
-    png = page.locator("#viewer .qmv-canvas canvas").screenshot()
+    png = page.locator(_CANVAS).screenshot()
     return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int16)
 
 
@@ -150,3 +169,36 @@ def test_search_page_finds_and_plays_results_in_a_real_browser(
         u for u in requests if not u.startswith(served)
     ]
     page.close()
+
+
+@pytest.mark.needs_data
+def test_play_compare_and_search_pages_keep_every_family_in_view(
+    browser, real_clips, real_library, figures_in_view, tmp_path, artifact_dir
+):
+    """The web app's play, compare (original beside decoded) and search ("play beside" the
+    first result) pages: each figure inside its viewport at the first, middle and last frames,
+    on a bandai1 walk (a static joint_Root), a CMU AMC walk, an HDM05 jog and a CMU BVH walk."""
+    library, index = (str(real_library[k]) for k in ("library", "index"))
+    with _serve(tmp_path / "serve.log", "--library", library, "--index", index) as served:
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        errors: list[str] = []
+        page.on("pageerror", lambda error: errors.append(str(error)))
+        requests: list[str] = []
+        page.on("request", lambda request: requests.append(request.url))
+        problems: list[str] = []
+        for name, path in real_clips.items():
+            clip = path.stem
+            for kind in ("play", "compare", "search"):
+                page.goto(f"{served}/{kind}?clip={clip}")
+                _state(page, "ready")
+                if kind == "search":
+                    page.evaluate("document.documentElement.dataset.state = 'asked'")
+                    page.locator("#results li button.play-result").nth(0).click()
+                    _state(page, "ready")
+                    assert page.evaluate("quatmotionViewer.clips.length") == 2
+                problems += [f"{kind} {name}: {p}" for p in figures_in_view(page, _CANVAS)]
+                page.screenshot(path=str(artifact_dir / f"server-{kind}-{name}.png"))
+        assert not errors, errors
+        assert all(url.startswith(served) for url in requests), requests
+        page.close()
+    assert not problems, "\n".join(problems)

@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from quatmotion import codec
+from quatmotion.io import read_motion
 from quatmotion.motion import Motion, forward_kinematics
 from quatmotion.motion.synthetic import generate_clip
 from quatmotion.viz import write_view
@@ -93,3 +95,66 @@ def test_view_page_plays_offline_and_shows_the_comparison(browser, compare_page,
         np.sqrt(np.mean(distance[180] ** 2)), abs=0.006
     )
     page.close()
+
+
+def _decoded(motion: Motion) -> Motion:
+    """``motion`` through the codec at 1 cm, as ``view --compare-decoded`` shows it."""
+    with codec.open(codec.compress([motion], max_error=1.0).data) as archive:
+        return archive.read(0)
+
+
+def _open(browser, path):
+    page = browser.new_page(viewport={"width": 1200, "height": 760})
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    requests: list[str] = []
+    page.on("request", lambda request: requests.append(request.url))
+    page.goto(path.as_uri())
+    page.wait_for_selector("html[data-first-play-ms], html[data-error]", state="attached")
+    assert page.evaluate("document.documentElement.dataset.error || null") is None
+    assert requests == [path.as_uri()]  # nothing fetched
+    return page, errors
+
+
+@pytest.mark.needs_data
+def test_every_skeleton_family_stays_whole_in_view(
+    browser, real_clips, figures_in_view, tmp_path, artifact_dir
+):
+    """The whole figure inside the canvas at the first, middle and last frames, on one clip of
+    each family, beside its decoded copy and beside a clip of another skeleton and length."""
+    clips = {name: read_motion(path) for name, path in real_clips.items()}
+    bandai, cmu = clips["bandai1_walk"], clips["cmu_walk"]
+    pages = {name: ([motion], None, None) for name, motion in clips.items()}
+    pages["bandai1_walk_decoded"] = ([bandai], [_decoded(bandai)], None)
+    pages["hdm05_jog_decoded"] = ([clips["hdm05_jog"]], [_decoded(clips["hdm05_jog"])], None)
+    pages["bandai1_vs_cmu"] = ([bandai], [cmu], None)
+    pages["bandai1_vs_cmu_overlay"] = ([bandai], [cmu], "overlay")
+    problems: list[str] = []
+    for name, (motions, compare, layout) in pages.items():
+        path = write_view(tmp_path / f"{name}.html", motions, compare, layout=layout)
+        page, errors = _open(browser, path)
+        problems += [f"{name}: {p}" for p in figures_in_view(page)]
+        page.screenshot(path=str(artifact_dir / f"viewer-{name}.png"))
+        if name == "bandai1_walk":
+            # joint_Root is neither drawn nor followed: one sphere per other point, one bone
+            # per joint below the hips and per end site, the camera on the hips.
+            sk = bandai.skeleton
+            figure = "quatmotionViewer.figures[0]"
+            drawn = page.evaluate(
+                f"[{figure}.joints.count, {figure}.bones.count,"
+                " quatmotionViewer.clips[0].follow, quatmotionViewer.follow]"
+            )
+            expected = [sk.n_joints + sk.n_sites - 1, sk.n_joints - 2 + sk.n_sites, 1, True]
+            if drawn != expected:
+                problems.append(f"{name}: spheres, bones, followed point, following {drawn}")
+        if name.startswith("bandai1_vs_cmu"):
+            # Two skeletons, two lengths: both play, no per-frame error, and the page says why.
+            panel = page.locator(".qmv-error").inner_text()
+            assert "no per-frame error: their skeletons differ" in panel, panel
+            assert page.locator(".qmv-strip").count() == 0
+            assert page.evaluate("quatmotionViewer.nFrames") == bandai.n_frames  # the longer
+            page.evaluate(f"quatmotionViewer.seek({bandai.n_frames - 1})")
+            assert "ended, holds frame 342" in page.locator(".qmv-labels").inner_text()
+        assert not errors, errors
+        page.close()
+    assert not problems, "\n".join(problems)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 
@@ -105,6 +106,28 @@ def test_comparison_needs_the_same_skeleton_frames_and_rate():
         frame_data.encode_comparison(clip, half_rate)
 
 
+def test_view_data_pairs_any_two_clips_and_says_when_it_shows_no_error():
+    long = generate_clip("walk", 1, n_frames=120)
+    short = generate_clip("walk", 2, n_frames=90)
+    data = viewer.view_data([long, long], [short, long])
+    different, same = data["pairs"]
+    assert [c["n_frames"] for c in data["clips"]] == [120, 90, 120, 120]  # each at its length
+    assert different["errors"] is None and different["arms_cm"] is None
+    assert "lengths differ (120 and 90 frames)" in different["no_error"]
+    assert same["errors"] is not None and "no_error" not in same and same["max_cm"] < 1e-6
+
+    sk = long.skeleton
+    anonymous = dataclasses.replace(
+        long,
+        skeleton=dataclasses.replace(sk, joint_names=tuple(f"j{k}" for k in range(sk.n_joints))),
+    )
+    (pair,) = viewer.view_data([long], [anonymous])["pairs"]
+    assert pair["errors"] is None and "skeletons differ" in pair["no_error"]
+    half_rate = generate_clip("walk", 1, n_frames=240).slice(0, None, 2)
+    (pair,) = viewer.view_data([long], [half_rate])["pairs"]
+    assert "frame rates differ (120 and 60 fps)" in pair["no_error"]
+
+
 def test_page_holds_every_frame_and_fetches_nothing(tmp_path):
     clips = [generate_clip("wave", 1, n_frames=150), generate_clip("jump", 2, n_frames=90)]
     path = viewer.write_view(tmp_path / "view.html", clips, ghost=10)
@@ -180,6 +203,22 @@ def test_view_command_writes_the_page_and_reports_bad_input(tmp_path):
         assert result.exit_code == 2, result.output
         assert needle in result.stderr and "Traceback" not in result.output
     assert not (tmp_path / "bad.html").exists()
+
+
+def test_view_plays_two_clips_of_different_lengths_and_says_why_it_shows_no_error(tmp_path):
+    # Refused before ("the clips need the same skeleton and frame count").
+    long, short = tmp_path / "long.bvh", tmp_path / "short.bvh"
+    write_motion(generate_clip("walk", 1, n_frames=120), long)
+    write_motion(generate_clip("run", 2, n_frames=80), short)
+    out = tmp_path / "pair.html"
+    result = CliRunner().invoke(app, ["view", str(long), "--compare", str(short), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "no per-frame error for long vs short: their lengths differ (120 and 80" in " ".join(
+        result.output.split()
+    )
+    data = _embedded(out.read_text(encoding="utf-8"))
+    assert [c["n_frames"] for c in data["clips"]] == [120, 80]
+    assert data["pairs"][0]["errors"] is None and "lengths differ" in data["pairs"][0]["no_error"]
 
 
 def test_view_reads_qmz_clips_and_decoded_copies(tmp_path):

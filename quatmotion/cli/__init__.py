@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import importlib
 
-from quatmotion.cli._app import app
+from quatmotion.cli._app import app, reflow_all_help
 
 # Importing a command module registers its commands; this order is the order of --help.
 for _module in (
@@ -35,6 +35,7 @@ for _module in (
     "warmup",
 ):
     importlib.import_module(f"quatmotion.cli.{_module}")
+reflow_all_help(app)
 
 __all__ = ["app", "main"]
 

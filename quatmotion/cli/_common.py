@@ -11,18 +11,22 @@ Conventions every command keeps:
 
 * Frames are numbered from 0 in the clip's file (:data:`FRAMES_HELP`); an out-of-range frame
   is an error naming the valid range (:func:`check_frame`).
-* Files a command writes: never one of its inputs, never an existing file unless ``--force``
-  (:func:`check_outputs`); a command that fails removes what it wrote (:class:`Outputs`).
-* ``--units`` (:data:`UnitsOption`) names the length unit of BVH input wherever a file is read
-  (:func:`read_clip`).
+* Files a command writes: never a file it reads (a folder's clips and an AMC's ASF included),
+  never an existing file unless ``--force``, never a read-only one, and a destination that
+  cannot be written is refused before any work (:func:`check_outputs`); a command that fails
+  removes what it wrote (:class:`Outputs`).
+* ``--units`` and ``--skeleton`` (:data:`UnitsOption`, :data:`SkeletonOption`) are the same on
+  every command that reads motion (:func:`read_clip`, or ``units=``/``skeleton=`` of the
+  library's batch functions); a doubtful clip gets a warning (:func:`warn_doubt`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -33,6 +37,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from quatmotion.errors import FormatError
 
 if TYPE_CHECKING:
+    from quatmotion.io import Doubt
     from quatmotion.motion import Motion, Skeleton
 
 __all__ = [
@@ -40,25 +45,35 @@ __all__ = [
     "FRAMES_HELP",
     "CliInputError",
     "ForceOption",
+    "JsonOption",
     "Outputs",
     "SchedulerOption",
     "SkeletonOption",
     "UnitsOption",
     "WorkersOption",
     "at_least",
+    "bvh_unit_label",
     "check_frame",
+    "check_units",
     "check_outputs",
+    "check_writable",
     "clip_files",
     "console",
+    "doubt_reporter",
     "error_console",
     "fail",
+    "files_read",
     "number_in",
+    "print_json",
     "progress_bar",
     "read_clip",
     "report_skipped",
     "require_file",
+    "unit_label",
+    "unit_text",
     "user_errors",
     "warn",
+    "warn_doubt",
     "write_clip",
 ]
 
@@ -114,9 +129,13 @@ def user_errors() -> Iterator[None]:
         yield
     except FormatError as error:
         raise fail(str(error)) from None
-    except (DataNotFoundError, FileNotFoundError, IsADirectoryError, NotADirectoryError) as error:
+    except DataNotFoundError as error:
         raise fail(_os_message(error)) from None
-    except (CliInputError, FetchError, ValueError, KeyError, PermissionError) as error:
+    except OSError as error:  # a file that cannot be read or written: no disk, no permission
+        if getattr(error, "filename", None) is None and not isinstance(error, FileNotFoundError):
+            raise  # not about a file the user named: a bug, shown in full
+        raise fail(_os_message(error)) from None
+    except (CliInputError, FetchError, ValueError, KeyError) as error:
         text = error.args[0] if isinstance(error, KeyError) and error.args else error
         raise fail(str(text)) from None
 
@@ -147,15 +166,55 @@ UnitsOption = Annotated[
     typer.Option(
         "--units",
         help="Length unit of BVH input: cm, mm, m, in or asf (1/0.45 inch, the CMU unit). "
-        "Default: guessed from the skeleton's size.",
+        "Default: guessed from the skeleton's size, with a warning when the guess is doubtful.",
         show_default=False,
     ),
 ]
+"""``--units`` of every command that reads motion (:func:`read_clip`, and the library's batch
+functions: ``units=``)."""
 SkeletonOption = Annotated[
     Path | None,
-    typer.Option("--skeleton", "-s", help="ASF skeleton of AMC input (else found by name)."),
+    typer.Option(
+        "--skeleton", "-s", help="ASF skeleton of the AMC input (else each AMC's is found by name)."
+    ),
 ]
+"""``--skeleton`` of every command that reads motion: the ASF used for every AMC input."""
 ForceOption = Annotated[bool, typer.Option("--force", help="Replace existing output files.")]
+JsonOption = Annotated[
+    bool, typer.Option("--json", help="Print one JSON document on stdout, nothing else there.")
+]
+"""``--json`` of every command that reports something (:func:`print_json`)."""
+
+
+def check_units(units: str | None) -> str | None:
+    """``--units`` if it names a unit of :data:`quatmotion.io.BVH_UNITS`, else
+    :class:`CliInputError` listing them (before any file is read)."""
+    from quatmotion.io import BVH_UNITS
+
+    if units is not None and units.strip().lower() not in BVH_UNITS:
+        raise CliInputError(f"unknown --units {units!r}; choose from {', '.join(BVH_UNITS)}")
+    return units
+
+
+def print_json(document: object) -> None:
+    """``document`` as one JSON document on stdout (non-finite numbers as ``null``; NumPy
+    scalars as numbers): what ``--json`` prints, and all it prints there."""
+    print(json.dumps(_plain(document), indent=1, allow_nan=False))
+
+
+def _plain(value: object) -> object:
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, bool) or value is None or isinstance(value, str | int):
+        return value
+    if hasattr(value, "item"):  # a NumPy scalar
+        return _plain(value.item())  # type: ignore[attr-defined]
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    return str(value)
+
 
 WorkersOption = Annotated[
     int | None,
@@ -213,9 +272,66 @@ def read_clip(
     for doubt in implausible_values(motion):
         if strict and doubt.kind == "far":
             raise CliInputError(f"{path}: {doubt.message}: not human motion capture")
-        hint = "; give the unit with --units" if doubt.kind == "unit" else ""
-        warn(f"{path}: {doubt.message}{hint}")
+        warn_doubt(path, doubt)
     return motion
+
+
+def warn_doubt(source: object, doubt: Doubt, target: Console | None = None) -> None:
+    """A ``warning:`` line for a doubtful clip (:func:`quatmotion.io.implausible_values`), on
+    stderr or ``target`` (a progress bar's console), saying what to do about a unit."""
+    hint = "; give the unit with --units" if doubt.kind == "unit" else ""
+    (target or error_console).print(
+        f"warning: {source}: {doubt.message}{hint}", markup=False, highlight=False, soft_wrap=True
+    )
+
+
+def doubt_reporter(progress: Progress) -> Callable[[str, Doubt], None]:
+    """``on_doubt(source, doubt)`` for the library's batch functions: a warning on stderr,
+    above the bar (a bar on stdout lets stderr through above it too)."""
+    target = progress.console if progress.console.stderr else None
+    return lambda source, doubt: warn_doubt(source, doubt, target)
+
+
+def unit_label(skeleton: Skeleton) -> dict[str, object]:
+    """The length unit a clip was read in, as ``ls --json`` reports it.
+
+    ``unit``: a name of :data:`quatmotion.io.BVH_UNITS`, or ``None`` for another scale;
+    ``cm_per_unit``; ``unit_source``: ``"guessed"`` (a BVH's unit guessed from its size),
+    ``"given"`` (a BVH read with ``--units``), ``"asf"`` (the unit an ASF states) or ``"cm"``
+    (a skeleton built in code, in centimetres); ``unit_guessed``.
+    """
+    extras = skeleton.extras
+    if extras.get("format") == "asf" and "length_scale" in extras:
+        return _unit_fields(float(extras["length_scale"]), "asf")
+    if extras.get("format") == "bvh":
+        guessed = bool(extras.get("bvh_unit_guessed"))
+        return _unit_fields(float(extras.get("bvh_scale", 1.0)), "guessed" if guessed else "given")
+    return _unit_fields(1.0, "cm")
+
+
+def bvh_unit_label(cm_per_unit: float, guessed: bool) -> dict[str, object]:
+    """:func:`unit_label` of a BVH skeleton known by its scale alone (a ``.qmz`` header)."""
+    return _unit_fields(cm_per_unit, "guessed" if guessed else "given")
+
+
+def _unit_fields(cm: float, source: str) -> dict[str, object]:
+    from quatmotion.io import BVH_UNITS
+
+    name = next((n for n, v in BVH_UNITS.items() if abs(v - cm) <= 1e-9 * v), None)
+    return {
+        "unit": name,
+        "cm_per_unit": cm,
+        "unit_source": source,
+        "unit_guessed": source == "guessed",
+    }
+
+
+def unit_text(label: dict[str, object]) -> str:
+    """A :func:`unit_label` for a table: ``in (guessed)``, ``cm (given)``, ``asf (from the
+    ASF)``, ``6.028 cm (from the ASF)``, ``cm``."""
+    name = label["unit"] or f"{float(label['cm_per_unit']):.4g} cm"  # type: ignore[arg-type]
+    how = {"asf": " (from the ASF)", "guessed": " (guessed)", "given": " (given)"}
+    return f"{name}{how.get(str(label['unit_source']), '')}"
 
 
 # --- numbers and frames ------------------------------------------------------------------------
@@ -255,33 +371,80 @@ def check_frame(frame: int, n_frames: int, what: str) -> int:
 # --- files written -----------------------------------------------------------------------------
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def _identities(path: Path) -> set[object]:
+    """What makes two names one file: the resolved path, and device and inode if it exists
+    (a hard link, a bind mount)."""
+    found: set[object] = {path.resolve()}
+    with contextlib.suppress(OSError):
+        st = path.stat()
+        found.add((st.st_dev, st.st_ino))
+    return found
+
+
+def files_read(inputs: Iterable[Path | None]) -> list[Path]:
+    """Every file a command reads for these arguments: a file itself, a folder's motion files
+    (:func:`quatmotion.io.find_motion_files`, as batch commands expand it), and the ASF each
+    AMC among them reads by name. ``None`` (an option not given) is left out."""
+    from quatmotion.io import find_asf_for_amc, find_motion_files
+
+    given = [Path(p) for p in inputs if p is not None and Path(p).exists()]
     try:
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return False
+        found = find_motion_files(given) if given else []
+    except ValueError:  # folders without a clip in them
+        found = []
+    for amc in [f for f in found if f.suffix.lower() == ".amc"]:
+        with contextlib.suppress(FormatError, OSError):
+            found.append(find_asf_for_amc(amc))
+    return found
 
 
 def check_outputs(
-    outputs: Iterable[Path], inputs: Iterable[Path] = (), *, force: bool = False
+    outputs: Iterable[Path],
+    inputs: Iterable[Path | None] = (),
+    *,
+    force: bool = False,
+    replace: bool = False,
 ) -> None:
-    """The overwrite policy: refuse to write over an input, a folder, or (without ``force``) an
-    existing file.
+    """The overwrite policy, checked before any work starts: refuse to write over a file the
+    command reads (:func:`files_read` of ``inputs``: folders expanded, the ASF of each AMC),
+    ``--force`` or not; over a folder; over an existing file without ``force``; over a
+    read-only file; or where the file cannot be written (:func:`check_writable`).
+
+    ``replace`` says that the command rewrites an existing output by design (``append``,
+    ``index add``): no ``--force`` is asked for, the other rules hold.
 
     Raises
     ------
     CliInputError
         Naming the first output that breaks the policy.
     """
-    inputs = [Path(p) for p in inputs]
+    read: set[object] = set()
+    for path in files_read(inputs):
+        read |= _identities(path)
     for out in outputs:
         out = Path(out)
-        if any(_same_file(out, p) or out.resolve() == p.resolve() for p in inputs):
+        if _identities(out) & read:
             raise CliInputError(f"{out}: is also an input; write the output to another file")
         if out.is_dir():
             raise CliInputError(f"{out}: is a folder, expected a file name to write")
-        if out.exists() and not force:
+        if out.exists() and not (force or replace):
             raise CliInputError(f"{out}: exists; pass --force to replace it")
+        if out.exists() and not (out.stat().st_mode & 0o222 and os.access(out, os.W_OK)):
+            raise CliInputError(f"{out}: is read-only; make it writable to replace it")
+        check_writable(out)
+
+
+def check_writable(path: Path, *, folder: bool = False) -> None:
+    """Refuse (:class:`CliInputError`, naming ``path``) a file, or with ``folder`` a folder to
+    write files in, that cannot be written: the folder it goes in, or the nearest one that
+    exists (missing folders are created), is a file or not writable by this user
+    (``os.access``: permissions, ACLs, a read-only file system)."""
+    start = [path] if folder else []
+    where = next((p for p in [*start, path.parent, *path.parents] if p.exists()), Path.cwd())
+    if not where.is_dir():
+        raise CliInputError(f"{path}: cannot be written: {where} is a file, not a folder")
+    if not os.access(where, os.W_OK | os.X_OK):
+        raise CliInputError(f"{path}: cannot be written: no permission to write in {where}")
 
 
 class Outputs:

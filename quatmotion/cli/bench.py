@@ -29,7 +29,7 @@ def bench(
     seed: Annotated[int, typer.Option(help="Random seed (0 or more).")] = 0,
     force: ForceOption = False,
 ) -> None:
-    """Run ``quatmotion.bench.NAME.run(out, quick=..., seed=...)``."""
+    """Run one benchmark of quatmotion.bench: its JSON result in --out, figures beside it."""
     with user_errors():
         available = bench_package.names()
         if name not in available:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 from typing import Annotated
 
@@ -12,15 +13,26 @@ from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
+    JsonOption,
     Outputs,
     SchedulerOption,
+    SkeletonOption,
+    UnitsOption,
     WorkersOption,
+    bvh_unit_label,
     check_outputs,
+    check_units,
+    check_writable,
     clip_files,
     console,
+    doubt_reporter,
+    error_console,
+    print_json,
     progress_bar,
     report_skipped,
     require_file,
+    unit_label,
+    unit_text,
     user_errors,
     write_clip,
 )
@@ -55,6 +67,58 @@ def _summary(result) -> str:
     return ", ".join(parts)
 
 
+def _clip_rows(archive, first: int = 0) -> list[dict[str, object]]:
+    """The clips of an open archive from ``first`` on, as ``ls --json`` lists them."""
+    rows = []
+    units: dict[int, dict[str, object]] = {}  # per skeleton: clips share them
+    for i, entry in enumerate(archive.clips[first:], start=first):
+        size = archive.chunk_bytes(i)
+        if entry.skeleton not in units:
+            bvh = archive.bvh_unit(entry.skeleton)  # from the header: no record parsed
+            units[entry.skeleton] = (
+                bvh_unit_label(*bvh) if bvh else unit_label(archive.skeleton(entry.skeleton))
+            )
+        unit = units[entry.skeleton]
+        rows.append(
+            {
+                "name": entry.name,
+                "frames": entry.n_frames,
+                "fps": entry.fps,
+                "bytes": size,
+                "source_bytes": entry.source_bytes,
+                "source_format": entry.source_format,
+                "ratio": entry.source_bytes / size if entry.source_bytes and size else None,
+                "max_error_cm": entry.max_error,
+                "arms_cm": entry.arms,
+                **unit,
+                "unit_text": unit_text(unit),
+            }
+        )
+    return rows
+
+
+def _library_doc(path: Path, archive, rows: list[dict[str, object]]) -> dict[str, object]:
+    """One ``.qmz`` as ``ls --json`` and ``compress --json`` print it."""
+    source = sum(int(r["source_bytes"]) for r in rows)  # type: ignore[call-overload]
+    return {
+        "library": str(path),
+        "bytes": archive.size,
+        "method": archive.header.method,
+        "source_bytes": source,
+        "ratio": source / archive.size if source else None,
+        "clips": [{k: v for k, v in r.items() if k != "unit_text"} for r in rows],
+    }
+
+
+def _units_line(rows: list[dict[str, object]]) -> str:
+    """``length unit: in (guessed) for 3 clips; cm (given) for 1 clip``."""
+    counts = Counter(str(r["unit_text"]) for r in rows)
+    parts = [f"{unit} for {n} clip{'s' if n != 1 else ''}" for unit, n in counts.most_common()]
+    guessed = any(r["unit_guessed"] for r in rows)
+    note = " (the error bound holds in this unit; give --units if a guess is wrong)"
+    return f"length unit: {'; '.join(parts)}{note if guessed else ''}"
+
+
 @app.command()
 def compress(
     inputs: Annotated[list[Path], typer.Argument(help="AMC/BVH files or folders of them.")],
@@ -66,13 +130,13 @@ def compress(
         float | None, typer.Option(help="Target ratio against the source text instead.")
     ] = None,
     method: Annotated[str, typer.Option(help=f"Codec: {_METHODS}.")] = "best",
-    skeleton: Annotated[
-        Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC inputs (else by name).")
-    ] = None,
+    skeleton: SkeletonOption = None,
+    units: UnitsOption = None,
     seed: Annotated[int, typer.Option(help="Seed of random choices (same seed, same bytes).")] = 0,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
     force: ForceOption = False,
+    as_json: JsonOption = False,
 ) -> None:
     """Compress clips into one .qmz library (default: every joint within 1 cm).
 
@@ -80,7 +144,7 @@ def compress(
     scheduler; a file that cannot be read is reported and left out, and the command then ends
     with exit code 1.
     """
-    from quatmotion.codec import DEFAULT_MAX_ERROR_CM
+    from quatmotion.codec import DEFAULT_MAX_ERROR_CM, open_archive
     from quatmotion.codec import compress as run_compress
 
     with user_errors():
@@ -88,26 +152,43 @@ def compress(
             raise CliInputError("give --max-error or --ratio, not both")
         if max_error is None and ratio is None:
             max_error = DEFAULT_MAX_ERROR_CM
+        check_units(units)
         if skeleton is not None:
             require_file(skeleton)
         for path in inputs:
             if not path.exists():
                 raise CliInputError(f"{path}: no such file or folder")
-        check_outputs([out], [p for p in inputs if p.is_file()], force=force)
+        check_outputs([out], [*inputs, skeleton], force=force)
         from quatmotion.cli.warmup import ensure_kernels
 
         groups = ("read", "codec", "learn") if method in ("qssd", "ksvd") else ("read", "codec")
         ensure_kernels(*groups, workers=workers, scheduler=scheduler)
-        with progress_bar() as progress:
+        with progress_bar(error_console if as_json else console) as progress:
             result = run_compress(
                 inputs, out, max_error=max_error, ratio=ratio, method=method,
-                skeleton=skeleton, seed=seed, progress=_reporter(progress), workers=workers,
-                scheduler=scheduler, on_error="skip",
+                skeleton=skeleton, units=units, seed=seed, progress=_reporter(progress),
+                workers=workers, scheduler=scheduler, on_error="skip",
+                on_doubt=doubt_reporter(progress),
             )  # fmt: skip
+        with open_archive(result.data) as archive:
+            rows = _clip_rows(archive)
+            doc = _library_doc(out, archive, rows)
     report_skipped(f"{name}: {reason}" for name, reason in result.failed)
-    console.print(f"wrote {out}: {len(result.clip_errors)} clip(s), {_summary(result)}")
+    if as_json:
+        print_json(
+            {
+                **doc,
+                "max_error_cm": max_error,
+                "target_ratio": ratio,
+                "failed": [{"input": name, "reason": reason} for name, reason in result.failed],
+            }
+        )
+    else:
+        console.print(f"wrote {out}: {len(result.clip_errors)} clip(s), {_summary(result)}")
+        console.print(_units_line(rows), markup=False, highlight=False)
+        if result.failed:
+            console.print(f"{len(result.failed)} input(s) failed")
     if result.failed:
-        console.print(f"{len(result.failed)} input(s) failed")
         raise typer.Exit(code=1)
 
 
@@ -132,8 +213,11 @@ def decompress(
             raise CliInputError(f"--format must be amc or bvh, got {format!r}")
         if out.exists() and not out.is_dir():
             raise CliInputError(f"{out}: exists and is not a folder")
+        check_writable(out, folder=True)
         with open_archive(library) as archive:
-            wanted = [archive.index_of(c) for c in clip] if clip else range(len(archive))
+            # A clip named twice (or by name and number) is written once.
+            wanted = list(dict.fromkeys(archive.index_of(c) for c in clip or []))
+            wanted = wanted or range(len(archive))
             planned = []  # every clip's files, checked before anything is written
             for i in wanted:
                 entry = archive.clips[i]
@@ -157,29 +241,34 @@ def decompress(
 @app.command("ls")
 def list_library(
     library: Annotated[Path, typer.Argument(help="A .qmz file.")],
+    as_json: JsonOption = False,
 ) -> None:
-    """List a .qmz file's clips: frames, bytes, ratio, declared max error and ARMS."""
+    """List a .qmz file's clips: frames, bytes, ratio, declared max error, ARMS and the length
+    unit each was read in."""
     from quatmotion.codec import open_archive
 
     with user_errors():
         require_file(library)
         with open_archive(library) as archive:
+            rows = _clip_rows(archive)
+            if as_json:
+                print_json(_library_doc(library, archive, rows))
+                return
             table = Table(
                 title=f"{library} ({archive.size:,} bytes, method {archive.header.method})",
                 title_justify="left",
             )
-            for name in ("clip", "frames", "fps", "bytes", "ratio", "max error (cm)", "ARMS (cm)"):
-                table.add_column(name, justify="left" if name == "clip" else "right")
-            source = 0
-            for i, entry in enumerate(archive.clips):
-                size = archive.chunk_bytes(i)
-                ratio = f"{entry.source_bytes / size:.0f}" if entry.source_bytes and size else "-"
-                source += entry.source_bytes
+            columns = ("clip", "frames", "fps", "bytes", "ratio", "max error (cm)", "ARMS (cm)")
+            for name in (*columns, "unit"):
+                table.add_column(name, justify="left" if name in ("clip", "unit") else "right")
+            for r in rows:
+                ratio = "-" if r["ratio"] is None else f"{r['ratio']:.0f}"
                 table.add_row(
-                    entry.name, str(entry.n_frames), f"{entry.fps:g}", f"{size:,}", ratio,
-                    f"{entry.max_error:.3f}", f"{entry.arms:.3f}",
+                    str(r["name"]), str(r["frames"]), f"{r['fps']:g}", f"{r['bytes']:,}", ratio,
+                    f"{r['max_error_cm']:.3f}", f"{r['arms_cm']:.3f}", str(r["unit_text"]),
                 )  # fmt: skip
             console.print(table)
+            source = sum(int(r["source_bytes"]) for r in rows)  # type: ignore[call-overload]
             whole = f"{source / archive.size:.0f}:1" if source else "-"
             console.print(
                 f"{len(archive)} clip(s); whole file {archive.size:,} bytes, ratio {whole} "
@@ -194,27 +283,36 @@ def append(
     max_error: Annotated[
         float | None, typer.Option(help="Bound on every joint's position error, cm.")
     ] = 1.0,
-    skeleton: Annotated[
-        Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC inputs (else by name).")
-    ] = None,
+    skeleton: SkeletonOption = None,
+    units: UnitsOption = None,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
     """Add clips to a .qmz file without re-encoding the clips already in it."""
     from quatmotion.codec import append as run_append
+    from quatmotion.codec import open_archive
 
     with user_errors():
         require_file(library)
+        check_units(units)
         if skeleton is not None:
             require_file(skeleton)
+        for path in inputs:
+            if not path.exists():
+                raise CliInputError(f"{path}: no such file or folder")
+        check_outputs([library], [*inputs, skeleton], replace=True)
         from quatmotion.cli.warmup import ensure_kernels
 
         ensure_kernels("read", "codec", workers=workers, scheduler=scheduler)
         with progress_bar() as progress:
             result = run_append(
-                library, inputs, max_error=max_error, skeleton=skeleton,
+                library, inputs, max_error=max_error, skeleton=skeleton, units=units,
                 progress=_reporter(progress), workers=workers, scheduler=scheduler,
+                on_doubt=doubt_reporter(progress),
             )  # fmt: skip
-        console.print(
-            f"added {len(result.clip_errors)} clip(s) to {library}: now {result.size:,} bytes"
-        )
+        with open_archive(result.data) as archive:
+            rows = _clip_rows(archive, len(archive) - len(result.clip_errors))
+    console.print(
+        f"added {len(result.clip_errors)} clip(s) to {library}: now {result.size:,} bytes"
+    )
+    console.print(_units_line(rows), markup=False, highlight=False)

@@ -11,10 +11,13 @@ from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
+    SkeletonOption,
     UnitsOption,
     at_least,
     check_outputs,
+    check_units,
     console,
+    require_file,
     user_errors,
 )
 
@@ -31,6 +34,7 @@ def demo(
     seed: Annotated[int, typer.Option(help="Seed of the generated library and the learners.")] = 0,
     quick: Annotated[bool, typer.Option(help="Fewer clips and iterations.")] = False,
     units: UnitsOption = None,
+    skeleton: SkeletonOption = None,
     force: ForceOption = False,
 ) -> None:
     """Generate (or load) clips, show them, and compress them with QSSD vs K-SVD."""
@@ -40,5 +44,11 @@ def demo(
         if out.exists() and not out.is_dir():
             raise CliInputError(f"{out}: --out names a folder, this is a file")
         at_least("--seed", seed, 0)
-        check_outputs([out / "summary.json"], force=force)
-        run_demo(paths or [], out_dir=out, seed=seed, quick=quick, console=console, units=units)
+        check_units(units)
+        if skeleton is not None:
+            require_file(skeleton)
+        check_outputs([out / "summary.json"], [*(paths or []), skeleton], force=force)
+        run_demo(
+            paths or [], out_dir=out, seed=seed, quick=quick, console=console, units=units,
+            skeleton=skeleton,
+        )  # fmt: skip

@@ -13,17 +13,23 @@ from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
+    JsonOption,
     Outputs,
     SkeletonOption,
     UnitsOption,
     at_least,
     check_outputs,
+    check_units,
+    check_writable,
     clip_files,
     console,
     number_in,
+    print_json,
     progress_bar,
     read_clip,
     require_file,
+    unit_label,
+    unit_text,
     user_errors,
     write_clip,
 )
@@ -44,20 +50,8 @@ def _cm(value: float) -> str:
     return f"{value:.1f}" if abs(value) < 1e6 else f"{value:.3g}"
 
 
-def _unit(skeleton: Skeleton) -> str:
-    extras = skeleton.extras
-    if extras.get("format") == "asf":
-        per_inch = 2.54 / extras["length_scale"]
-        return f"ASF unit, 1/{per_inch:g} inch ({extras['length_scale']:.4g} cm)"
-    if extras.get("format") == "bvh":
-        name = extras.get("bvh_unit") or f"{extras['bvh_scale']:g} cm"
-        how = "guessed from the skeleton's size" if extras.get("bvh_unit_guessed") else "given"
-        return f"{name} ({how})"
-    return "cm"
-
-
-def _rest_pose_height(skeleton: Skeleton) -> str:
-    """The rest pose's vertical extent, or why it is not a height (a rest pose lying down)."""
+def _rest_pose(skeleton: Skeleton) -> tuple[float, str | None]:
+    """The rest pose's vertical extent, and the axis it lies along when it is not upright."""
     import numpy as np
 
     rest = skeleton.rest_positions()
@@ -71,26 +65,48 @@ def _rest_pose_height(skeleton: Skeleton) -> str:
         body = extent
     length = float(np.linalg.norm(body))
     if length > 0 and abs(body[1]) < 0.9 * length:
-        along = "XYZ"[int(np.argmax(np.abs(body)))]
-        return f"- (rest pose not upright: it lies along {along})"
-    return _cm(float(extent[1]))
+        return float(extent[1]), "XYZ"[int(np.argmax(np.abs(body)))]
+    return float(extent[1]), None
+
+
+def _stature(skeleton: Skeleton) -> float | None:
+    try:
+        from quatmotion.pose.skeleton16 import stature16
+
+        return stature16(skeleton)
+    except ValueError:  # not a skeleton the 16-joint pose skeleton maps
+        return None
 
 
 def _skeleton_rows(skeleton: Skeleton) -> list[tuple[str, str]]:
+    height, lying = _rest_pose(skeleton)
     rows = [
         ("skeleton", skeleton.name or "-"),
         ("joints", str(skeleton.n_joints)),
         ("end sites", str(skeleton.n_sites)),
-        ("unit", _unit(skeleton)),
-        ("rest pose height (cm)", _rest_pose_height(skeleton)),
+        ("unit", unit_text(unit_label(skeleton))),
+        (
+            "rest pose height (cm)",
+            f"- (rest pose not upright: it lies along {lying})" if lying else _cm(height),
+        ),
     ]
-    try:
-        from quatmotion.pose.skeleton16 import stature16
-
-        rows.append(("ankle-to-head bone chain (cm)", _cm(stature16(skeleton))))
-    except ValueError:  # not a skeleton the 16-joint pose skeleton maps
-        pass
+    stature = _stature(skeleton)
+    if stature is not None:
+        rows.append(("ankle-to-head bone chain (cm)", _cm(stature)))
     return rows
+
+
+def _skeleton_doc(skeleton: Skeleton) -> dict[str, object]:
+    height, lying = _rest_pose(skeleton)
+    return {
+        "skeleton": skeleton.name,
+        "joints": skeleton.n_joints,
+        "end_sites": skeleton.n_sites,
+        **unit_label(skeleton),
+        "rest_pose_height_cm": None if lying else height,
+        "rest_pose_lies_along": lying,
+        "ankle_to_head_cm": _stature(skeleton),
+    }
 
 
 def _frame_count(motion: Motion) -> str:
@@ -111,11 +127,22 @@ def _pelvis(motion: Motion) -> int:
         return 0
 
 
-def _motion_summary(motion: Motion) -> Table:
+def _motion_measures(motion: Motion) -> tuple[float, str, list[float]]:
+    """Median vertical extent over frames, the pelvis joint and its position at frame 0."""
     import numpy as np
 
     from quatmotion.motion import forward_kinematics, standing_height
 
+    # Absurd but finite values (reported as warnings) may overflow on the way: show what comes.
+    with np.errstate(all="ignore"):
+        step = max(1, motion.n_frames // 200)
+        extent = standing_height(motion, step)
+        pelvis = _pelvis(motion)
+        at_start = forward_kinematics(motion.slice(0, 1)).positions[0, pelvis]
+    return float(extent), motion.skeleton.joint_names[pelvis], [float(v) for v in at_start]
+
+
+def _motion_summary(motion: Motion) -> Table:
     table = Table(show_header=False)
     table.add_column("field", style="bold")
     table.add_column("value")
@@ -125,19 +152,24 @@ def _motion_summary(motion: Motion) -> Table:
         ("fps", f"{motion.fps:g}"),
         ("duration (s)", f"{motion.duration:.3f}"),
     ]
-    # Absurd but finite values (reported as warnings) may overflow on the way: show what comes.
-    with np.errstate(all="ignore"):
-        step = max(1, motion.n_frames // 200)
-        extent = standing_height(motion, step)
-        pelvis = _pelvis(motion)
-        at_start = forward_kinematics(motion.slice(0, 1)).positions[0, pelvis]
+    extent, pelvis, at_start = _motion_measures(motion)
     rows.append(("vertical extent, median over frames (cm)", _cm(extent)))
-    rows.append(
-        (f"{motion.skeleton.joint_names[pelvis]} at frame 0 (cm)", " ".join(map(_cm, at_start)))
-    )
+    rows.append((f"{pelvis} at frame 0 (cm)", " ".join(map(_cm, at_start))))
     for field, value in rows:
         table.add_row(field, value)
     return table
+
+
+def _motion_doc(motion: Motion) -> dict[str, object]:
+    extent, pelvis, at_start = _motion_measures(motion)
+    return {
+        **_skeleton_doc(motion.skeleton),
+        "frames": motion.n_frames,
+        "fps": motion.fps,
+        "duration_s": motion.duration,
+        "vertical_extent_cm": extent,
+        "pelvis": {"joint": pelvis, "frame0_cm": at_start},
+    }
 
 
 def _title(path: Path) -> None:
@@ -150,9 +182,11 @@ def info(
     file: Annotated[Path, typer.Argument(help="A .amc, .bvh or .asf file.")],
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    as_json: JsonOption = False,
 ) -> None:
     """Print a clip's skeleton, unit, frames, fps, duration and body measures (cm)."""
     with user_errors():
+        check_units(units)
         if file.suffix.lower() == ".asf":
             from quatmotion.io import read_asf
 
@@ -161,6 +195,9 @@ def info(
                     f"{file}: --units applies to BVH input only (an ASF states its unit)"
                 )
             sk = read_asf(require_file(file))
+            if as_json:
+                print_json({"file": str(file), **_skeleton_doc(sk)})
+                return
             _title(file)
             table = Table(show_header=False)
             for field, value in _skeleton_rows(sk):
@@ -168,6 +205,9 @@ def info(
             console.print(table)
             return
         motion = read_clip(file, skeleton, units)
+        if as_json:
+            print_json({"file": str(file), **_motion_doc(motion)})
+            return
         _title(file)
         console.print(_motion_summary(motion))
 
@@ -196,6 +236,7 @@ def convert(
         if len(paths) < 2:
             raise CliInputError("convert needs at least one input and an output")
         *inputs, out = paths
+        check_units(units)
         fmt = "." + to.lower().lstrip(".")
         if fmt not in MOTION_SUFFIXES:
             raise CliInputError(f"--to must be one of amc, bvh; got {to!r}")
@@ -214,6 +255,9 @@ def convert(
         targets = [out] if not into_folder else [out / f"{p.stem}{fmt}" for p in inputs]
         if len(set(targets)) < len(targets):
             raise CliInputError("two inputs have the same name: their outputs would collide")
+        if into_folder:
+            check_writable(out, folder=True)
+        check_outputs(targets, [*inputs, skeleton], force=force)  # before reading: fail fast
         # Read everything first: a bad clip then stops the command before anything is written.
         motions = []
         with progress_bar() as progress:
@@ -225,7 +269,7 @@ def convert(
                 motions.append(read_clip(path, sk, units if alone or bvh else None))
                 progress.advance(task)
         planned = [clip_files(t, m.skeleton) for m, t in zip(motions, targets, strict=True)]
-        check_outputs([f for files in planned for f in files], inputs, force=force)
+        check_outputs([f for files in planned for f in files], [*inputs, skeleton], force=force)
         with Outputs() as outputs:
             if into_folder:
                 outputs.folder(out)

@@ -15,8 +15,6 @@ distance.
 from __future__ import annotations
 
 import functools
-import json
-import sys
 import time
 from pathlib import Path
 from typing import Annotated
@@ -29,6 +27,7 @@ from quatmotion.cli._common import (
     FRAMES_HELP,
     CliInputError,
     ForceOption,
+    JsonOption,
     SchedulerOption,
     SkeletonOption,
     UnitsOption,
@@ -36,9 +35,12 @@ from quatmotion.cli._common import (
     at_least,
     check_frame,
     check_outputs,
+    check_units,
     console,
+    doubt_reporter,
     error_console,
     number_in,
+    print_json,
     progress_bar,
     read_clip,
     report_skipped,
@@ -97,12 +99,7 @@ def index_command(
         ),
     ] = 1,
     scheduler: SchedulerOption = None,
-    skeleton: Annotated[
-        Path | None,
-        typer.Option(
-            "--skeleton", "-s", help="ASF of the AMC files whose ASF is not found by name."
-        ),
-    ] = None,
+    skeleton: SkeletonOption = None,
     units: UnitsOption = None,
     force: ForceOption = False,
 ) -> None:
@@ -129,11 +126,12 @@ def index_command(
         ):
             at_least(option, value, 1)
         at_least("--seed", seed, 0)
+        check_units(units)
         if skeleton is not None:
             require_file(skeleton)
         where = resolve_scheduler(scheduler, workers=workers)
         files = find_motion_files(paths)
-        check_outputs([output], files, force=force)
+        check_outputs([output], [*files, skeleton], force=force)
         from quatmotion.cli.warmup import ensure_kernels
 
         ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
@@ -155,6 +153,7 @@ def index_command(
                 index_threads=index_threads,
                 progress=_StageBars(bar),
                 log=lambda message: bar.console.print(message, markup=False, highlight=False),
+                on_doubt=doubt_reporter(bar),
             )
         library.save(output)
     report_skipped(failures)
@@ -203,7 +202,7 @@ def search_command(
         bool, typer.Option(help="Leave out results from the query's own clip.")
     ] = False,
     ef: Annotated[int, typer.Option(help="HNSW search breadth (higher: slower, more exact).")] = 64,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    as_json: JsonOption = False,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
 ) -> None:
@@ -218,6 +217,9 @@ def search_command(
             raise CliInputError("give exactly one of --clip (an indexed clip) or --file")
         if file is None and (skeleton is not None or units is not None):
             raise CliInputError("--skeleton and --units apply to a --file query")
+        check_units(units)
+        if skeleton is not None:
+            require_file(skeleton)
         at_least("--ef", ef, 1)
         library = PoseLibrary.load(library_path, ef_search=ef)
         if file is not None:
@@ -268,8 +270,7 @@ def search_command(
             "search_ms": 1e3 * elapsed,
             "results": results,
         }
-        json.dump(doc, sys.stdout, indent=2)
-        sys.stdout.write("\n")
+        print_json(doc)
         return
     from rich.table import Table
 

@@ -9,7 +9,6 @@ already indexed with the same content hash are skipped) and report bad files wit
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -19,10 +18,17 @@ from rich.table import Table
 from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
+    JsonOption,
     SchedulerOption,
+    SkeletonOption,
+    UnitsOption,
     WorkersOption,
+    check_outputs,
+    check_units,
     console,
+    doubt_reporter,
     error_console,
+    print_json,
     progress_bar,
     read_clip,
     report_skipped,
@@ -58,6 +64,8 @@ def _build(
     kinds: str,
     workers: int | None,
     scheduler: str | None,
+    skeleton: Path | None = None,
+    units: str | None = None,
 ) -> None:
     from quatmotion.parallel import resolve_scheduler
     from quatmotion.retrieval.build import build_index, read_labels_csv
@@ -66,7 +74,17 @@ def _build(
         label_map = read_labels_csv(require_file(labels)) if labels else None
         if skeletons is not None and not skeletons.is_dir():
             raise CliInputError(f"{skeletons}: --skeletons must be a folder of ASF files")
+        if skeleton is not None and skeletons is not None:
+            raise CliInputError("give --skeleton (one ASF) or --skeletons (a folder), not both")
+        if skeleton is not None:
+            require_file(skeleton)
+        check_units(units)
         kind_tuple = _kinds(kinds)
+        for path in paths:
+            if not path.exists():
+                raise CliInputError(f"{path}: no such file or folder")
+        asf_files = sorted(skeletons.glob("*.asf")) if skeletons is not None else []
+        check_outputs([output], [*paths, labels, skeleton, *asf_files], replace=True)
         from quatmotion.cli.warmup import ensure_kernels
 
         learn = ("learn",) if {"qssd", "ksvd"} & set(kind_tuple) else ()
@@ -82,10 +100,12 @@ def _build(
                 output,
                 kinds=kind_tuple,
                 labels=label_map,
-                skeletons=skeletons,
+                skeletons=skeleton or skeletons,
+                units=units,
                 workers=workers,
                 scheduler=resolve_scheduler(scheduler, workers=workers),
                 progress=advance,
+                on_doubt=doubt_reporter(bar),
             )
     report_skipped(f"{path}: {reason}" for path, reason in report.failed)
     console.print(
@@ -99,14 +119,17 @@ def _build(
         raise typer.Exit(code=1)
 
 
+_SKELETONS_HELP = "Folder of the AMC clips' ASF files (each found by its name)."
+
+
 @index_app.command("build")
 def build_command(
     paths: Annotated[list[Path], typer.Argument(help="Folders (searched recursively) or clips.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Index file to write (.qidx).")],
     labels: Annotated[Path | None, typer.Option(help="CSV with columns clip,label.")] = None,
-    skeletons: Annotated[
-        Path | None, typer.Option(help="Folder of the AMC clips' ASF files.")
-    ] = None,
+    skeleton: SkeletonOption = None,
+    skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP)] = None,
+    units: UnitsOption = None,
     kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
@@ -116,7 +139,7 @@ def build_command(
     A file that cannot be read is reported and skipped; the command then exits with code 1
     after committing the others.
     """
-    _build(paths, output, labels, skeletons, kinds, workers, scheduler)
+    _build(paths, output, labels, skeletons, kinds, workers, scheduler, skeleton, units)
 
 
 @index_app.command("add")
@@ -124,9 +147,9 @@ def add_command(
     index: Annotated[Path, typer.Argument(help="Index file (.qidx).")],
     paths: Annotated[list[Path], typer.Argument(help="Folders (searched recursively) or clips.")],
     labels: Annotated[Path | None, typer.Option(help="CSV with columns clip,label.")] = None,
-    skeletons: Annotated[
-        Path | None, typer.Option(help="Folder of the AMC clips' ASF files.")
-    ] = None,
+    skeleton: SkeletonOption = None,
+    skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP)] = None,
+    units: UnitsOption = None,
     kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
@@ -135,8 +158,11 @@ def add_command(
     from quatmotion.retrieval.index import ClipIndex
 
     with user_errors():
+        check_units(units)  # the options first, as build checks them
+        if skeleton is not None:
+            require_file(skeleton)
         ClipIndex.open(index).close()
-    _build(paths, index, labels, skeletons, kinds, workers, scheduler)
+    _build(paths, index, labels, skeletons, kinds, workers, scheduler, skeleton, units)
 
 
 @index_app.command("remove")
@@ -147,17 +173,18 @@ def remove_command(
     """Remove clips from an index."""
     from quatmotion.retrieval.index import ClipIndex
 
-    with user_errors(), ClipIndex.open(index, write=True) as idx:
-        removed = idx.remove(clips)
-        if not removed:
-            raise CliInputError(f"no clip named {', '.join(clips)} in {index}")
+    with user_errors():
+        require_file(index)
+        check_outputs([index], replace=True)
+        with ClipIndex.open(index, write=True) as idx:
+            removed = idx.remove(clips)
     console.print(f"removed {len(removed)} clips", markup=False)
 
 
 @index_app.command("ls")
 def ls_command(
     index: Annotated[Path, typer.Argument(help="Index file (.qidx).")],
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    as_json: JsonOption = False,
 ) -> None:
     """List the clips of an index: name, label, frames, fps, skeleton, path."""
     from quatmotion.retrieval.index import ClipIndex
@@ -165,7 +192,7 @@ def ls_command(
     with user_errors(), ClipIndex.open(index) as idx:
         rows = idx.clips()
     if as_json:
-        print(json.dumps([r.__dict__ for r in rows], indent=1))
+        print_json([r.__dict__ for r in rows])
         return
     table = Table("clip", "label", "frames", "fps", "skeleton", "path")
     for r in rows:
@@ -177,20 +204,26 @@ def ls_command(
 @app.command("search")
 def search_command(
     query: Annotated[
-        str, typer.Argument(help="An .amc/.bvh file, or the name of an indexed clip.")
+        str, typer.Argument(help="An .amc/.bvh file, or an indexed clip's name, file name or stem.")
     ],
     index: Annotated[Path, typer.Option(help="Index file (.qidx).")],
     top: Annotated[int, typer.Option(help="Results to show.")] = 20,
     method: Annotated[
         str | None, typer.Option(help="Retrieval method (default: the best measured).")
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
-    skeleton: Annotated[Path | None, typer.Option(help="ASF of an AMC query.")] = None,
+    as_json: JsonOption = False,
+    skeleton: SkeletonOption = None,
+    units: UnitsOption = None,
     within: Annotated[
         bool, typer.Option(help="Find where the query occurs inside longer clips.")
     ] = False,
 ) -> None:
-    """Rank the indexed clips by similarity to the query."""
+    """Rank the indexed clips by similarity to the query.
+
+    With --within, each result names the frames of the clip that match, first to last (from
+    0); the JSON's stop_frame is one past the last.
+    """
+    from quatmotion.errors import ClipNameError
     from quatmotion.io import MOTION_SUFFIXES
     from quatmotion.retrieval.index import ClipIndex
     from quatmotion.retrieval.methods import DEFAULT_METHOD
@@ -200,24 +233,36 @@ def search_command(
         name = method or DEFAULT_METHOD
         if within and method not in (None, DEFAULT_METHOD):
             raise CliInputError("--within uses the motion frames; leave out --method")
+        check_units(units)
+        if skeleton is not None:
+            require_file(skeleton)
         path = Path(query)
-        is_file = path.suffix.lower() in MOTION_SUFFIXES
+        # A motion file if there is one; else the name of an indexed clip (walk.bvh included).
+        is_file = path.suffix.lower() in MOTION_SUFFIXES and path.exists()
+        if not is_file and (skeleton is not None or units is not None):
+            raise CliInputError("--skeleton and --units apply to a query file")
         with ClipIndex.open(index) as idx:
-            target = read_clip(path, skeleton) if is_file else query
-            results = (
-                search_within(idx, target, top=top)
-                if within
-                else search(idx, target, method=name, top=top)
-            )
+            target = read_clip(path, skeleton, units) if is_file else query
+            try:
+                results = (
+                    search_within(idx, target, top=top)
+                    if within
+                    else search(idx, target, method=name, top=top)
+                )
+            except ClipNameError as error:
+                looks_like_file = path.suffix.lower() in MOTION_SUFFIXES
+                raise CliInputError(
+                    f"{query}: no such file, and {error}" if looks_like_file else str(error)
+                ) from None
     if as_json:
         doc = {
             "query": query,
             "method": "subsequence-dtw" if within else name,
             "results": [r.as_dict() for r in results],
         }
-        print(json.dumps(doc, indent=1))
+        print_json(doc)
         return
-    cols = ["rank", "clip", "label", "distance"] + (["frames"] if within else [])
+    cols = ["rank", "clip", "label", "distance"] + (["frames (first-last)"] if within else [])
     table = Table(*cols)
     for r in results:
         row = [
@@ -227,6 +272,6 @@ def search_command(
             "-" if r.distance != r.distance else f"{r.distance:.4g}",
         ]
         if within:
-            row.append(f"{r.start_frame}-{r.stop_frame}")
+            row.append(f"{r.start_frame}-{max(r.start_frame, r.stop_frame - 1)}")
         table.add_row(*row)
     console.print(table)

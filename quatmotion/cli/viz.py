@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -12,8 +13,10 @@ from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
+    SkeletonOption,
     UnitsOption,
     check_outputs,
+    check_units,
     console,
     read_clip,
     require_file,
@@ -63,8 +66,9 @@ def view(
     compare: Annotated[
         list[str] | None,
         typer.Option(
-            help="A clip to compare with each FILE, in order (repeat the option): shown in green "
-            "beside the original in blue, with the per-joint error (same skeleton, frames, fps)."
+            help="A clip to play with each FILE, in order (repeat the option): in green beside "
+            "(or over) the FILE in blue, each at its own length (the shorter holds its last "
+            "frame); the per-joint error when both share skeleton, frame rate and frame count."
         ),
     ] = None,
     compare_decoded: Annotated[
@@ -78,22 +82,22 @@ def view(
     layout: Annotated[
         str | None, typer.Option(help="side (a viewport per clip) or overlay (one viewport).")
     ] = None,
-    skeleton: Annotated[
-        Path | None, typer.Option("--skeleton", "-s", help="ASF of AMC input (else found by name).")
-    ] = None,
+    skeleton: SkeletonOption = None,
     units: UnitsOption = None,
     force: ForceOption = False,
 ) -> None:
     """Write a standalone 3D viewer page (opens offline; frames count from 0)."""
     from quatmotion.viz import write_view
+    from quatmotion.viz.frame_data import comparison_obstacle
 
     with user_errors():
         if compare and compare_decoded:
             raise CliInputError("give --compare or --compare-decoded, not both")
         if layout not in (None, "side", "overlay"):
             raise CliInputError(f"--layout must be side or overlay, got {layout!r}")
+        check_units(units)
         inputs = [Path(spec.split(LIBRARY_SEPARATOR)[0]) for spec in [*files, *(compare or [])]]
-        check_outputs([out], inputs, force=force)
+        check_outputs([out], [*inputs, skeleton], force=force)
         motions = [_read(spec, skeleton, units) for spec in files]
         others = None
         if compare:
@@ -107,6 +111,10 @@ def view(
         path = write_view(out, motions, others, ghost=ghost, layout=layout)  # type: ignore[arg-type]
         frames = sum(m.n_frames for m in motions)
         console.print(f"wrote {path} ({len(motions)} clip(s), {frames} frames)")
+        for motion, other in zip(motions, others or (), strict=False):
+            reason = comparison_obstacle(motion, other)
+            if reason:
+                console.print(f"no per-frame error for {motion.name} vs {other.name}: {reason}")
 
 
 @app.command()
@@ -119,9 +127,15 @@ def report(
     force: ForceOption = False,
 ) -> None:
     """Write one standalone page with the tables and figures of benchmark runs."""
+    from quatmotion.errors import FormatError
     from quatmotion.viz import write_report
+    from quatmotion.viz.report import load_result
 
     with user_errors():
-        check_outputs([out], results, force=force)
+        figures = []  # the PNGs the page embeds are inputs too
+        for path in results:
+            with contextlib.suppress(FormatError, OSError):  # reported by write_report
+                figures += load_result(path).figures
+        check_outputs([out], [*results, *figures], force=force)
         path = write_report(out, results, title=title)
         console.print(f"wrote {path} ({len(results)} benchmark result(s))")

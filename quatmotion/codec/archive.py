@@ -31,8 +31,14 @@ from quatmotion.codec.container import (
 from quatmotion.codec.library import LayoutInfo
 from quatmotion.codec.methods import ClipContext, get_method
 from quatmotion.codec.repair import Corrections, correction_lever, read_clip_prefix
-from quatmotion.codec.skeletons import inflate_text, skeleton_from_record
+from quatmotion.codec.skeletons import (
+    RECORD_BVH,
+    RECORD_BVH_GUESSED,
+    inflate_text,
+    skeleton_from_record,
+)
 from quatmotion.errors import FormatError
+from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion, Skeleton
 
 __all__ = ["Archive", "DecodedChannels", "open_archive"]
@@ -130,15 +136,17 @@ class Archive:
         return [c.name for c in self.header.clips]
 
     def index_of(self, clip: int | str) -> int:
-        """The position of a clip given by position or name (``KeyError`` naming it)."""
-        if isinstance(clip, int | np.integer):
-            if not 0 <= clip < len(self):
-                raise KeyError(f"clip index {clip} out of range (the file holds {len(self)})")
-            return int(clip)
-        names = self.names()
-        if clip not in names:
-            raise KeyError(f"no clip named {clip!r} in {self._name}")
-        return names.index(clip)
+        """The position of a clip given by position or name: its name, file name (``walk.bvh``)
+        or number, as every command reads a clip name (:func:`quatmotion.io.names.match_clip`).
+
+        Raises
+        ------
+        KeyError
+            (:class:`~quatmotion.errors.ClipNameError`) No such clip, or several.
+        """
+        if isinstance(clip, int | np.integer) and 0 <= clip < len(self):
+            return int(clip)  # the fast path of every read
+        return match_clip(clip, self.names(), str(self._name))
 
     def chunk_bytes(self, clip: int | str) -> int:
         """Size of a clip's own chunk (payload), bytes."""
@@ -177,6 +185,15 @@ class Archive:
             )
             self._skeletons[k] = sk if sk.name == entry.name else replace(sk, name=entry.name)
         return self._skeletons[k]
+
+    def bvh_unit(self, k: int) -> tuple[float, bool] | None:
+        """The ``k``-th skeleton's BVH length unit, centimetres per file unit, and whether it
+        was guessed, from the header alone (no record parsed: ``ls`` of a library of thousands
+        of skeletons); ``None`` for a skeleton that did not come from a BVH file."""
+        rec = self.header.records[self.header.skeletons[k].record]
+        if rec.kind not in (RECORD_BVH, RECORD_BVH_GUESSED):
+            return None
+        return rec.scale, rec.kind == RECORD_BVH_GUESSED
 
     def layout(self, k: int) -> tuple[LayoutInfo, Any]:
         """The ``k``-th layout and its method model."""

@@ -42,7 +42,7 @@ from quatmotion.codec.repair import (
 )
 from quatmotion.codec.skeletons import deflate_text, same_skeleton, skeleton_record
 from quatmotion.errors import FormatError
-from quatmotion.io import find_motion_files, read_motion
+from quatmotion.io import Doubt, find_motion_files, implausible_values, read_motion
 from quatmotion.motion import Motion, Skeleton
 from quatmotion.parallel import Scheduler, run_batch
 
@@ -117,9 +117,13 @@ def _load_inputs(
     skeleton: Skeleton | str | Path | None,
     known: Sequence[tuple[int, str]] | None = None,
     failed: list[tuple[str, str]] | None = None,
+    units: str | float | None = None,
+    on_doubt: Callable[[str, Doubt], None] | None = None,
 ) -> tuple[list[Motion], list[tuple[int, str]]]:
-    """Motions and their source sizes from clips, files and folders. With ``failed``, a file
-    that cannot be read is noted there (file, reason) and left out instead of raising."""
+    """Motions and their source sizes from clips, files and folders (AMC files on
+    ``skeleton``, BVH files in ``units``). With ``failed``, a file that cannot be read is noted
+    there (file, reason) and left out instead of raising; ``on_doubt(file, doubt)`` hears what
+    is doubtful in a file read (:func:`quatmotion.io.implausible_values`)."""
     motions: list[Motion] = []
     sources: list[tuple[int, str]] = []
     paths: list[Path] = []
@@ -134,13 +138,16 @@ def _load_inputs(
             paths.append(Path(item))
     for path in find_motion_files(paths) if paths else []:
         try:
-            motion = read_motion(path, skeleton if path.suffix.lower() == ".amc" else None)
+            amc = path.suffix.lower() == ".amc"
+            motion = read_motion(path, skeleton if amc else None, units=None if amc else units)
             size = path.stat().st_size
         except (FormatError, OSError, ValueError) as error:
             if failed is None:
                 raise
             failed.append((str(path), str(error).splitlines()[0]))
             continue
+        for doubt in implausible_values(motion) if on_doubt is not None else ():
+            on_doubt(str(path), doubt)
         motions.append(motion)
         sources.append((size, path.suffix.lower().lstrip(".")))
     if not motions:
@@ -655,12 +662,14 @@ def compress(
     quality: float | None = None,
     bound_on: str = "joints",
     skeleton: Skeleton | str | Path | None = None,
+    units: str | float | None = None,
     sources: Sequence[tuple[int, str]] | None = None,
     seed: int = 0,
     progress: Progress | None = None,
     workers: int | None = None,
     scheduler: str | Scheduler | None = None,
     on_error: str = "raise",
+    on_doubt: Callable[[str, Doubt], None] | None = None,
 ) -> CompressionResult:
     """Compress clips into one ``.qmz`` library.
 
@@ -686,7 +695,11 @@ def compress(
         What ``max_error`` bounds: joint and end-site positions, or also the virtual vertices
         3 cm along each joint's axes (the Animation Compression Library's measure).
     skeleton : Skeleton or path, optional
-        The ASF for AMC inputs whose skeleton is not found by name.
+        The ASF for AMC inputs (else each AMC's is found by name).
+    units : str or float, optional
+        The length unit of BVH inputs (a name of :data:`quatmotion.io.BVH_UNITS` or
+        centimetres per unit); ``None`` guesses it from each file (stored with the skeleton,
+        which says it was guessed). ``max_error`` holds in the unit the clips are read in.
     sources : sequence of (int, str), optional
         For clips given in memory, the size and format (``"amc"``, ``"bvh"``) of the files
         they came from (stored for ratios and ``ls``).
@@ -705,6 +718,10 @@ def compress(
         What a file that cannot be read, or a clip that cannot be stored, does: stop the
         compression (nothing is written), or be left out and listed in
         :attr:`CompressionResult.failed`.
+    on_doubt : callable, optional
+        ``on_doubt(file, doubt)`` for what is doubtful in an input file read
+        (:func:`quatmotion.io.implausible_values`: a guessed unit near a boundary, a frame rate
+        motion capture does not run at...), as the file is read.
 
     Returns
     -------
@@ -727,7 +744,9 @@ def compress(
     codec = get_method(method)
     failed: list[tuple[str, str]] = []
     skip = on_error == "skip"
-    motions, sources = _load_inputs(clips, skeleton, sources, failed if skip else None)
+    motions, sources = _load_inputs(
+        clips, skeleton, sources, failed if skip else None, units, on_doubt
+    )
     table = _SkeletonTable()
     if skip:
         motions, sources = _admit(motions, sources, table, failed)
@@ -786,21 +805,23 @@ def append(
     max_error: float | None = None,
     quality: float | None = None,
     skeleton: Skeleton | str | Path | None = None,
+    units: str | float | None = None,
     seed: int = 0,
     progress: Progress | None = None,
     workers: int | None = None,
     scheduler: str | Scheduler | None = None,
+    on_doubt: Callable[[str, Doubt], None] | None = None,
 ) -> CompressionResult:
     """Add clips to an existing ``.qmz`` file (rewritten atomically).
 
     The clips already in the file keep their chunks byte for byte; the new ones are coded with
     the file's method and with its library models where their skeleton structure is known.
-    Names must stay unique. ``progress``, ``workers`` and ``scheduler`` are those of
-    :func:`compress`.
+    Names must stay unique. ``skeleton``, ``units``, ``progress``, ``workers``, ``scheduler``
+    and ``on_doubt`` are those of :func:`compress`.
     """
     t0 = time.perf_counter()
     path = Path(path)
-    motions, sources = _load_inputs(clips, skeleton)
+    motions, sources = _load_inputs(clips, skeleton, None, None, units, on_doubt)
     with open_archive(path) as archive:
         old = archive.header
         old_names = set(archive.names())

@@ -31,6 +31,7 @@ from quatmotion.io.bvh import (
 from quatmotion.io.files import (
     FAR_CM,
     MOTION_SUFFIXES,
+    PLAUSIBLE_FPS,
     Doubt,
     find_motion_files,
     implausible_values,
@@ -46,6 +47,7 @@ __all__ = [
     "Doubt",
     "MOTION_SUFFIXES",
     "PLAUSIBLE_FIGURE_CM",
+    "PLAUSIBLE_FPS",
     "asf_bone_end_positions",
     "asf_text",
     "bvh_text",

@@ -504,34 +504,58 @@ def _require_asf(skeleton: Skeleton, what: str) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def find_asf_for_amc(path: str | Path) -> Path:
-    """The ASF that goes with an AMC: same name first, then the CMU or HDM05 conventions.
+def find_asf_for_amc(path: str | Path, folder: str | Path | None = None) -> Path:
+    """The ASF that goes with an AMC: same name first, then the CMU or HDM05 conventions, then
+    the only ASF of the folder.
 
     In order: ``NAME.asf`` beside ``NAME.amc`` (where quatmotion writes it); CMU:
     ``SS_TT.amc`` -> ``SS.asf`` in the same folder; HDM05: ``clips/CLASS/HDM_AA_....amc`` ->
-    ``../../skeletons/HDM_AA.asf`` or ``HDM_AA.asf`` in the same folder.
+    ``../../skeletons/HDM_AA.asf`` or ``HDM_AA.asf`` in the same folder; else the one ASF in the
+    AMC's folder (some exporters write ``skeleton.asf`` beside ``walking.amc``). With
+    ``folder``, the same names are looked for in that folder instead (a folder of skeletons),
+    then its only ASF.
 
     Raises
     ------
     FormatError
-        If neither exists (the message says to pass the skeleton, e.g. ``--skeleton``).
+        If none is found, naming where it looked, or if the folder holds several ASF files and
+        no name tells which (naming them); the message says to pass the skeleton.
     """
     path = Path(path)
     stem = path.stem
-    candidates = [path.with_suffix(".asf")]
-    if "_" in stem:
-        candidates.append(path.with_name(stem.split("_", 1)[0] + ".asf"))
     parts = stem.split("_")
-    if len(parts) >= 2 and parts[0].upper() == "HDM":
-        actor = f"{parts[0]}_{parts[1]}.asf"
-        candidates.append(path.parent.parent.parent / "skeletons" / actor)
-        candidates.append(path.parent / actor)
+    if folder is not None:
+        base = Path(folder)
+        names = [f"{stem}.asf"]
+        if len(parts) >= 2:
+            names += [f"{parts[0]}.asf", f"{parts[0]}_{parts[1]}.asf"]
+        candidates = [base / n for n in names]
+    else:
+        base = path.parent
+        candidates = [path.with_suffix(".asf")]
+        if "_" in stem:
+            candidates.append(path.with_name(stem.split("_", 1)[0] + ".asf"))
+        if len(parts) >= 2 and parts[0].upper() == "HDM":
+            actor = f"{parts[0]}_{parts[1]}.asf"
+            candidates.append(path.parent.parent.parent / "skeletons" / actor)
+            candidates.append(path.parent / actor)
     for candidate in candidates:
         if candidate.is_file():
             return candidate
+    found = sorted(p for p in base.glob("*") if p.suffix.lower() == ".asf" and p.is_file())
+    if len(found) == 1:
+        return found[0]
+    if found:
+        listed = ", ".join(p.name for p in found[:6]) + (" ..." if len(found) > 6 else "")
+        raise FormatError(
+            f"cannot tell which ASF skeleton goes with this AMC: {base} holds {len(found)} ASF "
+            f"files ({listed}) and none is named for it; pass one (--skeleton)",
+            path,
+        )
     raise FormatError(
         "cannot find the ASF skeleton for this AMC (looked for "
-        f"{', '.join(str(c) for c in candidates) or 'nothing'}); pass it (--skeleton)",
+        f"{', '.join(str(c) for c in candidates)}, and {base} holds no ASF file); "
+        "pass it (--skeleton)",
         path,
     )
 

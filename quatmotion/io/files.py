@@ -15,12 +15,20 @@ import numpy as np
 from quatmotion.errors import FormatError
 from quatmotion.io._text import decode_text
 from quatmotion.io.asf_amc import parse_amc, parse_asf, read_amc, write_amc
-from quatmotion.io.bvh import BVH_UNITS, PLAUSIBLE_FIGURE_CM, parse_bvh, read_bvh, write_bvh
+from quatmotion.io.bvh import (
+    BVH_UNITS,
+    PLAUSIBLE_FIGURE_CM,
+    TYPICAL_HEIGHT_CM,
+    parse_bvh,
+    read_bvh,
+    write_bvh,
+)
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
 
 __all__ = [
     "FAR_CM",
     "MOTION_SUFFIXES",
+    "PLAUSIBLE_FPS",
     "Doubt",
     "find_motion_files",
     "implausible_values",
@@ -204,20 +212,36 @@ def write_motion(motion: Motion, path: str | Path) -> None:
 class Doubt(NamedTuple):
     """Something unlikely in a clip that was read without error."""
 
-    kind: Literal["unit", "far"]
-    """``"unit"``: a guessed unit makes an implausible figure; ``"far"``: beyond 1 km."""
+    kind: Literal["unit", "far", "rate"]
+    """``"unit"``: a guessed unit makes an implausible figure, or another unit a likelier one;
+    ``"far"``: beyond 1 km; ``"rate"``: a frame rate motion capture does not run at."""
     message: str
     """One sentence, without the file name."""
+
+
+PLAUSIBLE_FPS = (1.0, 1000.0)
+"""Frame rates of motion capture, frames per second: a frame time outside (a second or more
+per frame, or under a millisecond) is a unit mistake (milliseconds for seconds) or a typo."""
 
 
 def implausible_values(motion: Motion) -> list[Doubt]:
     """What in a clip that was read without error is unlikely for human motion capture.
 
-    Two checks: a BVH length unit that was guessed and makes the posed figure's size (the median
-    over frames of its largest extent: the height standing, the length lying) fall outside
-    :data:`PLAUSIBLE_FIGURE_CM`, naming the units that would not; and coordinates or bones
-    beyond :data:`FAR_CM`. Readers accept both (the numbers are valid); a caller shows these
-    messages as warnings.
+    Three checks:
+
+    * a BVH length unit that was guessed (the file has no unit field) and is doubtful: the
+      posed figure's size (:func:`posed_size_cm`: the height standing, the length lying) falls
+      outside :data:`PLAUSIBLE_FIGURE_CM`, or another unit of :data:`BVH_UNITS` makes it a
+      plausible figure nearer a typical adult's 170 cm: a figure near a unit boundary (a
+      135 cm figure in inches read as 53 cm, a child's torso, when its rest pose is no
+      standing pose). The message names the other readings. Every wrong guess that reads a
+      plausible figure too small (the error bounds of the codec then hold in the wrong unit,
+      too loose) meets the second test;
+    * coordinates or bones beyond :data:`FAR_CM`;
+    * a frame rate outside :data:`PLAUSIBLE_FPS`.
+
+    Readers accept all of these (the numbers are valid); a caller shows the messages as
+    warnings.
 
     Parameters
     ----------
@@ -240,25 +264,53 @@ def implausible_values(motion: Motion) -> list[Doubt]:
     if bones > FAR_CM:
         doubts.append(Doubt("far", f"a bone is {bones:.3g} cm long, over 1 km"))
     if sk.extras.get("bvh_unit_guessed") and bones <= FAR_CM:
-        size = posed_size_cm(motion)
-        low, high = PLAUSIBLE_FIGURE_CM
-        if not low <= size <= high:
-            cm = sk.extras["bvh_scale"]
-            others = [
-                f"{size / cm * other:.3g} cm read in {name}"
-                for name, other in BVH_UNITS.items()
-                if other != cm and low <= size / cm * other <= high
-            ]
-            alternatives = f"; it would be {' or '.join(others)}" if others else ""
-            unit = sk.extras.get("bvh_unit") or f"{cm:g} cm"
-            doubts.append(
-                Doubt(
-                    "unit",
-                    f"the figure is {size:.3g} cm tall or long with the length unit guessed as "
-                    f"{unit}; a human figure is {low:g} to {high:g} cm{alternatives}",
-                )
+        doubt = _unit_doubt(sk, posed_size_cm(motion))
+        if doubt is not None:
+            doubts.append(doubt)
+    low, high = PLAUSIBLE_FPS
+    if not low <= motion.fps <= high:
+        doubts.append(
+            Doubt(
+                "rate",
+                f"the frame time is {1.0 / motion.fps:.4g} s ({motion.fps:.4g} frames per "
+                f"second); motion capture runs at {low:g} to {high:g} frames per second",
             )
+        )
     return doubts
+
+
+def _unit_doubt(skeleton: Skeleton, size: float) -> Doubt | None:
+    """The doubt about a guessed unit that reads the figure ``size`` cm large, if any."""
+    low, high = PLAUSIBLE_FIGURE_CM
+    cm = skeleton.extras["bvh_scale"]
+
+    def typicality(value: float) -> float:  # distance from a typical adult, as a ratio
+        return abs(np.log(value / TYPICAL_HEIGHT_CM))
+
+    readings = {
+        name: size / cm * other
+        for name, other in BVH_UNITS.items()
+        if other != cm and low <= size / cm * other <= high
+    }
+    plausible = low <= size <= high
+    likelier = {n: v for n, v in readings.items() if typicality(v) < typicality(size)}
+    if plausible and not likelier:
+        return None
+    shown = likelier if plausible else readings
+    others = " or ".join(f"{value:.3g} cm read in {name}" for name, value in shown.items())
+    unit = skeleton.extras.get("bvh_unit") or f"{cm:g} cm"
+    said = f"; it would be {others}" if others else ""
+    if plausible:
+        return Doubt(
+            "unit",
+            f"the figure is {size:.3g} cm tall or long with the length unit guessed as {unit}, "
+            f"small for an adult and near a unit boundary{said}",
+        )
+    return Doubt(
+        "unit",
+        f"the figure is {size:.3g} cm tall or long with the length unit guessed as {unit}; a "
+        f"human figure is {low:g} to {high:g} cm{said}",
+    )
 
 
 def posed_size_cm(motion: Motion, n_frames: int = 30) -> float:

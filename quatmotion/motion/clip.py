@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,6 +75,12 @@ class Motion:
         object.__setattr__(self, "root_translation", trans)
         object.__setattr__(self, "joint_translations", jt)
         object.__setattr__(self, "fps", float(self.fps))
+
+    def renamed(self, name: str) -> Motion:
+        """The same clip (the same arrays, not validated again) under another name."""
+        other = copy.copy(self)
+        object.__setattr__(other, "name", name)
+        return other
 
     @property
     def n_frames(self) -> int:

@@ -21,6 +21,7 @@ Conventions
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from types import MappingProxyType
@@ -175,8 +176,40 @@ class Skeleton:
         """Joint ``j``'s rotation channels in file order (subset of ``rx ry rz``)."""
         return tuple(c for c in self.channels[j] if c in ROTATION_CHANNELS)
 
+    def fingerprint(self) -> str:
+        """A 16-hex-digit digest of everything the skeleton holds (names, hierarchy, offsets
+        and axes bit for bit, channels, end sites, name, extras): equal skeletons give equal
+        fingerprints in every process and release, so files store it and tables key on it."""
+        h = hashlib.sha256(b"quatmotion-skeleton-1\0")
+        for f in fields(self):
+            h.update(f.name.encode() + b"=")
+            _digest(h, getattr(self, f.name))
+        return h.hexdigest()[:16]
+
     def __repr__(self) -> str:
         return f"Skeleton(name={self.name!r}, joints={self.n_joints}, sites={self.n_sites})"
+
+
+def _digest(h: Any, value: Any) -> None:
+    """Feed ``value`` to the hash ``h`` unambiguously (type, shape and length prefixes)."""
+    if isinstance(value, np.ndarray):
+        a = np.ascontiguousarray(value)
+        if a.dtype.kind == "f":
+            a = a + 0.0  # -0.0 and 0.0 are one value
+        h.update(f"a{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    elif isinstance(value, Mapping):
+        h.update(f"d{len(value)}".encode())
+        for key in sorted(value, key=str):
+            _digest(h, str(key))
+            _digest(h, value[key])
+    elif isinstance(value, list | tuple):
+        h.update(f"l{len(value)}".encode())
+        for item in value:
+            _digest(h, item)
+    else:
+        text = repr(value).encode()
+        h.update(f"{type(value).__name__}{len(text)}:".encode() + text)
 
 
 def _rebuild_skeleton(values: dict[str, Any]) -> Skeleton:

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quatmotion import quat
+from quatmotion.io import Doubt
 from quatmotion.motion import Motion
 from quatmotion.pose import skeleton16
 from quatmotion.pose.gpd import gpd_features
@@ -353,6 +354,9 @@ class PoseClip:
     skeleton_kind : str or None
         The skeleton family it came from (:func:`skeleton16.skeleton_kind`), ``None`` when
         unknown.
+    doubts : tuple of Doubt
+        What is doubtful in the file it was read from (:func:`quatmotion.io.implausible_values`),
+        for the caller to report.
     """
 
     name: str
@@ -364,6 +368,7 @@ class PoseClip:
     height: float | None = None
     file_frames: int | None = None
     skeleton_kind: str | None = None
+    doubts: tuple[Doubt, ...] = ()
 
     @classmethod
     def from_motion(

@@ -38,7 +38,6 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import functools
 import json
 import os
@@ -54,6 +53,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from quatmotion._atomic import atomic_output
 from quatmotion.errors import FormatError
+from quatmotion.io import Doubt
+from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion
 from quatmotion.parallel import Failure, Scheduler, imap_batch
 from quatmotion.pose import labels
@@ -253,6 +254,7 @@ class PoseLibrary:
         index_threads: int = 1,
         progress: Callable[[str, int, int], None] | None = None,
         log: Callable[[str], None] | None = None,
+        on_doubt: Callable[[str, Doubt], None] | None = None,
     ) -> tuple[PoseLibrary, list[Failure]]:
         """Build a library of any size in bounded memory, the clips prepared in parallel.
 
@@ -301,6 +303,9 @@ class PoseLibrary:
             sample, out of all clips; stops when the sample is complete) or ``"index"``.
         log : callable, optional
             Called with progress messages.
+        on_doubt : callable, optional
+            ``on_doubt(clip name, doubt)`` for each of a clip's :attr:`PoseClip.doubts`, once,
+            in the index pass.
 
         Returns
         -------
@@ -402,6 +407,8 @@ class PoseLibrary:
                     )
                     failed[where] = Failure(where, sources[where], message)
                     continue
+                for doubt in clip.doubts if on_doubt is not None else ():
+                    on_doubt(clip.name, doubt)
                 names.append(clip.name)
                 lengths.append(len(clip.vectors))
                 steps.append(clip.step)
@@ -498,41 +505,16 @@ class PoseLibrary:
         clip : str or int
             The clip's name (its path as indexed), a unique end of it (the file name, its stem,
             or trailing folders), or its number from 0; digits are read as a number only when
-            no clip is named so.
+            no clip is named so (:func:`quatmotion.io.names.match_clip`, the rule of every
+            command).
 
         Raises
         ------
         ValueError
-            Naming up to five close names when none matches, or the matches when several do.
+            (:class:`~quatmotion.errors.ClipNameError`) Naming up to five close names when none
+            matches, or the matches when several do.
         """
-        names = self.clip_names
-        if isinstance(clip, (int, np.integer)):
-            if not 0 <= clip < len(names):
-                raise ValueError(f"clip number {clip} is out of range 0 to {len(names) - 1}")
-            return int(clip)
-        text = str(clip)
-        matches = [i for i, n in enumerate(names) if n == text]
-        if not matches:
-            matches = [i for i, n in enumerate(names) if _names_end(n, text)]
-        if not matches and text.isdigit():
-            return self.clip_number(int(text))
-        if len(matches) == 1:
-            return matches[0]
-        if matches:
-            listed = ", ".join(names[i] for i in matches[:5])
-            more = f" and {len(matches) - 5} more" if len(matches) > 5 else ""
-            raise ValueError(
-                f"clip {text!r} matches {len(matches)} indexed clips ({listed}{more}); "
-                "give more of the path"
-            )
-        stems = [pathlib.PurePath(n).stem for n in names]
-        close = [m for m in stems if text.lower() in m.lower()][:5]
-        close = close or difflib.get_close_matches(text, stems, n=5, cutoff=0.5)
-        hint = f"; close names: {', '.join(close)}" if close else ""
-        raise ValueError(
-            f"no indexed clip is named {text!r} ({len(names)} clips, numbered 0 to "
-            f"{len(names) - 1}){hint}"
-        )
+        return match_clip(clip, self.clip_names, "the pose library")
 
     def search(self, vectors: ArrayLike, k: int = 10) -> tuple[IntArray, FloatArray]:
         """Approximate nearest indexed poses of projected query vectors, ``(Q, k)`` each."""
@@ -647,12 +629,6 @@ class PoseLibrary:
             # np.load's own message (pickled data, a bad zip...) says nothing about what the
             # file should have been.
             raise FormatError(_NOT_A_LIBRARY, path) from exc
-
-
-def _names_end(name: str, text: str) -> bool:
-    """Whether ``text`` is the end of path ``name`` (whole components) or its file's stem."""
-    path, tail = pathlib.PurePath(name), pathlib.PurePath(text)
-    return path.stem == text or path.parts[-len(tail.parts) :] == tail.parts
 
 
 def _labelled_pairs(
@@ -824,6 +800,8 @@ class ProjectedClip:
         The skeleton family it came from.
     vectors : ndarray of float32, shape (T, r)
         Every pose projected into the index space.
+    doubts : tuple of Doubt
+        :attr:`PoseClip.doubts`.
     """
 
     name: str
@@ -833,6 +811,7 @@ class ProjectedClip:
     file_frames: int | None
     skeleton_kind: str | None
     vectors: NDArray[np.float32]
+    doubts: tuple[Doubt, ...] = ()
 
 
 def projected_clip(source: Any, *, load: Callable[[Any], PoseClip], model: dict) -> ProjectedClip:
@@ -840,8 +819,9 @@ def projected_clip(source: Any, *, load: Callable[[Any], PoseClip], model: dict)
     clip = load(source)
     vectors = project_gpd(clip.poses.gpd, model).astype(np.float32)
     return ProjectedClip(
-        clip.name, clip.fps, clip.step, clip.height, clip.file_frames, clip.skeleton_kind, vectors
-    )
+        clip.name, clip.fps, clip.step, clip.height, clip.file_frames, clip.skeleton_kind,
+        vectors, clip.doubts,
+    )  # fmt: skip
 
 
 def load_pose_clip(
@@ -862,14 +842,15 @@ def load_pose_clip(
     fps, height : float
         As for :meth:`PoseClip.from_motion`.
     skeleton : str or Path, optional
-        The ASF of AMC files whose own is not found by name.
+        The ASF of AMC files (else each one's is found by name).
     units : str, optional
         Length unit of a BVH file (:data:`quatmotion.io.BVH_UNITS`); guessed when None.
 
     Returns
     -------
     PoseClip
-        Named by ``str(path)``.
+        Named by ``str(path)``, with the file's unit and frame-rate doubts
+        (:attr:`PoseClip.doubts`).
 
     Raises
     ------
@@ -877,20 +858,16 @@ def load_pose_clip(
         For a clip with coordinates beyond a kilometre: not human motion capture, and its
         features would overflow.
     """
-    from quatmotion.io import find_asf_for_amc, implausible_values, read_motion
+    from quatmotion.io import implausible_values, read_motion
 
     path = pathlib.Path(path)
     amc = path.suffix.lower() == ".amc"
-    asf = None
-    if amc and skeleton is not None:
-        try:
-            find_asf_for_amc(path)
-        except FormatError:
-            asf = skeleton
-    motion = read_motion(path, asf, units=None if amc else units)
-    for doubt in implausible_values(motion):
+    motion = read_motion(path, skeleton if amc else None, units=None if amc else units)
+    doubts = implausible_values(motion)
+    for doubt in doubts:
         if doubt.kind == "far":
             raise ValueError(f"{path}: {doubt.message}: not human motion capture")
     # A clip that cannot be described fails with a message, not NumPy's overflow warnings.
     with np.errstate(all="ignore"):
-        return PoseClip.from_motion(motion, fps=fps, height=height, name=str(path))
+        clip = PoseClip.from_motion(motion, fps=fps, height=height, name=str(path))
+    return dataclasses.replace(clip, doubts=tuple(doubts))

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from quatmotion.errors import FormatError
+from quatmotion.io import Doubt
 from quatmotion.parallel import Scheduler, imap_batch
 from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
 from quatmotion.retrieval.index import ClipIndex, ClipRecord, content_hash
@@ -34,13 +35,15 @@ __all__ = [
 
 @dataclass(frozen=True)
 class ClipJob:
-    """What :func:`index_clip` needs: the file, its ASF (AMC only), kinds, label."""
+    """What :func:`index_clip` needs: the file, its ASF (AMC only), kinds, label, and the
+    length unit of a BVH (``None``: guessed)."""
 
     path: str
     skeleton: str | None
     kinds: tuple[str, ...]
     label: str
     sha256: str
+    units: str | float | None = None
 
 
 @dataclass
@@ -52,9 +55,18 @@ class BuildReport:
     failed: list[tuple[str, str]] = field(default_factory=list)
 
 
+@dataclass(frozen=True)
+class _Indexed:
+    """A worker's answer: the record, and what is doubtful in its file."""
+
+    record: ClipRecord
+    doubts: tuple[Doubt, ...]
+
+
 def skeleton_for(path: Path, skeletons: Path | None) -> Path | None:
-    """The ASF of an AMC: from ``skeletons`` (a folder) when given, else by the CMU / HDM05
-    layouts (:func:`quatmotion.io.find_asf_for_amc`); ``None`` for BVH files.
+    """The ASF of an AMC: ``skeletons`` if it is a file; from ``skeletons`` (a folder) when
+    given; else by the CMU / HDM05 layouts (:func:`quatmotion.io.find_asf_for_amc`); ``None``
+    for BVH files.
 
     Raises
     ------
@@ -65,6 +77,8 @@ def skeleton_for(path: Path, skeletons: Path | None) -> Path | None:
 
     if path.suffix.lower() != ".amc":
         return None
+    if skeletons is not None and skeletons.is_file():
+        return skeletons
     if skeletons is None:
         try:
             return find_asf_for_amc(path)
@@ -91,10 +105,15 @@ def skeleton_for(path: Path, skeletons: Path | None) -> Path | None:
 
 def index_clip(job: ClipJob) -> ClipRecord:
     """Read one clip and compute its features (a pure function of ``job``)."""
-    from quatmotion.io import read_motion
+    return _index_clip(job).record
 
-    motion = read_motion(job.path, job.skeleton)
-    return ClipRecord(
+
+def _index_clip(job: ClipJob) -> _Indexed:
+    from quatmotion.io import implausible_values, read_motion
+
+    amc = Path(job.path).suffix.lower() == ".amc"
+    motion = read_motion(job.path, job.skeleton, units=None if amc else job.units)
+    record = ClipRecord(
         name=Path(job.path).stem,
         path=job.path,
         sha256=job.sha256,
@@ -104,12 +123,13 @@ def index_clip(job: ClipJob) -> ClipRecord:
         skeleton=skeleton_fingerprint(motion.skeleton),
         arrays=clip_features(motion, job.kinds),
     )
+    return _Indexed(record, tuple(implausible_values(motion)))
 
 
-def _guarded(job: ClipJob) -> ClipRecord | tuple[str, str]:
-    """:func:`index_clip`, a bad file turned into ``(path, reason)``."""
+def _guarded(job: ClipJob) -> _Indexed | tuple[str, str]:
+    """:func:`index_clip` with the file's doubts, a bad file turned into ``(path, reason)``."""
     try:
-        return index_clip(job)
+        return _index_clip(job)
     except (FormatError, ValueError, OSError) as error:
         return (job.path, _reason(error))
 
@@ -161,10 +181,12 @@ def build_index(
     kinds: Iterable[str] = ("motion", "qssd", "ksvd"),
     labels: dict[str, str] | None = None,
     skeletons: str | Path | None = None,
+    units: str | float | None = None,
     workers: int | None = None,
     scheduler: str | Scheduler | None = None,
     batch: int = 16,
     progress: Callable[[int, int], None] | None = None,
+    on_doubt: Callable[[str, Doubt], None] | None = None,
 ) -> BuildReport:
     """Index every motion file under ``paths`` into ``out`` (created, or extended: clips
     already there with the same content hash are skipped).
@@ -180,7 +202,11 @@ def build_index(
     labels : dict, optional
         Clip (path, file name or stem) -> label; clips not in it take the catalogue's label.
     skeletons : str or Path, optional
-        Folder holding the ASF files of the AMC clips.
+        The ASF of every AMC clip, or a folder holding their ASF files (:func:`skeleton_for`).
+    units : str or float, optional
+        Length unit of the BVH clips (:data:`quatmotion.io.BVH_UNITS`); guessed when None.
+        The features are scale-free (every clip is put on one stature), so the unit changes
+        what ``on_doubt`` hears, not the index.
     workers : int, optional
         Processes (default: every core; 1 computes in this process).
     scheduler : str or Scheduler, optional
@@ -190,6 +216,9 @@ def build_index(
         Clips per committed transaction.
     progress : callable, optional
         Called with ``(done, total)`` as clips finish.
+    on_doubt : callable, optional
+        ``on_doubt(path, doubt)`` for what is doubtful in a clip indexed
+        (:func:`quatmotion.io.implausible_values`), in this process as its result comes back.
 
     Returns
     -------
@@ -216,7 +245,8 @@ def build_index(
                 report.skipped += 1
                 continue
             label = _label(path, labels, known)
-            jobs.append(ClipJob(str(path), str(skeleton) if skeleton else None, kinds, label, sha))
+            asf = str(skeleton) if skeleton else None
+            jobs.append(ClipJob(str(path), asf, kinds, label, sha, units))
         pending: list[ClipRecord] = []
         stream = imap_batch(_guarded, jobs, workers=workers, scheduler=scheduler, progress=progress)
         with stream:
@@ -224,8 +254,10 @@ def build_index(
                 result = outcome.value
                 if outcome.failure is not None:  # its worker died, on every attempt
                     report.failed.append((outcome.item.path, outcome.failure.message))
-                elif isinstance(result, ClipRecord):
-                    pending.append(result)
+                elif isinstance(result, _Indexed):
+                    pending.append(result.record)
+                    for doubt in result.doubts if on_doubt is not None else ():
+                        on_doubt(result.record.path, doubt)
                 else:
                     report.failed.append(result)  # type: ignore[arg-type]
                 if len(pending) >= batch:

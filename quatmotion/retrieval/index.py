@@ -18,17 +18,20 @@ Conventions
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
 import io
 import json
 import sqlite3
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from quatmotion.errors import FormatError
+from quatmotion.io.names import match_clip
 from quatmotion.retrieval import features as feat
 from quatmotion.retrieval.methods import Library
 
@@ -121,6 +124,16 @@ def _from_blob(b: bytes) -> np.ndarray:
     return np.load(io.BytesIO(b), allow_pickle=False)
 
 
+@contextlib.contextmanager
+def _writing(path: Path) -> Iterator[None]:
+    """SQLite's write errors as an ``OSError`` naming the index file ("unable to open database
+    file", "attempt to write a readonly database", "database or disk is full")."""
+    try:
+        yield
+    except sqlite3.OperationalError as error:
+        raise OSError(errno.EIO, f"cannot write the index ({error})", str(path)) from None
+
+
 class ClipIndex:
     """An open clip index (use as a context manager, or call :meth:`close`).
 
@@ -142,7 +155,7 @@ class ClipIndex:
         path.parent.mkdir(parents=True, exist_ok=True)
         db = sqlite3.connect(path)
         try:
-            with db:
+            with _writing(path), db:
                 db.executescript(_SCHEMA)
                 db.executemany(
                     "INSERT INTO meta VALUES (?, ?)",
@@ -247,9 +260,17 @@ class ClipIndex:
             out.setdefault(int(clip), set()).add(key)
         return out
 
-    def find(self, name: str) -> list[ClipRow]:
-        """Clips whose name or path is ``name``."""
-        return [c for c in self.clips() if name in (c.name, c.path)]
+    def find(self, name: str) -> ClipRow:
+        """The clip ``name`` names: its path, a unique end of it (file name, stem, trailing
+        folders) or its number (:func:`quatmotion.io.names.match_clip`, every command's rule).
+
+        Raises
+        ------
+        ValueError
+            (:class:`~quatmotion.errors.ClipNameError`) No such clip, or several.
+        """
+        rows = self.clips()
+        return rows[match_clip(name, [r.path for r in rows], str(self.path))]
 
     def load(self, keys: Iterable[str]) -> tuple[list[ClipRow], Library]:
         """The clips that have every feature array in ``keys``, and a :class:`Library` of them."""
@@ -276,7 +297,7 @@ class ClipIndex:
             Clips written.
         """
         n = 0
-        with self._db:
+        with _writing(self.path), self._db:
             for r in records:
                 self._db.execute("DELETE FROM clips WHERE path = ?", (r.path,))
                 cur = self._db.execute(
@@ -292,19 +313,18 @@ class ClipIndex:
         return n
 
     def remove(self, names: Iterable[str]) -> list[str]:
-        """Remove the clips named (by name or path); returns the paths removed."""
-        removed: list[str] = []
-        with self._db:
-            for name in names:
-                for row in self.find(name):
-                    self._db.execute("DELETE FROM clips WHERE id = ?", (row.id,))
-                    removed.append(row.path)
-        return removed
+        """Remove the clips named (as :meth:`find` reads a name; nothing is removed when one
+        of them names no clip or several); returns the paths removed."""
+        rows = [self.find(name) for name in names]
+        with _writing(self.path), self._db:
+            for row in rows:
+                self._db.execute("DELETE FROM clips WHERE id = ?", (row.id,))
+        return list(dict.fromkeys(row.path for row in rows))
 
     def set_labels(self, labels: dict[str, str]) -> int:
         """Set the label of clips named in ``labels`` (by name or path); returns the count."""
         n = 0
-        with self._db:
+        with _writing(self.path), self._db:
             for row in self.clips():
                 label = labels.get(row.path, labels.get(row.name))
                 if label is not None and label != row.label:

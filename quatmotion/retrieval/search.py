@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion
 from quatmotion.retrieval import distances as dist
 from quatmotion.retrieval.features import clip_features, feature_step, skeleton_fingerprint
@@ -78,12 +79,8 @@ def _query(
         )
     if isinstance(query, Motion):
         return rows, library, query_features(query, method), -1
-    matches = [i for i, r in enumerate(rows) if query in (r.name, r.path)]
-    if not matches:
-        raise ValueError(
-            f"{query!r} is neither a motion file nor a clip of the index with {method} features"
-        )
-    i = matches[0]
+    where = f"{index.path} (the clips with {method} features)"
+    i = match_clip(query, [r.path for r in rows], where)
     return rows, library, QueryFeatures(library.features[i], rows[i].skeleton), i
 
 
@@ -96,7 +93,8 @@ def search(
     ----------
     index : ClipIndex
     query : Motion or str
-        A clip, or the name (or path) of an indexed clip (left out of its own results).
+        A clip, or an indexed clip as a name, path, file name or number reads it
+        (:func:`quatmotion.io.names.match_clip`; left out of its own results).
     method : str
         A key of :data:`~quatmotion.retrieval.methods.METHODS`.
     top : int

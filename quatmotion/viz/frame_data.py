@@ -22,6 +22,9 @@ Conventions
   coordinates span a body's size whatever distance the clip travels, so the step stays a few
   thousandths of a centimetre for a person. Every payload states its bound,
   ``max_quantisation_cm``.
+* Framing (:mod:`quatmotion.viz.framing`): ``bones`` lists the bones drawn, ``follow`` the
+  point the viewer follows and frames (the body's centre), ``hidden`` the points not drawn (a
+  root the body leaves behind). Positions and errors still cover every point.
 * Why not float32 throughout: four bytes per coordinate, then base64, would fill the 6 MB
   budget of a 10,000-frame page with frame data alone; quantised frame deltas under deflate
   take a fraction of that (docs/performance.md).
@@ -38,10 +41,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion.motion import Motion, forward_kinematics
+from quatmotion.viz.framing import BodyFraming, body_framing, skeleton_bones
 
 __all__ = [
     "FORMAT",
     "clip_points",
+    "comparison_obstacle",
     "decode_block",
     "decode_clip",
     "encode_clip",
@@ -146,13 +151,12 @@ def clip_points(motion: Motion) -> tuple[NDArray[np.float64], list[str], list[li
     sk = motion.skeleton
     positions = forward_kinematics(motion).all_positions()
     names = [*sk.joint_names, *sk.site_names]
-    bones = [[int(sk.parents[j]), j] for j in range(1, sk.n_joints)]
-    bones += [[int(p), sk.n_joints + s] for s, p in enumerate(sk.site_parents)]
-    return positions, names, bones
+    return positions, names, [list(b) for b in skeleton_bones(sk)]
 
 
 def encode_clip(motion: Motion, name: str | None = None) -> dict[str, Any]:
-    """The viewer payload of ``motion``: its points' positions over every frame.
+    """The viewer payload of ``motion``: its points' positions over every frame, and which of
+    them are the body (:func:`quatmotion.viz.framing.body_framing`).
 
     Parameters
     ----------
@@ -165,18 +169,20 @@ def encode_clip(motion: Motion, name: str | None = None) -> dict[str, Any]:
     -------
     dict
         JSON-ready: ``format``, ``name``, ``fps``, ``n_frames``, ``point_names`` (``P``),
-        ``n_joints``, ``bones``, ``root`` (a ``(T, 3)`` block), ``relative`` (a ``(T, 3P)``
+        ``n_joints``, ``bones`` (those drawn), ``follow`` (the point followed), ``hidden``
+        (points not drawn), ``root`` (a ``(T, 3)`` block), ``relative`` (a ``(T, 3P)``
         block) and ``max_quantisation_cm``, the largest decoding error of a coordinate.
     """
-    positions, names, bones = clip_points(motion)
-    return _payload(motion, positions, names, bones, name)
+    positions, names, _ = clip_points(motion)
+    framing = body_framing(motion.skeleton, positions)
+    return _payload(motion, positions, names, framing, name)
 
 
 def _payload(
     motion: Motion,
     positions: NDArray[np.float64],
     names: Sequence[str],
-    bones: list[list[int]],
+    framing: BodyFraming,
     name: str | None,
 ) -> dict[str, Any]:
     T, P, _ = positions.shape
@@ -191,7 +197,9 @@ def _payload(
         "n_frames": T,
         "n_joints": motion.n_joints,
         "point_names": list(names),
-        "bones": bones,
+        "bones": [list(b) for b in framing.bones],
+        "follow": framing.centre,
+        "hidden": list(framing.hidden),
         "root": root_block,
         "relative": relative,
         "max_quantisation_cm": root_error + max(relative["step"]) / 2,
@@ -215,6 +223,33 @@ def point_errors(positions: NDArray[np.float64], other: NDArray[np.float64]) -> 
     return np.linalg.norm(positions - other, axis=-1)
 
 
+def comparison_obstacle(reference: Motion, compared: Motion) -> str | None:
+    """Why no per-frame error can be shown between two clips (None when it can).
+
+    A per-frame error pairs frame ``t`` of one clip with frame ``t`` of the other and point
+    ``p`` with point ``p``: it needs the same skeleton (joint and end-site names and
+    hierarchy), the same frame rate and the same frame count. Nothing here aligns two takes
+    in time (resampling to one duration would pair frames that show different moments).
+    """
+    sa, sb = reference.skeleton, compared.skeleton
+    same_names = (sa.joint_names, sa.site_names) == (sb.joint_names, sb.site_names)
+    if not (
+        same_names
+        and np.array_equal(sa.parents, sb.parents)
+        and np.array_equal(sa.site_parents, sb.site_parents)
+    ):
+        shape = f"{sa.n_joints} and {sb.n_joints} joints, {sa.n_sites} and {sb.n_sites} end sites"
+        return f"their skeletons differ ({shape}{'' if same_names else ', other names'})"
+    if reference.fps != compared.fps:
+        return f"their frame rates differ ({reference.fps:g} and {compared.fps:g} fps)"
+    if reference.n_frames != compared.n_frames:
+        return (
+            f"their lengths differ ({reference.n_frames} and {compared.n_frames} frames); "
+            "a per-frame error needs the same skeleton and frame count"
+        )
+    return None
+
+
 def encode_comparison(
     reference: Motion, compared: Motion, reference_name: str = "", compared_name: str = ""
 ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
@@ -222,7 +257,9 @@ def encode_comparison(
 
     The error of a point is the distance between its two positions, cm, over every joint and
     end site (METRICS.md: positions of the full skeleton); ``arms_cm`` is the paper's ARMS on
-    them (Eq. 12: RMS over points per frame, mean over frames).
+    them (Eq. 12: RMS over points per frame, mean over frames). Both payloads are framed as
+    the reference is (:func:`quatmotion.viz.framing.body_framing`), so the two figures show
+    the same points.
 
     Parameters
     ----------
@@ -236,20 +273,18 @@ def encode_comparison(
     (reference payload, compared payload, errors)
         ``errors`` holds ``block`` (``(T, P)`` cm, ``uint16-delta-planes``), ``arms_cm`` (mean
         over frames of the RMS over points), ``max_cm`` and ``max_quantisation_cm``.
+
+    Raises
+    ------
+    ValueError
+        When :func:`comparison_obstacle` finds one, saying which.
     """
-    a, names, bones = clip_points(reference)
-    b, names_b, _ = clip_points(compared)
-    if names != names_b or a.shape != b.shape:
-        raise ValueError(
-            f"cannot compare {compared.name!r} ({b.shape[0]} frames, {b.shape[1]} points) with "
-            f"{reference.name!r} ({a.shape[0]} frames, {a.shape[1]} points): "
-            "the clips need the same skeleton and frame count"
-        )
-    if reference.fps != compared.fps:
-        raise ValueError(
-            f"cannot compare {compared.name!r} at {compared.fps:g} fps with "
-            f"{reference.name!r} at {reference.fps:g} fps"
-        )
+    reason = comparison_obstacle(reference, compared)
+    if reason:
+        raise ValueError(f"cannot compare {compared.name!r} with {reference.name!r}: {reason}")
+    a, names, _ = clip_points(reference)
+    b, _, _ = clip_points(compared)
+    framing = body_framing(reference.skeleton, a)
     errors = point_errors(a, b)
     block = encode_uint16(errors, min_step=ERROR_STEP_CM)
     summary = {
@@ -259,8 +294,8 @@ def encode_comparison(
         "max_quantisation_cm": block["step"][0] / 2,
     }
     return (
-        _payload(reference, a, names, bones, reference_name or None),
-        _payload(compared, b, names, bones, compared_name or None),
+        _payload(reference, a, names, framing, reference_name or None),
+        _payload(compared, b, names, framing, compared_name or None),
         summary,
     )
 

@@ -66,9 +66,12 @@ def view_data(
     motions : sequence of Motion
         Clips to show, at least one, each with at least one frame.
     compare : sequence of Motion, optional
-        One clip per entry of ``motions``, with the same skeleton, frame count and rate: each
-        is shown in green beside (or over) its original in blue, with the per-joint error of
-        the current frame and an error-over-time strip.
+        One clip per entry of ``motions``, any skeleton and length: each is shown in green
+        beside (or over) its partner in blue, each clip at its own length on one clock (the
+        shorter holds its last frame). When the two share skeleton, frame rate and frame count
+        the page also shows the per-joint error of the current frame and an error-over-time
+        strip; otherwise it says why it shows none
+        (:func:`quatmotion.viz.frame_data.comparison_obstacle`).
     ghost : int, keyword-only
         A faint pose every ``ghost`` frames (0: none). The page caps a trail at 600 poses.
     layout : {"side", "overlay"}, optional, keyword-only
@@ -80,8 +83,8 @@ def view_data(
     -------
     dict
         ``clips`` (frame-data payloads), ``pairs`` (``reference`` and ``compared`` clip
-        indices, ``errors`` with ``arms_cm`` and ``max_cm``), ``layout``, ``ghost``,
-        ``autoplay``, ``loop``.
+        indices, ``errors`` with ``arms_cm`` and ``max_cm``, or ``errors`` None and
+        ``no_error`` saying why), ``layout``, ``ghost``, ``autoplay``, ``loop``.
     """
     if not motions:
         raise ValueError("nothing to view: give at least one motion")
@@ -102,16 +105,15 @@ def view_data(
                 f"{len(compare)} comparison clip(s) for {len(motions)} clip(s): give one for each"
             )
         for reference, compared in zip(motions, compare, strict=True):
-            a, b, errors = frame_data.encode_comparison(reference, compared)
-            pairs.append(
-                {
-                    "reference": len(clips),
-                    "compared": len(clips) + 1,
-                    "errors": errors,
-                    "arms_cm": errors["arms_cm"],
-                    "max_cm": errors["max_cm"],
-                }
-            )
+            pair: dict[str, Any] = {"reference": len(clips), "compared": len(clips) + 1}
+            reason = frame_data.comparison_obstacle(reference, compared)
+            if reason is None:
+                a, b, errors = frame_data.encode_comparison(reference, compared)
+                pair.update(errors=errors, arms_cm=errors["arms_cm"], max_cm=errors["max_cm"])
+            else:
+                a, b = frame_data.encode_clip(reference), frame_data.encode_clip(compared)
+                pair.update(errors=None, arms_cm=None, max_cm=None, no_error=reason)
+            pairs.append(pair)
             clips += [a, b]
     return {
         "clips": clips,

@@ -200,8 +200,10 @@
     status('Decoding and reading the original\u2026');
     const data = await api('/api/clips/' + enc(id) + '/compare');
     const pair = data.pairs[0];
-    status('measured: ARMS ' + fixed(pair.arms_cm, 3) + ' cm, max ' + fixed(pair.max_cm, 3) +
-      ' cm over every joint and end site (declared max ' + fixed(clip.declared_max_error_cm, 3) + ' cm)');
+    status(pair.errors
+      ? 'measured: ARMS ' + fixed(pair.arms_cm, 3) + ' cm, max ' + fixed(pair.max_cm, 3) +
+        ' cm over every joint and end site (declared max ' + fixed(clip.declared_max_error_cm, 3) + ' cm)'
+      : 'no per-frame error: ' + pair.no_error);
     await show($('#viewer'), data);
     ready();
   }

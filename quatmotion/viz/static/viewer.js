@@ -7,17 +7,26 @@
  *   QuatmotionViewer.decodeClip(payload)        -> Promise<Clip>    (quatmotion-frames/1)
  *   QuatmotionViewer.decodeErrors(errorsPayload) -> Promise<Float32Array>  (T * P, cm)
  *   QuatmotionViewer.mount(element, options)    -> Viewer
- *       options: {clips: [Clip], pairs: [{reference, compared, errors, arms_cm, max_cm}],
+ *       options: {clips: [Clip], pairs: [{reference, compared, errors, arms_cm, max_cm}
+ *                 (errors null and no_error, the reason, when there is no per-frame error)],
  *                 layout: 'side' | 'overlay', ghost: N (0 = off), autoplay: bool, loop: bool}
  *   QuatmotionViewer.show(element, data)         -> Promise<Viewer>  (data: viewer.view_data)
  *   QuatmotionViewer.boot()   standalone page: reads <script id="quatmotion-data"> and shows it.
  *   Viewer: play(), pause(), toggle(), seek(frame), step(n), setSpeed(x), setLoop(b),
  *           setFollow(b), setLayout(s), setGhost(n), cameraPreset('front'|'side'|'top'),
- *           frame (0-based master frame), nFrames, dispose(), onFrame(callback).
+ *           frame (0-based master frame), nFrames, dispose(), onFrame(callback),
+ *           projectedPoints() (where each viewport draws its clips' points, for tests).
  *
  * Units: centimetres, Y up (as forward_kinematics gives them). Frames count from 0.
- * Timing: the master clock runs at the first clip's fps; a clip at another rate shows the frame
- * at the same time (clamped to its last frame).
+ * Timing: the master clock runs at the first clip's fps and lasts as long as the longest clip;
+ * every clip shows the frame at the same time, and a clip that has ended holds its last frame.
+ * Framing (quatmotion.viz.framing): each payload names the point the viewer follows (the
+ * body's centre, `follow`), the bones to draw and the points to hide (a root the body leaves
+ * behind). The camera is fitted to what the clips cover over the whole clip: the body around
+ * the followed point when following, else every point of every frame.
+ * Overlay: a pair with a per-frame error is drawn where it is (the error is the distance
+ * drawn); other clips sharing a viewport are moved horizontally so that each starts where the
+ * viewport's first clip starts (its followed point at frame 0), and their labels say so.
  */
 (function (global) {
   'use strict';
@@ -87,10 +96,14 @@
         positions[base + 3 * p] += rx; positions[base + 3 * p + 1] += ry; positions[base + 3 * p + 2] += rz;
       }
     }
+    const hidden = new Set(payload.hidden || []);
+    const visible = [];
+    for (let p = 0; p < P; p++) if (!hidden.has(p)) visible.push(p);
+    const follow = Number.isInteger(payload.follow) && payload.follow >= 0 && payload.follow < P ? payload.follow : 0;
     return {
       name: payload.name, fps: payload.fps, nFrames: T, nPoints: P, nJoints: payload.n_joints,
       pointNames: payload.point_names, bones: payload.bones, positions: positions,
-      quantisationCm: payload.max_quantisation_cm,
+      quantisationCm: payload.max_quantisation_cm, follow: follow, visible: visible,
     };
   }
 
@@ -98,14 +111,15 @@
 
   // ---------------------------------------------------------------- helpers
   function clipStats(clip) {
-    // Horizontal centre and floor-to-top extent, for the camera, grid and follow mode.
-    const pos = clip.positions, P = clip.nPoints, T = clip.nFrames;
+    // The shown points' extent over the clip, the body's height and the followed point's
+    // travel: for the camera, the grid and follow mode.
+    const pos = clip.positions, P = clip.nPoints, T = clip.nFrames, visible = clip.visible;
     let minX = Infinity, maxX = -Infinity, minY = Infinity, maxY = -Infinity, minZ = Infinity, maxZ = -Infinity;
+    let fx0 = Infinity, fx1 = -Infinity, fz0 = Infinity, fz1 = -Infinity;
     let height = 0;
-    const stride = Math.max(1, Math.floor(T / 2000));
-    for (let t = 0; t < T; t += stride) {
+    for (let t = 0; t < T; t++) {
       let lo = Infinity, hi = -Infinity;
-      for (let p = 0; p < P; p++) {
+      for (const p of visible) {
         const i = (t * P + p) * 3, x = pos[i], y = pos[i + 1], z = pos[i + 2];
         if (x < minX) minX = x; if (x > maxX) maxX = x;
         if (y < minY) minY = y; if (y > maxY) maxY = y;
@@ -113,12 +127,63 @@
         if (y < lo) lo = y; if (y > hi) hi = y;
       }
       height = Math.max(height, hi - lo);
+      const f = (t * P + clip.follow) * 3;
+      fx0 = Math.min(fx0, pos[f]); fx1 = Math.max(fx1, pos[f]); fz0 = Math.min(fz0, pos[f + 2]); fz1 = Math.max(fz1, pos[f + 2]);
     }
+    if (!(minX <= maxX)) { minX = maxX = minY = maxY = minZ = maxZ = 0; fx0 = fx1 = fz0 = fz1 = 0; }
     return {
       minX, maxX, minY, maxY, minZ, maxZ,
       centre: new THREE.Vector3((minX + maxX) / 2, 0, (minZ + maxZ) / 2),
       height: height || 170,
+      travel: Math.max(fx1 - fx0, fz1 - fz0),
     };
+  }
+
+  /** Camera distance at which `box` (relative to the target, a Box3) fills at most `fill` of a
+   * viewport of aspect `aspect` seen along `dir` (target to camera) with vertical field `fovDeg`. */
+  function fitDistance(box, dir, fovDeg, aspect, fill) {
+    const m = new THREE.Matrix4().lookAt(dir, new THREE.Vector3(0, 0, 0), new THREE.Vector3(0, 1, 0));
+    const right = new THREE.Vector3(), up = new THREE.Vector3(), back = new THREE.Vector3();
+    m.extractBasis(right, up, back);
+    const tanV = Math.tan((fovDeg * Math.PI) / 360) * fill, tanH = tanV * aspect;
+    let d = 0;
+    const v = new THREE.Vector3();
+    for (let k = 0; k < 8; k++) {
+      v.set(k & 1 ? box.max.x : box.min.x, k & 2 ? box.max.y : box.min.y, k & 4 ? box.max.z : box.min.z);
+      const z = v.dot(back);
+      d = Math.max(d, z + Math.abs(v.dot(right)) / tanH, z + Math.abs(v.dot(up)) / tanV);
+    }
+    return d;
+  }
+
+  /**
+   * A square grid on the floor (y = 0), `divisions` cells of `cell` cm a side, centred on the
+   * origin, its two centre lines darker. Unlike THREE.GridHelper, each line is cut into pieces
+   * of at most a few cells: a line that runs from in front of the camera to behind it
+   * (following a walk, the camera stands over the grid) vanished whole in Chromium's
+   * SwiftShader WebGL, where only the piece behind the camera should.
+   */
+  function floorGrid(divisions, cell) {
+    const half = (divisions * cell) / 2, pieceCells = Math.max(1, Math.ceil(divisions / 48));
+    const pieces = Math.ceil(divisions / pieceCells), piece = (divisions * cell) / pieces;
+    const vertices = new Float32Array((divisions + 1) * pieces * 12), colours = new Float32Array(vertices.length);
+    const light = new THREE.Color(0xd0d3d8), dark = new THREE.Color(0x9aa0a8);
+    let k = 0;
+    for (let i = 0; i <= divisions; i++) {
+      const a = -half + i * cell, c = 2 * i === divisions ? dark : light;
+      for (let j = 0; j < pieces; j++) {
+        const s0 = -half + j * piece, s1 = s0 + piece;
+        for (const [x, z] of [[a, s0], [a, s1], [s0, a], [s1, a]]) {
+          vertices[k] = x; vertices[k + 1] = 0; vertices[k + 2] = z;
+          colours[k] = c.r; colours[k + 1] = c.g; colours[k + 2] = c.b;
+          k += 3;
+        }
+      }
+    }
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute('position', new THREE.BufferAttribute(vertices, 3));
+    geometry.setAttribute('color', new THREE.BufferAttribute(colours, 3));
+    return new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ vertexColors: true }));
   }
 
   function niceCeil(x) {
@@ -162,7 +227,7 @@
       const jointGeometry = new THREE.SphereGeometry(1, 12, 8);
       const material = new THREE.MeshLambertMaterial({ color: 0xffffff });
       this.bones = new THREE.InstancedMesh(boneGeometry, material, clip.bones.length);
-      this.joints = new THREE.InstancedMesh(jointGeometry, material, clip.nPoints);
+      this.joints = new THREE.InstancedMesh(jointGeometry, material, clip.visible.length);
       for (const mesh of [this.bones, this.joints]) {
         mesh.instanceMatrix.setUsage(THREE.DynamicDrawUsage);
         mesh.frustumCulled = false; // instances move every frame; a cached bound would go stale
@@ -172,7 +237,7 @@
       this.ghost = null;
     }
 
-    /** Pose at frame t, shifted by `offset` (a Vector3), bones coloured by `errors` if given. */
+    /** Pose at frame t (the group carries the clip's offset), coloured by `errors` if given. */
     update(t, errors, errorScale) {
       const clip = this.clip, pos = clip.positions, base = t * clip.nPoints * 3, r = this.radius;
       const bones = clip.bones;
@@ -190,12 +255,13 @@
       }
       _q.identity();
       _s.set(1.5 * r, 1.5 * r, 1.5 * r);
-      for (let p = 0; p < clip.nPoints; p++) {
-        const i = base + 3 * p;
+      const visible = clip.visible;
+      for (let k = 0; k < visible.length; k++) {
+        const p = visible[k], i = base + 3 * p;
         _a.set(pos[i], pos[i + 1], pos[i + 2]);
         _m.compose(_a, _q, _s);
-        this.joints.setMatrixAt(p, _m);
-        if (errors) this.joints.setColorAt(p, errorColour(errors[t * clip.nPoints + p], errorScale, _col));
+        this.joints.setMatrixAt(k, _m);
+        if (errors) this.joints.setColorAt(k, errorColour(errors[t * clip.nPoints + p], errorScale, _col));
       }
       this.bones.instanceMatrix.needsUpdate = true;
       this.joints.instanceMatrix.needsUpdate = true;
@@ -268,25 +334,32 @@
       this.stats = this.clips.map(clipStats);
       const height = Math.max(...this.stats.map((s) => s.height));
       this.bodyHeight = height;
-      // A clip that travels further than a few body heights leaves the view: follow its root.
-      const travel = Math.max(...this.stats.map((s) => Math.max(s.maxX - s.minX, s.maxZ - s.minZ)));
-      this.follow = options.follow !== undefined ? !!options.follow : travel > 4 * height;
+      // A body that travels further than twice its height: follow it (its centre, the
+      // payload's `follow` point, never a root left behind at the origin). Unfollowed, the
+      // camera takes in the whole path, and a walk towards it shows the far end small.
+      const travel = Math.max(...this.stats.map((s) => s.travel));
+      this.follow = options.follow !== undefined ? !!options.follow : travel > 2 * height;
+      this.offsets = this.clips.map(() => new THREE.Vector3());
       // Per-pair colours: reference blue, compared green; other clips from the palette.
       const colours = this.clips.map((_, i) => PALETTE[i % PALETTE.length]);
       for (const pair of this.pairs) { colours[pair.reference] = COMPARE_BLUE; colours[pair.compared] = COMPARE_GREEN; }
       this.figures = this.clips.map((clip, i) => new SkeletonFigure(clip, colours[i], height * 0.011));
       for (const pair of this.pairs) {
-        if (!pair.errorScale) pair.errorScale = niceCeil(percentile(pair.errorValues, 0.99) || pair.max_cm || 1);
+        if (pair.errorValues && !pair.errorScale) pair.errorScale = niceCeil(percentile(pair.errorValues, 0.99) || pair.max_cm || 1);
       }
+      this._errorPairs = this.pairs.filter((p) => p.errorValues);
 
       this._buildScene();
       this._buildUi();
       this.setGhost(options.ghost || 0);
-      this.setLayout(this.layout);
-      this.cameraPreset('front');
+      this.preset = 'front';
+      this.setLayout(this.layout); // places the clips and fits the camera
       this.seek(0);
       this._onResize = () => this._resize();
       global.addEventListener('resize', this._onResize);
+      // The stage also changes size without the window (the error panel below it fills in).
+      this._resizeObserver = typeof ResizeObserver === 'function' ? new ResizeObserver(this._onResize) : null;
+      if (this._resizeObserver) this._resizeObserver.observe(this.canvas.parentElement);
       this._resize();
       this._loop = this._loop.bind(this);
       this._raf = requestAnimationFrame(this._loop);
@@ -307,21 +380,32 @@
       sun.position.set(0.4, 1, 0.7);
       this.scene.add(sun);
       for (const f of this.figures) this.scene.add(f.group);
-      // Ground grid over every clip's floor area, 50 cm cells (1 m when the area is large).
-      let minX = Infinity, maxX = -Infinity, minZ = Infinity, maxZ = -Infinity;
-      for (const s of this.stats) { minX = Math.min(minX, s.minX); maxX = Math.max(maxX, s.maxX); minZ = Math.min(minZ, s.minZ); maxZ = Math.max(maxZ, s.maxZ); }
-      const margin = this.bodyHeight;
-      const size = Math.max(maxX - minX, maxZ - minZ) + 2 * margin;
-      const cell = size > 3000 ? 100 : 50;
-      const divisions = Math.min(600, Math.ceil(size / cell));
-      this.grid = new THREE.GridHelper(divisions * cell, divisions, 0x9aa0a8, 0xd0d3d8);
-      this.grid.position.set((minX + maxX) / 2, 0, (minZ + maxZ) / 2);
-      this.scene.add(this.grid);
+      this.grid = null;
       this.camera = new THREE.PerspectiveCamera(40, 1, 1, 1e6);
       this.renderCamera = this.camera.clone();
       this.controls = new THREE.OrbitControls(this.camera, this.canvas);
       this.controls.enableDamping = false;
       this.controls.addEventListener('change', () => { this._dirty = true; });
+      this.controls.addEventListener('start', () => { this._cameraMoved = true; });
+    }
+
+    _buildGrid() {
+      // Ground grid over every clip's floor area (where it is drawn), 50 cm cells (1 m when the
+      // area is large).
+      if (this.grid) { this.scene.remove(this.grid); this.grid.geometry.dispose(); this.grid.material.dispose(); }
+      let minX = Infinity, maxX = -Infinity, minZ = Infinity, maxZ = -Infinity;
+      this.stats.forEach((s, i) => {
+        const o = this.offsets[i];
+        minX = Math.min(minX, s.minX + o.x); maxX = Math.max(maxX, s.maxX + o.x);
+        minZ = Math.min(minZ, s.minZ + o.z); maxZ = Math.max(maxZ, s.maxZ + o.z);
+      });
+      const margin = this.bodyHeight;
+      const size = Math.max(maxX - minX, maxZ - minZ) + 2 * margin;
+      const cell = size > 3000 ? 100 : 50;
+      const divisions = Math.min(600, Math.ceil(size / cell));
+      this.grid = floorGrid(divisions, cell);
+      this.grid.position.set((minX + maxX) / 2, 0, (minZ + maxZ) / 2);
+      this.scene.add(this.grid);
     }
 
     /** Viewports: lists of clip indices drawn together. */
@@ -336,50 +420,135 @@
       return this.clips.map((_, i) => [i]);
     }
 
-    /** Where the camera looks in a viewport: the first clip's root (follow) or its floor centre. */
-    _centre(clipIndex, out) {
-      const clip = this.clips[clipIndex];
-      if (this.follow) {
-        const t = this._clipFrame(clipIndex);
-        const i = t * clip.nPoints * 3;
-        return out.set(clip.positions[i], 0, clip.positions[i + 2]);
+    /** Horizontal shift of each clip: in an overlaid viewport, a clip that is not half of a
+     * pair with a per-frame error starts where the viewport's first clip starts. */
+    _placeClips() {
+      this.offsets.forEach((o) => o.set(0, 0, 0));
+      this.moved = this.clips.map(() => false);
+      if (this.layout === 'overlay') {
+        for (const group of this._groups()) {
+          if (this._errorPairs.some((p) => group.includes(p.reference) && group.includes(p.compared))) continue;
+          const lead = this.clips[group[0]], lf = lead.follow * 3;
+          for (const i of group.slice(1)) {
+            const clip = this.clips[i], f = clip.follow * 3;
+            this.offsets[i].set(lead.positions[lf] - clip.positions[f], 0, lead.positions[lf + 2] - clip.positions[f + 2]);
+            this.moved[i] = this.offsets[i].lengthSq() > 1e-6;
+          }
+        }
       }
-      return out.copy(this.stats[clipIndex].centre);
+      this.figures.forEach((f, i) => f.group.position.copy(this.offsets[i]));
+      this._buildGrid();
     }
 
-    _clipFrame(i) {
+    /** Where a viewport's camera is carried to: the followed point of its first clip (follow)
+     * or the centre of its clips' floor area, at master frame `frame`. */
+    _anchor(group, frame, out) {
+      const lead = group[0];
+      if (this.follow) {
+        const clip = this.clips[lead], i = (this._clipFrameAt(lead, frame) * clip.nPoints + clip.follow) * 3;
+        return out.set(clip.positions[i], 0, clip.positions[i + 2]).add(this.offsets[lead]);
+      }
+      let minX = Infinity, maxX = -Infinity, minZ = Infinity, maxZ = -Infinity;
+      for (const i of group) {
+        const s = this.stats[i], o = this.offsets[i];
+        minX = Math.min(minX, s.minX + o.x); maxX = Math.max(maxX, s.maxX + o.x);
+        minZ = Math.min(minZ, s.minZ + o.z); maxZ = Math.max(maxZ, s.maxZ + o.z);
+      }
+      return out.set((minX + maxX) / 2, 0, (minZ + maxZ) / 2);
+    }
+
+    /** What a viewport shows over the whole clip, relative to its anchor (a Box3). */
+    _extent(group) {
+      const box = new THREE.Box3(), anchor = new THREE.Vector3(), v = new THREE.Vector3();
+      const n = this.nFrames, stride = Math.max(1, Math.floor(n / 1500));
+      const frames = [];
+      for (let f = 0; f < n; f += stride) frames.push(f);
+      if (frames[frames.length - 1] !== n - 1) frames.push(n - 1);
+      for (const f of frames) {
+        this._anchor(group, f, anchor);
+        for (const i of group) {
+          const clip = this.clips[i], pos = clip.positions, base = this._clipFrameAt(i, f) * clip.nPoints * 3, o = this.offsets[i];
+          for (const p of clip.visible) {
+            const k = base + 3 * p;
+            box.expandByPoint(v.set(pos[k] + o.x - anchor.x, pos[k + 1], pos[k + 2] + o.z - anchor.z));
+          }
+        }
+      }
+      return box;
+    }
+
+    _clipFrameAt(i, frame) {
+      // The clip's frame at the master frame's time; a clip that has ended holds its last.
+      return Math.min(this._clipTime(i, frame), this.clips[i].nFrames - 1);
+    }
+
+    _clipTime(i, frame) {
       const clip = this.clips[i];
-      const t = clip.fps === this.fps ? this.frame : Math.floor(((this.frame + 1e-6) / this.fps) * clip.fps);
-      return Math.min(t, clip.nFrames - 1);
+      return clip.fps === this.fps ? frame : Math.floor(((frame + 1e-6) / this.fps) * clip.fps);
+    }
+
+    _clipFrame(i) { return this._clipFrameAt(i, this.frame); }
+
+    /** renderCamera set up for viewport g of `count` (the orbit camera carried to `centre`). */
+    _viewportCamera(centre, g, count, width, height) {
+      const w = width / count;
+      this.renderCamera.position.copy(this.camera.position).add(centre);
+      this.renderCamera.quaternion.copy(this.camera.quaternion);
+      this.renderCamera.aspect = w / height;
+      this.renderCamera.updateProjectionMatrix();
+      this.renderCamera.updateMatrixWorld();
+      return { x: Math.round(g * w), width: Math.round(w) };
+    }
+
+    /**
+     * Where the current frame's shown points land on the canvas, per viewport: {width, height,
+     * viewports: [{x, width, clips, points: [[clip, point, px, py, inFront]]}]}, pixels from
+     * the canvas's top left (CSS pixels). For tests: every point of a figure in its viewport.
+     */
+    projectedPoints() {
+      const width = this.canvas.clientWidth, height = this.canvas.clientHeight;
+      const groups = this._groups(), centre = new THREE.Vector3(), v = new THREE.Vector3();
+      const viewports = groups.map((group, g) => {
+        this._anchor(group, this.frame, centre);
+        const port = this._viewportCamera(centre, g, groups.length, width, height);
+        const points = [];
+        for (const i of group) {
+          const clip = this.clips[i], base = this._clipFrame(i) * clip.nPoints * 3, o = this.offsets[i];
+          for (const p of clip.visible) {
+            const k = base + 3 * p;
+            v.set(clip.positions[k] + o.x, clip.positions[k + 1] + o.y, clip.positions[k + 2] + o.z).project(this.renderCamera);
+            points.push([i, p, port.x + ((v.x + 1) / 2) * port.width, ((1 - v.y) / 2) * height, v.z > -1 && v.z < 1]);
+          }
+        }
+        return { x: port.x, width: port.width, clips: group, points };
+      });
+      return { width, height, viewports };
     }
 
     _render() {
       const width = this.canvas.clientWidth, height = this.canvas.clientHeight;
       if (!width || !height) return;
       for (let i = 0; i < this.figures.length; i++) {
-        const pair = this.pairs.find((p) => p.compared === i);
+        const pair = this._errorPairs.find((p) => p.compared === i);
         const errors = pair && this.errorColours ? pair.errorValues : null;
         this.figures[i].update(this._clipFrame(i), errors, pair ? pair.errorScale : 1);
       }
       const groups = this._groups();
-      const w = width / groups.length;
       this.renderer.setScissorTest(true);
       const centre = new THREE.Vector3();
       groups.forEach((group, g) => {
         this.figures.forEach((f, i) => { f.group.visible = group.includes(i); });
-        this._centre(group[0], centre);
-        // The orbit camera circles the origin; each viewport carries it to its clip's centre.
-        this.renderCamera.position.copy(this.camera.position).add(centre);
-        this.renderCamera.quaternion.copy(this.camera.quaternion);
-        this.renderCamera.aspect = w / height;
-        this.renderCamera.updateProjectionMatrix();
-        const x = Math.round(g * w);
-        this.renderer.setViewport(x, 0, Math.round(w), height);
-        this.renderer.setScissor(x, 0, Math.round(w), height);
+        // The orbit camera circles its target near the origin; each viewport carries it to
+        // its anchor (the followed body, or the centre of its clips' floor area).
+        this._anchor(group, this.frame, centre);
+        const port = this._viewportCamera(centre, g, groups.length, width, height);
+        this.renderer.setViewport(port.x, 0, port.width, height);
+        this.renderer.setScissor(port.x, 0, port.width, height);
         this.renderer.render(this.scene, this.renderCamera);
         const label = this.labels[g];
         if (label) {
-          label.style.left = (x + 8) + 'px';
+          label.style.left = (port.x + 8) + 'px';
+          label.style.maxWidth = Math.max(80, port.width - 16) + 'px';
           label.textContent = group.map((i) => this._label(i)).join('  vs  ');
         }
       });
@@ -389,8 +558,11 @@
 
     _label(i) {
       const clip = this.clips[i], t = this._clipFrame(i);
-      const frame = clip.fps === this.fps ? '' : ' (frame ' + t + ' at ' + clip.fps + ' fps)';
-      return clip.name + frame;
+      const notes = [];
+      if (clip.fps !== this.fps) notes.push('frame ' + t + ' at ' + clip.fps + ' fps');
+      if (this._clipTime(i, this.frame) > clip.nFrames - 1) notes.push('ended, holds frame ' + t);
+      if (this.moved && this.moved[i]) notes.push('start aligned with ' + this.clips[this._groups().find((g) => g.includes(i))[0]].name);
+      return clip.name + (notes.length ? ' (' + notes.join('; ') + ')' : '');
     }
 
     _resize() {
@@ -398,6 +570,8 @@
       this.renderer.setSize(holder.clientWidth, holder.clientHeight, false);
       this.canvas.style.width = '100%';
       this.canvas.style.height = '100%';
+      // The fit depends on the viewports' shape: fit again unless the user moved the camera.
+      if (this.preset && !this._cameraMoved) this.cameraPreset(this.preset);
       this._drawStrips();
       this._dirty = true;
     }
@@ -452,6 +626,8 @@
     }
     setLayout(layout) {
       this.layout = layout === 'overlay' ? 'overlay' : 'side';
+      this._placeClips();
+      if (this.preset) this.cameraPreset(this.preset); // the viewports changed shape
       this._dirty = true; this._updateUi();
     }
     setGhost(every) {
@@ -464,19 +640,27 @@
     }
     setErrorColours(b) {
       this.errorColours = !!b;
-      if (!b) for (const p of this.pairs) this.figures[p.compared].resetColours();
+      if (!b) for (const p of this._errorPairs) this.figures[p.compared].resetColours();
       this._dirty = true;
     }
     cameraPreset(name) {
-      // Following, the body fills the view; otherwise the whole floor area the clips cover.
+      // Fitted to what every viewport shows over the whole clip, relative to its anchor:
+      // following, the body around its centre; otherwise every point of every frame.
       this.preset = name;
-      const area = Math.max(...this.stats.map((s) => Math.max(s.maxX - s.minX, s.maxZ - s.minZ)));
-      const d = this.follow ? this.bodyHeight * 2.6 : Math.max(this.bodyHeight * 2.6, area * 1.1);
-      const target = new THREE.Vector3(0, this.bodyHeight * 0.5, 0);
+      this._cameraMoved = false;
+      const groups = this._groups();
+      const box = new THREE.Box3();
+      for (const group of groups) box.union(this._extent(group));
+      if (box.isEmpty()) box.set(new THREE.Vector3(-50, 0, -50), new THREE.Vector3(50, this.bodyHeight, 50));
+      const target = box.getCenter(new THREE.Vector3());
+      box.translate(target.clone().negate());
       const directions = { front: [0, 0.15, 1], side: [1, 0.15, 0], top: [0, 1, 0.001] };
       const dir = new THREE.Vector3(...(directions[name] || directions.front)).normalize();
+      const width = this.canvas.clientWidth || 640, height = this.canvas.clientHeight || 480;
+      const aspect = width / groups.length / height;
+      const d = Math.max(fitDistance(box, dir, this.camera.fov, aspect, 0.86), this.bodyHeight * 0.5);
       this.controls.target.copy(target);
-      this.camera.position.copy(target).addScaledVector(dir, name === 'top' ? d * 1.3 : d);
+      this.camera.position.copy(target).addScaledVector(dir, d);
       this.camera.up.set(0, 1, 0);
       this.controls.update();
       this._dirty = true;
@@ -485,6 +669,7 @@
     dispose() {
       cancelAnimationFrame(this._raf);
       global.removeEventListener('resize', this._onResize);
+      if (this._resizeObserver) this._resizeObserver.disconnect();
       document.removeEventListener('keydown', this._onKey);
       this.controls.dispose();
       for (const f of this.figures) f.dispose();
@@ -522,9 +707,9 @@
       for (const b of root.querySelectorAll('[data-camera]')) b.addEventListener('click', () => this.cameraPreset(b.dataset.camera));
       ui.layout.disabled = this.clips.length < 2;
       this.labels = this.clips.map(() => ui.labels.appendChild(el('div', { class: 'qmv-label' })));
-      root.classList.toggle('qmv-compare', this.pairs.length > 0);
-      // Error strips: one per compared pair, under the scrub bar, sharing its cursor.
-      this.strips = this.pairs.map((pair) => {
+      root.classList.toggle('qmv-compare', this._errorPairs.length > 0);
+      // Error strips: one per pair with a per-frame error, under the scrub bar, sharing its cursor.
+      this.strips = this._errorPairs.map((pair) => {
         const canvas = el('canvas', { class: 'qmv-strip', title: 'error per frame, click to seek' });
         ui.strips.appendChild(canvas);
         const seekFrom = (ev) => {
@@ -578,6 +763,12 @@
       panel.hidden = false;
       const lines = this.pairs.map((pair) => {
         const clip = this.clips[pair.compared], ref = this.clips[pair.reference];
+        const title = '<div class="qmv-error-title"><span class="qmv-swatch" style="background:#1f5fd6"></span>' + escapeHtml(ref.name) +
+          ' vs <span class="qmv-swatch" style="background:#22a33a"></span>' + escapeHtml(clip.name) + '</div>';
+        if (!pair.errorValues) {
+          return title + '<div class="qmv-no-error">no per-frame error: ' + escapeHtml(pair.no_error || 'the clips cannot be compared frame by frame') +
+            '.</div><div class="qmv-small">Each plays at its own length on one clock; the shorter holds its last frame.</div>';
+        }
         const t = this._clipFrame(pair.compared), P = clip.nPoints, e = pair.errorValues;
         let sum = 0, worst = 0, worstAt = 0;
         const order = [];
@@ -588,15 +779,14 @@
         }
         order.sort((a, b) => e[t * P + b] - e[t * P + a]);
         const top = order.slice(0, 3).map((p) => clip.pointNames[p] + ' ' + e[t * P + p].toFixed(2)).join(', ');
-        return '<div class="qmv-error-title"><span class="qmv-swatch" style="background:#1f5fd6"></span>' + escapeHtml(ref.name) +
-          ' vs <span class="qmv-swatch" style="background:#22a33a"></span>' + escapeHtml(clip.name) + '</div>' +
+        return title +
           '<div>frame ' + t + ': RMS <b class="qmv-frame-rms">' + Math.sqrt(sum / P).toFixed(2) + ' cm</b>, max <b>' + worst.toFixed(2) +
           ' cm</b> (' + escapeHtml(clip.pointNames[worstAt]) + ')</div>' +
           '<div class="qmv-small">worst joints (cm): ' + escapeHtml(top) + '</div>' +
-          '<div class="qmv-small">whole clip: ARMS ' + pair.arms_cm.toFixed(3) + ' cm, max ' + pair.max_cm.toFixed(2) + ' cm</div>' +
-          '<div class="qmv-legend"><span>0</span><span class="qmv-ramp"></span><span>\u2265 ' + pair.errorScale + ' cm</span></div>';
+          '<div class="qmv-small">whole clip: ARMS ' + pair.arms_cm.toFixed(3) + ' cm, max ' + pair.max_cm.toFixed(2) + ' cm ' +
+          '<span class="qmv-legend"><span>0</span><span class="qmv-ramp"></span><span>\u2265 ' + pair.errorScale + ' cm</span></span></div>';
       });
-      panel.innerHTML = lines.join('<hr>');
+      panel.innerHTML = lines.map((l) => '<div class="qmv-pair">' + l + '</div>').join('');
     }
 
     _drawStrips() {
@@ -668,8 +858,8 @@
 
   /** The viewer's controls, for pages that do not write their own (the standalone page does). */
   const TEMPLATE =
-    '<div class="qmv-stage"><div class="qmv-canvas"></div><div class="qmv-labels"></div>' +
-    '<div class="qmv-error" hidden></div></div>' +
+    '<div class="qmv-stage"><div class="qmv-canvas"></div><div class="qmv-labels"></div></div>' +
+    '<div class="qmv-error" hidden></div>' +
     '<div class="qmv-bar">' +
     '<button class="qmv-prev" title="previous frame (\u2190, Shift \u00d710)">\u25c0\u25c0</button>' +
     '<button class="qmv-play">\u25b6</button>' +
@@ -678,7 +868,7 @@
     '<span class="qmv-time"></span>' +
     '<label>speed <select class="qmv-speed"></select></label>' +
     '<label><input class="qmv-loop" type="checkbox"> loop</label>' +
-    '<label><input class="qmv-follow" type="checkbox"> follow root</label>' +
+    '<label title="keep the centre of the body (its hips) in view"><input class="qmv-follow" type="checkbox"> follow body</label>' +
     '<span class="qmv-cams">camera <button data-camera="front" title="from +Z (the front of a CMU rest pose)">front</button>' +
     '<button data-camera="side" title="from +X">side</button><button data-camera="top" title="from above (+Y)">top</button></span>' +
     '<label>layout <select class="qmv-layout"><option value="side">side by side</option><option value="overlay">overlay</option></select></label>' +
@@ -693,7 +883,7 @@
   async function mount(element, options) {
     if (!element.querySelector('.qmv-canvas')) element.innerHTML = TEMPLATE;
     element.classList.add('qmv');
-    const pairs = await Promise.all((options.pairs || []).map(async (p) => Object.assign({}, p, { errorValues: await decodeErrors(p.errors) })));
+    const pairs = await Promise.all((options.pairs || []).map(async (p) => Object.assign({}, p, { errorValues: p.errors ? await decodeErrors(p.errors) : null })));
     return new Viewer(element, Object.assign({}, options, { pairs }));
   }
 

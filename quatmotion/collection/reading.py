@@ -1,0 +1,243 @@
+"""Finding and reading the clips of a collection: one set of rules for every file kind.
+
+Conventions
+-----------
+* :func:`find_clips` turns what a user names (files, folders, clips in memory) into
+  :class:`ClipSource` items: folders searched recursively (:func:`quatmotion.io.find_motion_files`),
+  every clip given a unique name (:func:`~quatmotion.collection.refs.unique_names`), every AMC
+  its ASF (:func:`find_skeleton`), every file its content hash. Nothing is parsed there: the
+  clips are read where they are used, in the batch workers, by :func:`read_clip`.
+* The ASF of an AMC (:func:`find_skeleton`), in order: ``ReadSettings.skeleton`` when it is a
+  file (it is the skeleton of every AMC read with these settings); when it is a folder, the ASF
+  there named as the conventions below name it, else the folder's only ASF; with no skeleton
+  given, the conventions beside the AMC (``NAME.asf``, CMU's ``SS.asf``, HDM05's
+  ``skeletons/HDM_AA.asf``: :func:`quatmotion.io.find_asf_for_amc`), else the only ASF in the
+  AMC's folder. Several candidates and no rule to choose: an error naming them.
+* :class:`ReadSettings` (the length unit of BVH input, the ASF of AMC input, whether
+  coordinates beyond a kilometre are refused) is part of every file kind's settings and is
+  stored with them, so a collection says how its clips were read.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from numbers import Real
+from pathlib import Path
+from typing import Any, ClassVar, NamedTuple
+
+from sklearn.utils._param_validation import Interval, StrOptions
+
+from quatmotion._settings import Settings
+from quatmotion.collection.refs import ClipRef, content_hash, duplicates, motion_hash, unique_names
+from quatmotion.errors import FormatError
+from quatmotion.io import BVH_UNITS
+from quatmotion.motion import Motion
+
+__all__ = [
+    "ClipSource",
+    "ReadClip",
+    "ReadSettings",
+    "find_clips",
+    "find_skeleton",
+    "read_clip",
+]
+
+
+@dataclass(frozen=True)
+class ReadSettings(Settings):
+    """How the clips of a collection are read.
+
+    Attributes
+    ----------
+    units : str, float or None
+        Length unit of BVH input: a name of :data:`quatmotion.io.BVH_UNITS` or centimetres per
+        unit; None guesses it from the figure's size (and says so in every clip's reference).
+    skeleton : str or None
+        An ASF file (the skeleton of every AMC) or a folder of ASF files; None finds each
+        AMC's by the conventions of :func:`find_skeleton`.
+    strict : bool
+        Refuse a clip with coordinates beyond a kilometre (not human motion capture) instead of
+        reporting it as a doubt.
+    """
+
+    units: str | float | None = None
+    skeleton: str | None = None
+    strict: bool = True
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "units": [None, Interval(Real, 0, None, closed="neither"), StrOptions(set(BVH_UNITS))],
+        "skeleton": [str, None],
+        "strict": ["boolean"],
+    }
+
+    def __post_init__(self) -> None:
+        if isinstance(self.skeleton, os.PathLike):
+            object.__setattr__(self, "skeleton", os.fspath(self.skeleton))
+        super().__post_init__()
+
+
+@dataclass(frozen=True)
+class ClipSource:
+    """A clip to read: a file (with the ASF of an AMC) or a motion in memory, with its name
+    in the collection and its content hash."""
+
+    name: str
+    sha256: str
+    path: Path | None = None
+    skeleton_path: Path | None = None
+    motion: Motion | None = field(default=None, repr=False, compare=False)
+
+    def ref(self) -> ClipRef:
+        """The reference before reading (fingerprint and unit not known yet)."""
+        return ClipRef(
+            self.name,
+            self.sha256,
+            None if self.path is None else str(self.path),
+            None if self.skeleton_path is None else str(self.skeleton_path),
+        )
+
+    def __str__(self) -> str:  # how a batch failure names it
+        return str(self.path) if self.path is not None else self.name
+
+
+class ReadClip(NamedTuple):
+    """What :func:`read_clip` gives: the motion (named by its collection name), its completed
+    reference, and what in it is doubtful (:class:`quatmotion.io.Doubt`)."""
+
+    motion: Motion
+    ref: ClipRef
+    doubts: list[Any]
+
+
+def find_skeleton(amc: Path, skeleton: str | Path | None = None) -> Path:
+    """The ASF of an AMC by the rules of the module's conventions.
+
+    Raises
+    ------
+    FileNotFoundError
+        A ``skeleton`` given that does not exist.
+    FormatError
+        Naming the AMC, where it looked, and the candidates when several fit.
+    """
+    from quatmotion.io import find_asf_for_amc
+
+    if skeleton is None:
+        return find_asf_for_amc(amc)
+    given = Path(skeleton)
+    if given.is_file():
+        return given
+    if not given.is_dir():
+        raise FileNotFoundError(2, "no such skeleton file or folder", str(given))
+    return find_asf_for_amc(amc, given)
+
+
+def find_clips(
+    sources: Iterable[Motion | str | os.PathLike[str] | ClipSource],
+    read: ReadSettings | None = None,
+    *,
+    on_error: list[tuple[str, str]] | None = None,
+) -> list[ClipSource]:
+    """The clips named by ``sources``, each with a unique name, its ASF and its content hash.
+
+    Parameters
+    ----------
+    sources : iterable
+        Files, folders (searched recursively), motions in memory, or sources already found.
+    read : ReadSettings, optional
+        Where AMC skeletons come from.
+    on_error : list, optional
+        Where a file whose skeleton is not found or that cannot be hashed is noted, as
+        ``(file, one-line reason)``, and left out; without it the error is raised.
+
+    Raises
+    ------
+    FileNotFoundError
+        A named path that does not exist.
+    ValueError
+        Nothing found, or two motions in memory with one name.
+    FormatError
+        An AMC without a skeleton (when ``on_error`` is None).
+    """
+    from quatmotion.io import find_motion_files
+
+    read = read or ReadSettings()
+    items = list(sources)
+    given = [s for s in items if isinstance(s, ClipSource)]
+    motions = [m for m in items if isinstance(m, Motion)]
+    paths = [Path(p) for p in items if not isinstance(p, Motion | ClipSource)]
+    files = find_motion_files(paths) if paths else []
+    found: list[ClipSource] = list(given)
+    names = unique_names(files)
+    for path, name in zip(files, names, strict=True):
+        path = Path(os.path.abspath(path))
+        try:
+            asf = find_skeleton(path, read.skeleton) if path.suffix.lower() == ".amc" else None
+            asf = None if asf is None else Path(os.path.abspath(asf))
+            sha = content_hash(path, asf)
+        except (FormatError, OSError) as error:
+            if on_error is None:
+                raise
+            on_error.append((str(path), _one_line(error)))
+            continue
+        found.append(ClipSource(name, sha, path, asf))
+    for motion in motions:
+        if not motion.name:
+            raise ValueError("a clip given in memory needs a name (Motion.name)")
+        found.append(ClipSource(motion.name, motion_hash(motion), motion=motion))
+    repeated = duplicates(s.name for s in found)
+    if repeated:
+        raise ValueError(f"clip names must be unique; repeated: {', '.join(repeated[:5])}")
+    if not found and not (on_error and len(on_error)):
+        raise ValueError("no clips given")
+    return found
+
+
+def read_clip(source: ClipSource | ClipRef, read: ReadSettings | None = None) -> ReadClip:
+    """Read one clip of a collection (a batch job's first step, in the worker).
+
+    Raises
+    ------
+    FormatError
+        A malformed file (naming it and the line).
+    ValueError
+        A clip beyond a kilometre with ``read.strict`` (naming it).
+    FileNotFoundError
+        A reference whose file is gone.
+    """
+    from quatmotion.io import implausible_values, read_motion
+
+    read = read or ReadSettings()
+    if isinstance(source, ClipRef):
+        path = None if source.path is None else Path(source.path)
+        asf = None if source.skeleton_path is None else Path(source.skeleton_path)
+        source = ClipSource(source.name, source.sha256, path, asf)
+    if source.motion is not None:
+        motion = source.motion
+    else:
+        assert source.path is not None
+        amc = source.path.suffix.lower() == ".amc"
+        motion = read_motion(
+            source.path,
+            source.skeleton_path if amc else None,
+            units=None if amc else read.units,
+        )
+    if motion.name != source.name:
+        motion = motion.renamed(source.name)
+    doubts = implausible_values(motion)
+    if read.strict:
+        for doubt in doubts:
+            if doubt.kind == "far":
+                raise ValueError(f"{source}: {doubt.message}: not human motion capture")
+    return ReadClip(motion, source.ref().with_reading(motion), doubts)
+
+
+def _one_line(error: BaseException) -> str:
+    text = getattr(error, "reason", None) or str(error) or type(error).__name__
+    return str(text).splitlines()[0]
+
+
+def names_of(sources: Sequence[ClipSource]) -> list[str]:
+    """The names of ``sources``, in order."""
+    return [s.name for s in sources]

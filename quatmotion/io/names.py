@@ -1,0 +1,97 @@
+"""Clip names: the one rule every collection (a ``.qmz``, a clip index, a pose library) uses to
+find the clip a user names.
+
+A collection names its clips by file stem (``walk``: a ``.qmz``), by path (``clips/walk.bvh``:
+a pose library) or both (a clip index keeps the path). A user types any of those: the name, the
+file name, the stem, trailing folders, or a clip's number. :func:`match_clip` decides which clip
+that is, the same way everywhere, and says so when the answer is none or several.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Sequence
+from pathlib import PurePath
+
+from quatmotion.errors import ClipNameError
+
+__all__ = ["match_clip"]
+
+_SUFFIXES = (".amc", ".bvh")  # io.files.MOTION_SUFFIXES (importing it here would be circular)
+
+
+def _bare(text: str) -> tuple[str, ...]:
+    """Path components of ``text`` with a motion-file suffix removed from the last."""
+    parts = PurePath(text).parts
+    if parts and parts[-1].lower().endswith(_SUFFIXES):
+        parts = (*parts[:-1], parts[-1][:-4])  # every suffix is four characters
+    return parts
+
+
+def _ends(name: tuple[str, ...], query: tuple[str, ...]) -> bool:
+    return 0 < len(query) <= len(name) and name[-len(query) :] == query
+
+
+def match_clip(query: str | int, names: Sequence[str], where: str = "the collection") -> int:
+    """The position in ``names`` of the clip ``query`` names.
+
+    The first rule some name meets decides; two names meeting it is an error (never a silent
+    choice):
+
+    1. ``query`` is a name (``clips/walk.bvh``, or ``walk`` in a ``.qmz``);
+    2. it is the end of a name's path, whole components (``walk.bvh``, ``clips/walk.bvh``);
+    3. without a motion-file suffix, it is the end of a name's path without one (``walk`` for
+       ``clips/walk.bvh``, ``walk.bvh`` for a clip named ``walk``);
+    4. digits (or an int) are a position from 0, when no clip is named so.
+
+    Parameters
+    ----------
+    query : str or int
+    names : sequence of str
+        Every clip's name, in the collection's order.
+    where : str
+        The collection, for messages (a file name).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ClipNameError
+        No clip matches (naming up to five close names), several match (listing them), or a
+        position is out of range.
+    """
+    n = len(names)
+    if not isinstance(query, str):
+        if not 0 <= int(query) < n:
+            raise ClipNameError(f"clip number {query} is out of range: {where} has 0 to {n - 1}")
+        return int(query)
+    paths = [PurePath(name).parts for name in names]
+    bare = [_bare(name) for name in names]
+    rules = (
+        lambda i: names[i] == query,
+        lambda i: _ends(paths[i], PurePath(query).parts),
+        lambda i: _ends(bare[i], _bare(query)),
+    )
+    for rule in rules:
+        matches = [i for i in range(n) if rule(i)]
+        if len(matches) == 1:
+            return matches[0]
+        if matches:
+            listed = ", ".join(names[i] for i in matches[:5])
+            more = f" and {len(matches) - 5} more" if len(matches) > 5 else ""
+            raise ClipNameError(
+                f"clip {query!r} is ambiguous in {where}: it matches {len(matches)} clips "
+                f"({listed}{more}); give more of the path"
+            )
+    if query.isdigit():
+        return match_clip(int(query), names, where)
+    stems = [parts[-1] if parts else "" for parts in bare]
+    key = _bare(query)[-1].lower() if _bare(query) else query.lower()
+    unique = list(dict.fromkeys(stems))
+    close = [s for s in unique if key and key in s.lower()][:5]
+    close = close or difflib.get_close_matches(key, unique, n=5, cutoff=0.5)
+    hint = f"; close names: {', '.join(close)}" if close else ""
+    numbered = f", numbered 0 to {n - 1}" if n else ""
+    raise ClipNameError(f"no clip named {query!r} in {where} ({n} clips{numbered}){hint}")
