@@ -249,7 +249,8 @@ def _search_by_example(
     """Index the clips (motion features), search with the first one as the example, and
     write ``view.html``: the example beside its best match."""
     from quatmotion.io import find_motion_files
-    from quatmotion.retrieval import DEFAULT_METHOD, ClipIndex, build_index, search
+    from quatmotion.retrieval import DEFAULT_METHOD, ClipIndex, build_index
+    from quatmotion.retrieval.search import search
     from quatmotion.viz import write_view
 
     if paths:

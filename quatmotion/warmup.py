@@ -340,7 +340,8 @@ _DICTIONARY_CODECS = ("qssd", "ksvd")
 def _index_and_search(space: _Workspace, kinds: tuple[str, ...]) -> None:
     """Index the clips with feature ``kinds``, then search with every method they serve."""
     from quatmotion.io import read_motion
-    from quatmotion.retrieval import METHODS, ClipIndex, build_index, search, search_within
+    from quatmotion.retrieval import METHODS, ClipIndex, build_index, search_within
+    from quatmotion.retrieval.search import search
 
     out = space.folder / f"clips-{'-'.join(kinds)}.qidx"
     build_index(space.files, out, kinds=kinds, workers=1)
