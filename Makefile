@@ -11,7 +11,10 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
+# warm-up compiles the Numba kernels once (minutes on a fresh machine, then cached; a second
+# make demo finds them compiled and goes straight on).
 demo: $(STAMP)
+	$(BIN)/quatmotion warm-up
 	$(BIN)/quatmotion demo --force $(DEMO_ARGS)
 
 test: $(STAMP)

@@ -4,7 +4,10 @@ Steps: generate a labelled library of procedural clips (or read the clips given)
 they are, draw one as a stick figure (PNG), learn a QSSD dictionary and a K-SVD dictionary
 on the clips' angular displacements and compare their reconstruction errors on held-out frames,
 then compress the clips into a ``.qmz`` library with every joint within 1 cm (the default codec
-beside the spline and naive baselines) and, when the data folder is present, one real clip.
+beside the spline and naive baselines) and, when the data folder is present, one real clip;
+last, index the clips and search them by example (the first clip), and write ``view.html``,
+the example beside its best match. :func:`build_library` makes the library ``quatmotion serve``
+serves without files (the same clips) or from a folder.
 
 Conventions
 -----------
@@ -15,14 +18,17 @@ Conventions
   120 frames/s are near-duplicates); 80 % of the frames train, 20 % test (random split).
 * Errors are the mean rotation angle between sample and reconstruction, degrees per joint per
   frame (METRICS.md "Angular error", with the factor 2).
-* Outputs go to ``out_dir``: ``stick_<clip>.png`` and ``summary.json`` (written atomically).
+* Outputs go to ``out_dir``: ``stick_<clip>.png``, the ``.qmz`` files, ``library.qidx``,
+  ``view.html``, ``clips/`` (the generated clips as BVH, for the index) and ``summary.json``
+  (written atomically).
 """
 
 from __future__ import annotations
 
 import json
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +41,14 @@ from quatmotion._atomic import atomic_write_text
 from quatmotion.motion import Motion, angular_displacements, forward_kinematics, standing_height
 from quatmotion.viz import pyplot, save_figure
 
-__all__ = ["plot_stick_figure", "run_demo", "sample_step"]
+__all__ = [
+    "BuiltLibrary",
+    "build_library",
+    "plot_stick_figure",
+    "run_demo",
+    "sample_step",
+    "write_clips",
+]
 
 _MAX_SAMPLE_FPS = 20.0
 _MAX_USER_CLIPS = 60
@@ -216,10 +229,76 @@ def run_demo(
     }
     summary.update(_dictionary_comparison(clips, seed, quick, console))
     summary["compression"] = _compression(clips, out_dir, seed, quick, console)
+    summary["search"] = _search_by_example(clips, list(paths), out_dir, console)
     summary["seconds"] = time.perf_counter() - start
     atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
     console.print(f"summary: {out_dir / 'summary.json'} ({summary['seconds']:.1f} s)")
+    console.print(
+        f"next: open {summary['search']['view']} in a browser (offline; space plays); "
+        "`quatmotion serve` shows the same library in the web app",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
     return summary
+
+
+def _search_by_example(
+    clips: list[tuple[Motion, str]], paths: list[Path], out_dir: Path, console: Console
+) -> dict[str, Any]:
+    """Index the clips (motion features), search with the first one as the example, and
+    write ``view.html``: the example beside its best match."""
+    from quatmotion.io import find_motion_files
+    from quatmotion.retrieval import DEFAULT_METHOD, ClipIndex, build_index
+    from quatmotion.retrieval.search import search
+    from quatmotion.viz import write_view
+
+    if paths:
+        files = find_motion_files(paths)[:_MAX_USER_CLIPS]
+        labels = {f.stem: label for f, (_, label) in zip(files, clips, strict=True)}
+    else:
+        labels = {f.stem: label for f, label in write_clips(clips, out_dir / "clips").items()}
+        files = [out_dir / "clips" / f"{m.name}.bvh" for m, _ in clips]
+    index_path = out_dir / "library.qidx"
+    index_path.unlink(missing_ok=True)  # built afresh: the demo runs with --force
+    report = build_index(files, index_path, kinds=("motion",), labels=labels)
+    query = clips[0][0]
+    with ClipIndex.open(index_path) as index:
+        results = search(index, query.name, top=5)
+    console.print(
+        f"search by example: {report.added} clips indexed ({index_path}); the clips most like "
+        f"{query.name} under {DEFAULT_METHOD}, the example itself left out",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
+    table = Table(title=f"clips like {query.name}", title_justify="left")
+    for column in ("rank", "clip", "label", "distance"):
+        table.add_column(column, justify="right" if column in ("rank", "distance") else "left")
+    for hit in results:
+        table.add_row(str(hit.rank), hit.clip, hit.label, f"{hit.distance:.3f}")
+    console.print(table)
+    rows = [
+        {"rank": h.rank, "clip": h.clip, "label": h.label, "distance": h.distance} for h in results
+    ]
+    if not results:
+        return {"index": str(index_path), "query": query.name, "results": rows, "view": None}
+    by_name = {m.name: m for m, _ in clips}
+    best = by_name.get(results[0].clip) or _read(results[0].path)
+    view = write_view(out_dir / "view.html", [query, best], title=f"{query.name} and {best.name}")
+    console.print(
+        f"view: {view} (the example beside its best match, {best.name})",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
+    return {"index": str(index_path), "query": query.name, "results": rows, "view": str(view)}
+
+
+def _read(path: str) -> Motion:
+    from quatmotion.io import read_motion
+
+    return read_motion(path)
 
 
 def _compression(
@@ -308,9 +387,10 @@ def _dictionary_comparison(
     )
     rows = _compare(train, test, seed, quick)
     result = Table(
-        title="reconstruction of angular displacements "
-        "(mean rotation error, degrees per joint per frame)",
+        title="reconstruction of angular displacements",
+        caption="errors: mean rotation angle, degrees per joint per frame",
         title_justify="left",
+        caption_justify="left",
     )
     columns = (
         "method",
@@ -340,3 +420,155 @@ def _dictionary_comparison(
         "quaternions_per_sample": int(Y.shape[1]),
         "methods": rows,
     }
+
+
+# --- a browsable, searchable library built from clips (the demo's ending, `quatmotion serve`) --
+
+
+@dataclass(frozen=True)
+class BuiltLibrary:
+    """What :func:`build_library` wrote.
+
+    Attributes
+    ----------
+    files : list of Path
+        The motion files it read (the clips written, or those found under the sources).
+    library : Path
+        The ``.qmz`` library: every clip within 1 cm.
+    index : Path
+        The ``.qidx`` clip index (motion features: search by example with the default method).
+    poses : Path or None
+        The pose index (pose search), when asked for.
+    failed : list of str
+        ``"file: reason"`` of each clip left out.
+    """
+
+    files: list[Path]
+    library: Path
+    index: Path
+    poses: Path | None
+    failed: list[str] = field(default_factory=list)
+
+
+BuildProgress = Callable[[str, int, int], None]
+"""``progress(step, done, total)`` of :func:`build_library`: steps ``compress: ...`` (the
+codec's steps), ``index`` and ``poses: ...``."""
+
+
+def write_clips(clips: Sequence[tuple[Motion, str]], folder: str | Path) -> dict[Path, str]:
+    """Each clip written as ``<folder>/<name>.bvh``; returns file -> label, in clip order."""
+    from quatmotion.io import write_motion
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    out = {}
+    for motion, label in clips:
+        path = folder / f"{motion.name}.bvh"
+        write_motion(motion, path)
+        out[path] = label
+    return out
+
+
+def build_library(
+    folder: str | Path,
+    sources: Sequence[str | Path] = (),
+    *,
+    seed: int = 0,
+    poses: bool = True,
+    progress: BuildProgress | None = None,
+    workers: int | None = None,
+) -> BuiltLibrary:
+    """Compress, index (and pose-index) clips into ``folder``, ready to serve or search.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Where the files go (created): ``library.qmz``, ``library.qidx``, ``poses.idx``, and
+        ``clips/`` when the clips are generated.
+    sources : sequence of paths
+        Clips or folders of clips (``.amc`` with their ASF found by name, ``.bvh``); empty: the
+        demo's generated library (two clips of every kind, labelled by kind).
+    seed : int
+        Seed of the generated clips and of the learners.
+    poses : bool
+        Build the pose index too.
+    progress : callable, optional
+        See :data:`BuildProgress`.
+    workers : int, optional
+        Processes of the batch steps (default: every core).
+
+    Returns
+    -------
+    BuiltLibrary
+
+    Raises
+    ------
+    ValueError
+        No clip could be read (naming the sources).
+    """
+    from quatmotion import codec
+    from quatmotion.io import find_motion_files
+    from quatmotion.retrieval.build import build_index
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    report = progress or (lambda _step, _done, _total: None)
+    if sources:
+        files, labels = find_motion_files(sources), None
+    else:
+        from quatmotion.motion.synthetic import generate_library
+
+        generated = generate_library(2, seed=seed)
+        report("clips", 0, len(generated))
+        written = write_clips(generated, folder / "clips")
+        report("clips", len(generated), len(generated))
+        files, labels = list(written), {p.stem: label for p, label in written.items()}
+    failed: dict[str, str] = {}
+    library = folder / "library.qmz"
+
+    def step(prefix: str) -> BuildProgress:
+        return lambda name, done, total: report(f"{prefix}: {name}", done, total)
+
+    result = codec.compress(
+        files,
+        library,
+        max_error=codec.DEFAULT_MAX_ERROR_CM,
+        seed=seed,
+        workers=workers,
+        on_error="skip",
+        progress=step("compress"),
+    )
+    failed.update(dict(result.failed))
+    bad = {str(Path(name)) for name in failed}
+    good = [f for f in files if str(f) not in bad and f.stem not in failed]
+    if not good:
+        where = ", ".join(str(s) for s in sources) or "the generated library"
+        raise ValueError(f"{where}: no clip could be read ({next(iter(failed.values()), '')})")
+    index = folder / "library.qidx"
+    built = build_index(
+        good,
+        index,
+        kinds=("motion",),
+        labels=labels,
+        workers=workers,
+        progress=lambda done, total: report("index", done, total),
+    )
+    failed.update(dict(built.failed))
+    pose_path = None
+    if poses:
+        import functools
+
+        from quatmotion.pose.library import PoseLibrary, load_pose_clip
+
+        pose_library, pose_failures = PoseLibrary.build_streamed(
+            good,
+            functools.partial(load_pose_clip, fps=30.0, height=170.0),
+            seed=seed,
+            workers=workers,
+            progress=step("poses"),
+        )
+        for failure in pose_failures:
+            failed.setdefault(str(failure.item), failure.message)
+        pose_path = folder / "poses.idx"
+        pose_library.save(pose_path)
+    return BuiltLibrary(files, library, index, pose_path, [f"{k}: {v}" for k, v in failed.items()])

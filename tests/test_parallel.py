@@ -12,6 +12,10 @@ import pathlib
 import pickle
 import signal
 import socket
+import subprocess
+import sys
+import textwrap
+import threading
 import time
 from collections.abc import Iterator
 
@@ -372,3 +376,93 @@ def test_a_stream_closed_early_runs_no_more_items_and_the_pool_serves_again(
     assert 3 <= started <= 3 + 3  # what was yielded, plus at most workers + 1 in flight
     again = run_batch(touch_marker, items[:6], workers=2)
     assert again.ok and again.results == list(range(6))
+
+
+# --- scripts: the main module and the workers ----------------------------------------------
+
+
+def run_script(tmp_path: pathlib.Path, text: str) -> subprocess.CompletedProcess[str]:
+    script = tmp_path / "script.py"
+    script.write_text(textwrap.dedent(text))
+    return subprocess.run(
+        [sys.executable, str(script)],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, SCHEDULER_ENV: ""},
+    )
+
+
+def test_a_script_calling_a_batch_at_its_top_level_runs_once_on_the_pool(
+    tmp_path: pathlib.Path,
+) -> None:
+    # No `if __name__ == "__main__":` guard: the workers must not re-run the script (they did,
+    # and died starting pools of their own: "its worker process died running it").
+    done = run_script(
+        tmp_path,
+        """
+        import os
+        from quatmotion.parallel import run_batch
+
+        print("script ran in", os.getpid())
+        result = run_batch(abs, [-1, 2, -3, 4, -5], workers=2)
+        print("results", result.results, result.stats.scheduler)
+        """,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.count("script ran in") == 1
+    assert "results [1, 2, 3, 4, 5] local pool of 2 processes" in done.stdout
+    assert "leaked" not in done.stderr and "Traceback" not in done.stderr
+
+
+def test_a_guarded_script_may_define_the_job_and_the_items_of_a_batch(
+    tmp_path: pathlib.Path,
+) -> None:
+    done = run_script(
+        tmp_path,
+        """
+        import dataclasses
+        from quatmotion.parallel import run_batch
+
+        @dataclasses.dataclass(frozen=True)
+        class Item:
+            value: int
+
+        def square(x):
+            return x * x
+
+        if __name__ == "__main__":
+            print("jobs", run_batch(square, [1, 2, 3], workers=2).results)
+            print("items", run_batch(repr, [Item(1), Item(2)], workers=2).results)
+        """,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "jobs [1, 4, 9]" in done.stdout
+    assert "items ['Item(value=1)', 'Item(value=2)']" in done.stdout
+
+
+def test_an_unguarded_script_whose_job_needs_it_is_told_about_the_guard(
+    tmp_path: pathlib.Path,
+) -> None:
+    done = run_script(
+        tmp_path,
+        """
+        from quatmotion.parallel import run_batch
+
+        def square(x):
+            return x * x
+
+        print(run_batch(square, [1, 2], workers=2).failures[0])
+        """,
+    )
+    assert done.returncode == 0, done.stderr
+    assert 'under `if __name__ == "__main__":`' in done.stdout
+
+
+def test_an_item_that_cannot_be_pickled_fails_alone() -> None:
+    items = [1, 2, threading.Lock(), 4]
+    result = run_batch(repr, items, workers=2)
+    assert [f.index for f in result.failures] == [2]
+    assert "cannot be sent to a worker process" in result.failures[0].message
+    assert result.results[:2] == ["1", "2"] and result.results[3] == "4"

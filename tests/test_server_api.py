@@ -422,13 +422,12 @@ def test_sizes_and_hosts():
 
 
 def test_serve_command_checks_input_and_warns_off_the_loopback(motion_library, monkeypatch):
-    import uvicorn
-
     from quatmotion.cli import app as cli
+    from quatmotion.server import listen
 
     runner = CliRunner()
-    nothing = runner.invoke(cli, ["serve"])
-    assert nothing.exit_code == 2 and "give --library" in nothing.output
+    lonely = runner.invoke(cli, ["serve", "--poses", str(motion_library["poses"])])
+    assert lonely.exit_code == 2 and "--poses needs --library or --index" in lonely.output
     missing = runner.invoke(cli, ["serve", "--library", "/nonexistent/lib.qmz"])
     assert missing.exit_code == 2 and "no such file" in missing.output
     bad_size = runner.invoke(
@@ -436,17 +435,25 @@ def test_serve_command_checks_input_and_warns_off_the_loopback(motion_library, m
     )
     assert bad_size.exit_code == 2 and "not a size" in bad_size.output
     bad_port = runner.invoke(
-        cli, ["serve", "--library", str(motion_library["library"]), "--port", "0"]
+        cli, ["serve", "--library", str(motion_library["library"]), "--port", "65536"]
     )
     assert bad_port.exit_code == 2
-    assert bad_port.output.strip() == "error: --port must be from 1 to 65535, got 0"
+    assert bad_port.output.strip() == "error: --port must be from 0 to 65535, got 65536"
     started: dict[str, object] = {}
-    monkeypatch.setattr(uvicorn, "run", lambda app, **kw: started.update(app=app, **kw))
-    local = runner.invoke(cli, ["serve", "--library", str(motion_library["library"])])
+
+    def serve_on(application, sock):
+        started.update(app=application, address=sock.getsockname())
+        sock.close()
+
+    monkeypatch.setattr(listen, "serve_on", serve_on)
+    local = runner.invoke(
+        cli, ["serve", "--library", str(motion_library["library"]), "--port", "0"]
+    )
     assert local.exit_code == 0, local.output
-    assert started["host"] == "127.0.0.1" and started["port"] == 8000
+    assert started["address"][0] == "127.0.0.1"
     assert "warning" not in local.output and "6 clips" in local.output
     wide = runner.invoke(
-        cli, ["serve", "--library", str(motion_library["library"]), "--host", "0.0.0.0"]
+        cli,
+        ["serve", "--library", str(motion_library["library"]), "--host", "0.0.0.0", "--port", "0"],
     )
     assert wide.exit_code == 0 and "warning: --host 0.0.0.0" in wide.output

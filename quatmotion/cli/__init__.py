@@ -11,7 +11,8 @@ Modules: :mod:`~quatmotion.cli.motion` (``info``, ``convert``, ``generate``),
 :mod:`~quatmotion.cli.datasets` (``datasets list|fetch``), :mod:`~quatmotion.cli.pose`
 (``pose index|search``), :mod:`~quatmotion.cli.retrieval` (``index build|add|remove|ls``,
 ``search``), :mod:`~quatmotion.cli.viz` (``view``, ``report``), :mod:`~quatmotion.cli.server`
-(``serve``), :mod:`~quatmotion.cli.bench` (``bench``), :mod:`~quatmotion.cli.demo` (``demo``).
+(``serve``), :mod:`~quatmotion.cli.bench` (``bench``), :mod:`~quatmotion.cli.demo` (``demo``),
+:mod:`~quatmotion.cli.warmup` (``warm-up``).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ for _module in (
     "server",
     "bench",
     "demo",
+    "warmup",
 ):
     importlib.import_module(f"quatmotion.cli.{_module}")
 reflow_all_help(app)

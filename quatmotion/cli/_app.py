@@ -52,6 +52,7 @@ def _print_version(value: bool) -> None:
 
 @app.callback()
 def _root(
+    ctx: typer.Context,
     version: Annotated[
         bool,
         typer.Option(
@@ -60,3 +61,11 @@ def _root(
     ] = False,
 ) -> None:
     """Compress and search human motion-capture libraries."""
+    if ctx.invoked_subcommand not in _WITHOUT_KERNELS:
+        from quatmotion.cli.warmup import say_when_compiling
+
+        say_when_compiling()
+
+
+# Commands that run no kernel, spared the import of Numba that listening for compiles costs.
+_WITHOUT_KERNELS = ("datasets", "warm-up")

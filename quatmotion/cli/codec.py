@@ -159,6 +159,10 @@ def compress(
             if not path.exists():
                 raise CliInputError(f"{path}: no such file or folder")
         check_outputs([out], [*inputs, skeleton], force=force)
+        from quatmotion.cli.warmup import ensure_kernels
+
+        groups = ("read", "codec", "learn") if method in ("qssd", "ksvd") else ("read", "codec")
+        ensure_kernels(*groups, workers=workers, scheduler=scheduler)
         with progress_bar(error_console if as_json else console) as progress:
             result = run_compress(
                 inputs, out, max_error=max_error, ratio=ratio, method=method,
@@ -297,6 +301,9 @@ def append(
             if not path.exists():
                 raise CliInputError(f"{path}: no such file or folder")
         check_outputs([library], [*inputs, skeleton], replace=True)
+        from quatmotion.cli.warmup import ensure_kernels
+
+        ensure_kernels("read", "codec", workers=workers, scheduler=scheduler)
         with progress_bar() as progress:
             result = run_append(
                 library, inputs, max_error=max_error, skeleton=skeleton, units=units,

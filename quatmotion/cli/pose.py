@@ -132,6 +132,9 @@ def index_command(
         where = resolve_scheduler(scheduler, workers=workers)
         files = find_motion_files(paths)
         check_outputs([output], [*files, skeleton], force=force)
+        from quatmotion.cli.warmup import ensure_kernels
+
+        ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
         _echo(f"{len(files)} clips, prepared on {where.describe()}")
         load = functools.partial(
             load_pose_clip, fps=fps, height=height, skeleton=skeleton, units=units

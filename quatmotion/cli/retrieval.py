@@ -85,6 +85,10 @@ def _build(
                 raise CliInputError(f"{path}: no such file or folder")
         asf_files = sorted(skeletons.glob("*.asf")) if skeletons is not None else []
         check_outputs([output], [*paths, labels, skeleton, *asf_files], replace=True)
+        from quatmotion.cli.warmup import ensure_kernels
+
+        learn = ("learn",) if {"qssd", "ksvd"} & set(kind_tuple) else ()
+        ensure_kernels("read", *learn, "retrieval", workers=workers, scheduler=scheduler)
         with progress_bar(error_console) as bar:
             task = bar.add_task("indexing", total=None)
 

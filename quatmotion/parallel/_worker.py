@@ -93,3 +93,24 @@ def run_task(func: Callable[[Any], Any], entries: Sequence[tuple[int, Any]]) -> 
     """The task a pool or a Dask worker runs: single-threaded, then :func:`run_items`."""
     limit_threads_in_worker()
     return run_items(func, entries)
+
+
+def run_pickled_task(payload: bytes) -> list[Record]:
+    """:func:`run_task` of a task the caller pickled, ``(func, entries)``.
+
+    Raises
+    ------
+    RuntimeError
+        The task cannot be unpickled here, e.g. it refers to a class of the caller's main
+        script, which this worker did not import (one line, naming what is missing).
+    """
+    import pickle
+
+    try:
+        func, entries = pickle.loads(payload)
+    except Exception as exc:  # the task's own failure, told in one line
+        raise RuntimeError(
+            f"a worker process cannot read the task ({one_line(exc)}): define what the job "
+            f"uses in an importable module"
+        ) from None
+    return run_task(func, entries)

@@ -26,6 +26,10 @@ Conventions
 * ``progress(done, total)`` is called in the calling process: once with ``done == 0`` before
   any work, then each time an item finishes (succeeded or failed), ``done`` counting up to
   ``total``.
+* Local pool workers fork from a fork server (safe beside threads; modules imported once) and
+  do not re-run the caller's main script unless the batch's first task refers to something
+  defined there: a script that calls a batch at its top level, without an
+  ``if __name__ == "__main__":`` guard, works (see :mod:`quatmotion.parallel._context`).
 * Local pools are kept for the next batch of the same size (warm workers); a worker that
   died takes its pool down and the next batch starts a new one; :func:`shutdown_pools` ends
   them sooner than the process's exit.
@@ -36,7 +40,6 @@ Conventions
 from __future__ import annotations
 
 import contextlib
-import multiprocessing
 import pickle
 import sys
 import threading
@@ -48,7 +51,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from quatmotion.parallel import _worker
+from quatmotion.parallel import _context, _worker
 from quatmotion.parallel.scheduler import Scheduler, resolve_scheduler
 
 __all__ = [
@@ -409,34 +412,67 @@ class BatchStream(Generic[T]):
         in_flight: dict[Future[list[_worker.Record]], _Task] = {}
         pool: ProcessPoolExecutor | None = None
 
-        def submit(task: _Task) -> None:
+        def submit(task: _Task, payload: bytes) -> None:
             assert pool is not None
-            in_flight[pool.submit(_worker.run_task, self._func, task.entries)] = task
+            in_flight[pool.submit(_worker.run_pickled_task, payload)] = task
 
         def settle(future: Future[list[_worker.Record]], task: _Task, crashed: list[_Task]) -> None:
             try:
                 records = future.result()
             except BrokenProcessPool:
                 crashed.append(task)
-            except Exception as exc:  # the task never ran: its items could not be sent
+                return
+            except Exception as exc:  # the task never ran: the worker could not read it
                 collector.fail(task, _worker.one_line(exc))
             else:
                 collector.add_records(records)
+            payloads.pop(task.number, None)
 
+        # Each task is pickled here, once (the pool sends the bytes): whether they name the main
+        # script tells which workers the batch needs (see _context), and a task that cannot be
+        # pickled fails alone, at once. Kept until the task is settled, for a re-run.
+        payloads: dict[int, bytes] = {}
+
+        def payload_of(task: _Task) -> bytes | None:
+            if task.number not in payloads:
+                try:
+                    payloads[task.number] = pickle.dumps(
+                        (self._func, task.entries), protocol=pickle.HIGHEST_PROTOCOL
+                    )
+                except Exception as exc:  # an item that cannot be sent fails alone
+                    message = f"cannot be sent to a worker process: {_worker.one_line(exc)}"
+                    collector.fail(task, message)
+                    return None
+            return payloads[task.number]
+
+        def drop_unsendable() -> None:
+            """Fail and drop the tasks at the head of ``tasks`` that cannot be pickled."""
+            while tasks and payload_of(tasks[0]) is None:
+                tasks.popleft()
+
+        import_main: bool | None = None  # the first task sent decides, for the whole batch
         try:
             while tasks or suspects or in_flight:
                 if pool is None:
-                    pool = _shared_pool(n, _module_of(self._func))
+                    if import_main is None:
+                        drop_unsendable()
+                        if not tasks:
+                            yield from collector.pop_ready()
+                            continue
+                        import_main = _names_main(payloads[tasks[0].number])
+                    pool = _shared_pool(n, _module_of(self._func), import_main=import_main)
                 try:
                     if suspects:
                         if not in_flight:
-                            submit(suspects[0])
+                            submit(suspects[0], payloads[suspects[0].number])
                             suspects.popleft()
                     else:
                         horizon = collector.next_index + self._window
+                        drop_unsendable()
                         while tasks and len(in_flight) < capacity and tasks[0].first < horizon:
-                            submit(tasks[0])
+                            submit(tasks[0], payloads[tasks[0].number])
                             tasks.popleft()
+                            drop_unsendable()
                 except BrokenProcessPool:
                     # A worker died since the last look: while the kept pool was idle (start
                     # afresh), or under a task in flight (found below, like any death).
@@ -459,11 +495,14 @@ class BatchStream(Generic[T]):
                         deaths[task.number] = deaths.get(task.number, 0) + 1
                         if deaths[task.number] > self._retries:
                             times = deaths[task.number]
-                            collector.fail(
-                                task,
+                            message = (
                                 f"its worker process died running it "
-                                f"({times} time{'s' if times > 1 else ''}; gave up)",
+                                f"({times} time{'s' if times > 1 else ''}; gave up)"
                             )
+                            if import_main and collector.done == collector.failed:
+                                message += _MAIN_HINT
+                            collector.fail(task, message)
+                            payloads.pop(task.number, None)
                         else:
                             collector.retried += len(task.entries)
                             suspects.append(task)
@@ -475,33 +514,52 @@ class BatchStream(Generic[T]):
                 future.cancel()
 
 
-# Local pools outlive their batches, one per size: a batch after the first (the second pass of a
-# pose-library build, a benchmark's repetitions) finds its workers started and warm (modules
-# imported, compiled kernels loaded). They end with the process, or with shutdown_pools().
-_pools: dict[int, ProcessPoolExecutor] = {}
+# Local pools outlive their batches, one per size and kind: a batch after the first (the second
+# pass of a pose-library build, a benchmark's repetitions) finds its workers started and warm
+# (modules imported, compiled kernels loaded). They end with the process, or with
+# shutdown_pools().
+_pools: dict[tuple[int, bool], ProcessPoolExecutor] = {}
 _pools_lock = threading.Lock()
 
+_MAIN_HINT = (
+    "; its workers import the main script first, to find what the job uses from it: keep the "
+    'script\'s work under `if __name__ == "__main__":`'
+)
 
-def _shared_pool(n: int, module: str | None) -> ProcessPoolExecutor:
+
+def _names_main(payload: bytes) -> bool:
+    """Whether a pickled task may refer to something of the main script.
+
+    A pickle names the module of every function and class it refers to, so a task that needs
+    the main script contains ``__main__``; a byte string that merely contains those bytes
+    costs a worker that imports the script, as ``multiprocessing`` always does.
+    """
+    return b"__main__" in payload
+
+
+def _shared_pool(n: int, module: str | None, *, import_main: bool) -> ProcessPoolExecutor:
     with _pools_lock:
-        pool = _pools.get(n)
+        pool = _pools.get((n, import_main))
         if pool is None:
-            context = multiprocessing.get_context("forkserver")
-            # Workers fork from a server process started once, with these modules imported:
-            # plain fork is unsafe in a process that runs threads (a Rich progress bar does).
-            preload = ["quatmotion.parallel._worker"] + ([module] if module else [])
+            context = _context.context(import_main=import_main)
+            # Workers fork from a server process started once, with these modules imported
+            # (never __main__ itself: the fork server would run an unguarded script's work).
+            preload = ["quatmotion.parallel._worker"]
+            if module and module != "__main__":
+                preload.append(module)
             context.set_forkserver_preload(preload)
             pool = ProcessPoolExecutor(
                 max_workers=n, mp_context=context, initializer=_worker.limit_threads_in_worker
             )
-            _pools[n] = pool
+            _pools[n, import_main] = pool
         return pool
 
 
 def _discard_pool(n: int, pool: ProcessPoolExecutor, *, wait: bool) -> None:
     with _pools_lock:
-        if _pools.get(n) is pool:
-            del _pools[n]
+        for key, kept in list(_pools.items()):
+            if key[0] == n and kept is pool:
+                del _pools[key]
     pool.shutdown(wait=wait, cancel_futures=True)
 
 

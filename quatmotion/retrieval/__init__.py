@@ -17,7 +17,10 @@ build
 search
     ``search`` and ``search_within`` (subsequence DTW inside long takes).
 
-Names are loaded on first use, so ``import quatmotion.retrieval`` stays cheap.
+Names are loaded on first use, so ``import quatmotion.retrieval`` stays cheap. The function
+``search`` is imported from its module (``from quatmotion.retrieval.search import search``):
+the package attribute of that name is the submodule once anything has imported it, so a lazy
+export of the function would be a module or a function depending on what ran first.
 """
 
 from __future__ import annotations
@@ -33,7 +36,6 @@ _EXPORTS = {
     "Library": "methods",
     "ClipIndex": "index",
     "build_index": "build",
-    "search": "search",
     "search_within": "search",
     "query_features": "search",
 }
