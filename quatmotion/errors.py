@@ -38,3 +38,20 @@ class ClipNameError(KeyError, ValueError):
 
     def __str__(self) -> str:  # KeyError's would quote the message
         return str(self.args[0]) if self.args else ""
+
+
+class FormatWarning(UserWarning):
+    """A motion file read despite something in it that a reader tolerated or had to assume (a
+    frame line more than ``Frames:`` announces, translation channels whose meaning was
+    detected). The message names the file and, where known, the line; ``reason`` is the
+    message alone. :func:`quatmotion.io.read_motion_checked` turns them into doubts.
+    """
+
+    def __init__(self, message: str, path: str | Path | None = None, line: int | None = None):
+        self.path = Path(path) if path is not None else None
+        self.line = line
+        where = ""
+        if self.path is not None:
+            where = f"{self.path}" + (f":{line}" if line is not None else "") + ": "
+        super().__init__(f"{where}{message}")
+        self.reason = message

@@ -253,35 +253,36 @@ def test_every_command_that_reads_motion_takes_units_and_skeleton(clips, tmp_pat
     _assert_bad_input(_invoke(*args, "--skeleton", missing), "missing.asf")
 
 
-def test_compress_warns_about_a_unit_near_a_boundary_and_units_keeps_the_bound(
-    tmp_path, studio_walk
-):
-    """The issue's case: a 135 cm figure written in inches reads as 53 cm (guessed cm), and
-    ``compress --max-error 1`` then bounds the error in the wrong unit."""
+def test_compress_reads_a_studio_layout_in_its_unit_and_warns_about_a_giant(tmp_path, studio_walk):
+    """Issue 17's case: a 135 cm figure written in inches, its rest pose laid out along X, read
+    as 53 cm (guessed cm) when the guess looked at the rest pose. The stature chain reads it in
+    inches (issue 21, item 7); a figure no unit makes human (300 cm in cm) is warned about, and
+    ``--units`` then keeps the bound in the unit given."""
     truth, studio = studio_walk(135.0, INCH_CM)
     bvh = tmp_path / "studio.bvh"
     io.write_bvh(studio, bvh)
     lib = tmp_path / "guessed.qmz"
     result = _invoke("compress", bvh, "-o", lib, "--max-error", "1", "--workers", "1")
     assert result.exit_code == 0, result.output
-    (warning,) = _warnings(result)
-    assert "studio.bvh" in warning and "--units" in warning, warning
-    reading = re.search(r"it would be ([\d.]+) cm read in in", warning)
-    assert reading and 120 < float(reading.group(1)) < 150, warning  # the alternative, named
-    assert "length unit: cm (guessed)" in result.stdout
+    assert _warnings(result) == [] and "length unit: in (guessed)" in result.stdout
     with codec.open(lib) as archive:
-        guessed = archive.read(0)
-    assert _max_error(truth, guessed, INCH_CM) > 1.0  # the bound broken in the true unit
+        assert _max_error(truth, archive.read(0)) <= 1.0 + 1e-6  # the bound, in true cm
 
-    lib = tmp_path / "given.qmz"
-    result = _invoke("compress", bvh, "-o", lib, "--max-error", "1", "--units", "in")
+    truth, giant = studio_walk(300.0, 1.0)
+    io.write_bvh(giant, bvh)
+    result = _invoke("compress", bvh, "-o", tmp_path / "giant.qmz", "--max-error", "1")
     assert result.exit_code == 0, result.output
-    assert _warnings(result) == [] and "length unit: in (given)" in result.stdout
+    (warning,) = _warnings(result)
+    assert "studio.bvh" in warning and "--units" in warning and "50 to 220 cm" in warning
+    lib = tmp_path / "given.qmz"
+    result = _invoke("compress", bvh, "-o", lib, "--max-error", "1", "--units", "cm")
+    assert result.exit_code == 0, result.output
+    assert _warnings(result) == [] and "length unit: cm (given)" in result.stdout
     with codec.open(lib) as archive:
         decoded = archive.read(0)
     assert _max_error(truth, decoded) <= 1.0 + 1e-6  # the bound holds on the true figure
     listing = _invoke("ls", lib)
-    assert re.search(r"studio .* in \(given\)", listing.stdout), listing.stdout
+    assert re.search(r"studio .* cm \(given\)", listing.stdout), listing.stdout
 
 
 def test_append_takes_the_unit_and_reports_it(tmp_path, clips, studio_walk):
@@ -291,13 +292,13 @@ def test_append_takes_the_unit_and_reports_it(tmp_path, clips, studio_walk):
     assert _invoke("compress", clips / "walk.bvh", "-o", lib).exit_code == 0
     guessed = _invoke("append", lib, tmp_path / "studio.bvh", "--workers", "1")
     assert guessed.exit_code == 0, guessed.output
-    assert len(_warnings(guessed)) == 1 and "cm (guessed)" in guessed.stdout
+    assert _warnings(guessed) == [] and "in (guessed)" in guessed.stdout
     with codec.open(lib) as archive:
-        assert archive.read("studio").skeleton.extras["bvh_scale"] == 1.0
+        assert archive.read("studio").skeleton.extras["bvh_scale"] == INCH_CM
 
 
 def test_batch_commands_warn_about_a_doubtful_unit_from_their_workers(tmp_path, clips, studio_walk):
-    _, studio = studio_walk(135.0, INCH_CM)
+    _, studio = studio_walk(300.0, 1.0)  # a giant: no unit makes it human
     io.write_bvh(studio, clips / "studio.bvh")
     built = _invoke(
         "index", "build", clips, "-o", tmp_path / "x.qidx", "--kinds", "motion", "--workers", "2"
@@ -314,7 +315,7 @@ def test_batch_commands_warn_about_a_doubtful_unit_from_their_workers(tmp_path, 
     assert "studio.bvh" in warning and "--units" in warning
     given = _invoke(
         "index", "build", clips / "studio.bvh", "-o", tmp_path / "y.qidx", "--kinds", "motion",
-        "--units", "in",
+        "--units", "cm",
     )  # fmt: skip
     assert given.exit_code == 0 and _warnings(given) == [], given.output
 

@@ -46,11 +46,12 @@ def _field(output: str, name: str) -> str:
 
 
 def _stick_bvh(path: Path, height_units: float, root_x: float = 0.0) -> Path:
-    """A two-bone stick figure ``height_units`` tall in its own (unstated) unit."""
+    """A two-bone stick figure ``height_units`` tall in its own (unstated) unit: a body (it
+    has a head), measured by its extent."""
     half = height_units / 2
     path.write_text(
-        "HIERARCHY\nROOT a\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xposition Yposition Zposition\n"
-        f"  JOINT b\n  {{\n    OFFSET 0 {half!r} 0\n    CHANNELS 1 Zrotation\n"
+        "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xposition Yposition Zposition\n"
+        f"  JOINT Head\n  {{\n    OFFSET 0 {half!r} 0\n    CHANNELS 1 Zrotation\n"
         f"    End Site\n    {{\n      OFFSET 0 {half!r} 0\n    }}\n  }}\n}}\n"
         f"MOTION\nFrames: 2\nFrame Time: 0.01\n{root_x!r} 0 0 0\n{root_x!r} 0 0 5\n"
     )
@@ -141,12 +142,14 @@ def test_piped_output_keeps_file_paths_whole(tmp_path):
 
 
 def test_info_reports_the_guessed_unit_and_warns_when_the_figure_is_implausible(tmp_path):
-    child = _stick_bvh(tmp_path / "child.bvh", 90.0)  # a 90 cm child, in centimetres
+    # A 90 cm child in centimetres: 229 cm read in inches is no human (issue 21, item 7).
+    child = _stick_bvh(tmp_path / "child.bvh", 90.0)
     result = _invoke("info", child)
     assert result.exit_code == 0, result.output
-    assert "in" in _field(result.stdout, "unit") and "guessed" in _field(result.stdout, "unit")
-    warning = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
-    assert warning and "--units" in warning[0] and "cm" in warning[0], result.stderr
+    assert _field(result.stdout, "unit") == "cm (guessed)" and "warning" not in result.stderr
+    giant = _invoke("info", _stick_bvh(tmp_path / "giant.bvh", 300.0))  # no unit makes it human
+    warning = [line for line in giant.stderr.splitlines() if line.startswith("warning:")]
+    assert warning and "--units" in warning[0] and "50 to 220 cm" in warning[0], giant.stderr
     given = _invoke("info", child, "--units", "cm")
     assert given.exit_code == 0, given.output
     assert "warning" not in given.stderr
@@ -163,7 +166,9 @@ def test_units_option_is_validated_and_reaches_every_reader(tmp_path):
     assert io.read_motion(out, units="cm").skeleton.height() == pytest.approx(90.0)
     amc = tmp_path / "w.amc"
     assert _invoke("generate", "walk", amc, "--frames", "5").exit_code == 0
-    _assert_bad_input(_invoke("info", amc, "--units", "cm"), "BVH")
+    # An ASF states its unit; --units replaces it (issue 21, item 9).
+    given = _invoke("info", amc, "--units", "cm")
+    assert given.exit_code == 0 and _field(given.stdout, "unit") == "cm (given)", given.output
 
 
 def test_a_unit_is_read_from_a_string_or_a_number(tmp_path):

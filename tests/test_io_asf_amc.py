@@ -389,7 +389,9 @@ def test_malformed_amc(tiny, old: str, new: str, needle: str, message: str):
 
 
 def test_amc_without_frames_and_binary_bytes(tiny):
-    tiny[1].write_text(":FULLY-SPECIFIED\n:DEGREES\n")
+    tiny[1].write_text(":FULLY-SPECIFIED\n:DEGREES\n")  # a header alone: a clip of no frames
+    assert read_amc(tiny[1], tiny[0]).n_frames == 0
+    tiny[1].write_text("")
     with pytest.raises(FormatError, match="no frames"):
         read_amc(tiny[1], tiny[0])
     tiny[1].write_bytes(TINY_AMC.encode().replace(b"a 90", b"a 9\x000"))
@@ -460,5 +462,5 @@ def test_find_motion_files_walks_folders_and_names_what_is_missing(tmp_path: Pat
     with pytest.raises(FileNotFoundError, match="nope"):
         find_motion_files([tmp_path / "nope"])
     (tmp_path / "empty").mkdir()
-    with pytest.raises(ValueError, match="no .amc or .bvh files"):
+    with pytest.raises(ValueError, match="no .amc or .bvh or .glb or .gltf files"):
         find_motion_files([tmp_path / "empty"])

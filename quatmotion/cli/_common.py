@@ -49,11 +49,13 @@ __all__ = [
     "Outputs",
     "SchedulerOption",
     "SkeletonOption",
+    "TranslationsOption",
     "UnitsOption",
     "WorkersOption",
     "at_least",
     "bvh_unit_label",
     "check_frame",
+    "check_translations",
     "check_units",
     "check_outputs",
     "check_writable",
@@ -161,17 +163,47 @@ def require_file(path: Path) -> Path:
 
 # --- options shared by several commands ------------------------------------------------------
 
+
+def _units_value(value: str | None) -> str | float | None:
+    """``--units`` as the library takes it: a unit name (lower case) or a number of cm per
+    unit. A bad value is kept for :func:`check_units` to refuse with the one-line error."""
+    if value is None:
+        return None
+    from quatmotion.io import LENGTH_UNITS, length_unit
+
+    try:
+        cm = length_unit(value)
+    except ValueError:
+        return value
+    name = value.strip().lower()
+    return name if name in LENGTH_UNITS else cm
+
+
 UnitsOption = Annotated[
     str | None,
     typer.Option(
         "--units",
-        help="Length unit of BVH input: cm, mm, m, in or asf (1/0.45 inch, the CMU unit). "
-        "Default: guessed from the skeleton's size, with a warning when the guess is doubtful.",
+        help="Length unit of the input: mm, cm, dm, m, in, asf (1/0.45 inch, the CMU unit) or "
+        "a number of cm per unit (2.54 for inches). Default: a BVH's is guessed from the "
+        "figure's stature, with a warning when no unit makes it human; an ASF's is the one it "
+        "states (given, this replaces it).",
         show_default=False,
+        callback=_units_value,
     ),
 ]
 """``--units`` of every command that reads motion (:func:`read_clip`, and the library's batch
-functions: ``units=``)."""
+functions: ``units=``): the command receives a unit name or a float."""
+TranslationsOption = Annotated[
+    str,
+    typer.Option(
+        "--bvh-translations",
+        help="What position channels on BVH joints other than the root mean: absolute (they "
+        "replace the OFFSET), relative (added to it), root-only (ignored but on the root), or "
+        "auto: relative when they hold values near zero, else absolute.",
+    ),
+]
+"""``--bvh-translations`` of every command that reads motion (:func:`read_clip`;
+``translations`` of :class:`quatmotion.collection.ReadSettings`)."""
 SkeletonOption = Annotated[
     Path | None,
     typer.Option(
@@ -186,14 +218,30 @@ JsonOption = Annotated[
 """``--json`` of every command that reports something (:func:`print_json`)."""
 
 
-def check_units(units: str | None) -> str | None:
-    """``--units`` if it names a unit of :data:`quatmotion.io.BVH_UNITS`, else
-    :class:`CliInputError` listing them (before any file is read)."""
-    from quatmotion.io import BVH_UNITS
+def check_units(units: str | float | None) -> str | float | None:
+    """``--units`` if it is a unit of :data:`quatmotion.io.LENGTH_UNITS` or a positive number
+    of cm per unit, else :class:`CliInputError` listing them (before any file is read)."""
+    from quatmotion.io import length_unit
 
-    if units is not None and units.strip().lower() not in BVH_UNITS:
-        raise CliInputError(f"unknown --units {units!r}; choose from {', '.join(BVH_UNITS)}")
+    if units is not None:
+        try:
+            length_unit(units)
+        except ValueError as error:
+            raise CliInputError(f"--units: {error}") from None
     return units
+
+
+def check_translations(translations: str) -> str:
+    """``--bvh-translations`` if it is ``auto`` or a mode of
+    :data:`quatmotion.io.TRANSLATION_MODES`, else :class:`CliInputError` listing them."""
+    from quatmotion.io import TRANSLATION_MODES
+
+    if translations != "auto" and translations not in TRANSLATION_MODES:
+        raise CliInputError(
+            f"unknown --bvh-translations {translations!r}; choose from auto, "
+            f"{', '.join(TRANSLATION_MODES)}"
+        )
+    return translations
 
 
 def print_json(document: object) -> None:
@@ -238,23 +286,32 @@ def report_skipped(failures: Iterable[object]) -> None:
 
 
 def read_clip(
-    path: Path, skeleton: Path | None = None, units: str | None = None, *, strict: bool = False
+    path: Path,
+    skeleton: Path | None = None,
+    units: str | float | None = None,
+    *,
+    strict: bool = False,
+    translations: str = "auto",
 ) -> Motion:
-    """Read a motion file given on the command line, warning about doubtful content.
+    """Read a motion file given on the command line, warning about doubtful content (and
+    what the reader tolerated or assumed: :func:`quatmotion.io.read_motion_checked`).
 
     Parameters
     ----------
     path : Path
-        A ``.amc`` or ``.bvh`` file.
+        A motion file (:data:`quatmotion.io.MOTION_SUFFIXES`).
     skeleton : Path, optional
         The ASF of an AMC (else found as :func:`quatmotion.io.find_asf_for_amc` finds it).
-    units : str, optional
-        Length unit of a BVH (:data:`quatmotion.io.BVH_UNITS`); ``None`` guesses it.
+    units : str or float, optional
+        Length unit of the file (:data:`quatmotion.io.LENGTH_UNITS` or cm per unit); ``None``
+        guesses a BVH's and takes an ASF's as stated.
     strict : bool
         Refuse (:class:`CliInputError`) a clip with coordinates beyond a kilometre instead of
         warning about it: for commands that compute on world positions.
+    translations : str
+        ``--bvh-translations`` (:data:`quatmotion.io.TRANSLATION_MODES` or ``"auto"``).
     """
-    from quatmotion.io import MOTION_SUFFIXES, implausible_values, read_motion
+    from quatmotion.io import MOTION_SUFFIXES, read_motion_checked
 
     require_file(path)
     if path.suffix.lower() not in MOTION_SUFFIXES:
@@ -266,10 +323,11 @@ def read_clip(
         require_file(skeleton)
         if path.suffix.lower() != ".amc":
             raise CliInputError("--skeleton applies to AMC input only (a BVH has its own)")
-    if units is not None and path.suffix.lower() != ".bvh":
-        raise CliInputError(f"{path}: --units applies to BVH input only (an ASF states its unit)")
-    motion = read_motion(path, skeleton, units=units)
-    for doubt in implausible_values(motion):
+    check_translations(translations)
+    if translations != "auto" and path.suffix.lower() != ".bvh":
+        raise CliInputError(f"{path}: --bvh-translations applies to BVH input only")
+    motion, doubts = read_motion_checked(path, skeleton, units=units, translations=translations)
+    for doubt in doubts:
         if strict and doubt.kind == "far":
             raise CliInputError(f"{path}: {doubt.message}: not human motion capture")
         warn_doubt(path, doubt)
@@ -280,6 +338,8 @@ def warn_doubt(source: object, doubt: Doubt, target: Console | None = None) -> N
     """A ``warning:`` line for a doubtful clip (:func:`quatmotion.io.implausible_values`), on
     stderr or ``target`` (a progress bar's console), saying what to do about a unit."""
     hint = "; give the unit with --units" if doubt.kind == "unit" else ""
+    if doubt.kind == "read" and "--bvh-translations" in doubt.message:
+        hint = ""
     (target or error_console).print(
         f"warning: {source}: {doubt.message}{hint}", markup=False, highlight=False, soft_wrap=True
     )
@@ -295,18 +355,17 @@ def doubt_reporter(progress: Progress) -> Callable[[str, Doubt], None]:
 def unit_label(skeleton: Skeleton) -> dict[str, object]:
     """The length unit a clip was read in, as ``ls --json`` reports it.
 
-    ``unit``: a name of :data:`quatmotion.io.BVH_UNITS`, or ``None`` for another scale;
+    ``unit``: a name of :data:`quatmotion.io.LENGTH_UNITS`, or ``None`` for another scale;
     ``cm_per_unit``; ``unit_source``: ``"guessed"`` (a BVH's unit guessed from its size),
-    ``"given"`` (a BVH read with ``--units``), ``"asf"`` (the unit an ASF states) or ``"cm"``
-    (a skeleton built in code, in centimetres); ``unit_guessed``.
+    ``"given"`` (read with ``--units``), ``"asf"`` (the unit an ASF states), ``"gltf"``
+    (glTF's metres) or ``"cm"`` (a skeleton built in code, in centimetres); ``unit_guessed``.
     """
-    extras = skeleton.extras
-    if extras.get("format") == "asf" and "length_scale" in extras:
-        return _unit_fields(float(extras["length_scale"]), "asf")
-    if extras.get("format") == "bvh":
-        guessed = bool(extras.get("bvh_unit_guessed"))
-        return _unit_fields(float(extras.get("bvh_scale", 1.0)), "guessed" if guessed else "given")
-    return _unit_fields(1.0, "cm")
+    from quatmotion.io import unit_reading
+
+    cm, source, _ = unit_reading(skeleton)
+    if source == "stated":
+        source = str(skeleton.extras.get("format"))
+    return _unit_fields(cm, source)
 
 
 def bvh_unit_label(cm_per_unit: float, guessed: bool) -> dict[str, object]:
@@ -315,9 +374,9 @@ def bvh_unit_label(cm_per_unit: float, guessed: bool) -> dict[str, object]:
 
 
 def _unit_fields(cm: float, source: str) -> dict[str, object]:
-    from quatmotion.io import BVH_UNITS
+    from quatmotion.io import LENGTH_UNITS
 
-    name = next((n for n, v in BVH_UNITS.items() if abs(v - cm) <= 1e-9 * v), None)
+    name = next((n for n, v in LENGTH_UNITS.items() if abs(v - cm) <= 1e-9 * v), None)
     return {
         "unit": name,
         "cm_per_unit": cm,
@@ -330,7 +389,12 @@ def unit_text(label: dict[str, object]) -> str:
     """A :func:`unit_label` for a table: ``in (guessed)``, ``cm (given)``, ``asf (from the
     ASF)``, ``6.028 cm (from the ASF)``, ``cm``."""
     name = label["unit"] or f"{float(label['cm_per_unit']):.4g} cm"  # type: ignore[arg-type]
-    how = {"asf": " (from the ASF)", "guessed": " (guessed)", "given": " (given)"}
+    how = {
+        "asf": " (from the ASF)",
+        "gltf": " (glTF: metres)",
+        "guessed": " (guessed)",
+        "given": " (given)",
+    }
     return f"{name}{how.get(str(label['unit_source']), '')}"
 
 

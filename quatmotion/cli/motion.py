@@ -16,9 +16,11 @@ from quatmotion.cli._common import (
     JsonOption,
     Outputs,
     SkeletonOption,
+    TranslationsOption,
     UnitsOption,
     at_least,
     check_outputs,
+    check_translations,
     check_units,
     check_writable,
     clip_files,
@@ -46,27 +48,64 @@ FPS_RANGE = (1.0, 1000.0)  # frames per second of motion capture
 
 
 def _cm(value: float) -> str:
-    """A length for a table: one decimal, or 3 significant digits when absurdly large."""
+    """A length for a table: one decimal, or 3 significant digits when absurdly large; ``-``
+    for none (NaN)."""
+    if value != value:
+        return "-"
     return f"{value:.1f}" if abs(value) < 1e6 else f"{value:.3g}"
 
 
 def _rest_pose(skeleton: Skeleton) -> tuple[float, str | None]:
-    """The rest pose's vertical extent, and the axis it lies along when it is not upright."""
+    """The rest pose's vertical extent, and the axis it lies along when it is not upright
+    (``"?"`` when neither a head nor feet are found to tell).
+
+    Upright means the head straight above the feet (Bandai's rest pose lies along X). Never the
+    skeleton's largest extent: a T-pose's arm span equals its height.
+    """
     import numpy as np
+
+    from quatmotion.io import find_body
 
     rest = skeleton.rest_positions()
     extent = np.ptp(rest, axis=0)
-    try:  # upright: the head straight above the feet (Bandai's rest pose lies along X)
+    try:
         from quatmotion.pose.skeleton16 import joint_indices16
 
         joints = rest[joint_indices16(skeleton)]
         body = joints[3] - 0.5 * (joints[12] + joints[15])
-    except ValueError:  # not a skeleton the 16 joints map: its tallest side
-        body = extent
+    except ValueError:  # not a skeleton the 16 joints map: its named head and feet (the root
+        # standing in for the one of them not found)
+        parts = find_body(skeleton)
+        if parts is None or (parts.head is None and not parts.ankles):
+            return float(extent[1]), "?"
+        head = rest[0] if parts.head is None else rest[parts.head]
+        feet = rest[list(parts.ankles)].mean(axis=0) if parts.ankles else rest[0]
+        body = head - feet
     length = float(np.linalg.norm(body))
     if length > 0 and abs(body[1]) < 0.9 * length:
         return float(extent[1]), "XYZ"[int(np.argmax(np.abs(body)))]
     return float(extent[1]), None
+
+
+def _rest_pose_text(height: float, lying: str | None) -> str:
+    if lying == "?":
+        return f"{_cm(height)} (vertical extent; no head or feet found to tell the body's axis)"
+    return f"- (rest pose not upright: it lies along {lying})" if lying else _cm(height)
+
+
+def _translations_text(skeleton: Skeleton) -> str | None:
+    """How position channels on joints other than the root were read, for BVH skeletons."""
+    mode = skeleton.extras.get("bvh_translations")
+    if mode is None:
+        return None
+    joints = sum(any(c[0] == "t" for c in ch) for ch in skeleton.channels[1:])
+    how = {
+        "absolute": "read as absolute (replacing the offsets)",
+        "relative": "read as relative to the offsets",
+        "root-only": "ignored (root only)",
+    }[mode]
+    said = "detected" if skeleton.extras.get("bvh_translations_guessed") else "given"
+    return f"on {joints} joints besides the root, {how} ({said})"
 
 
 def _stature(skeleton: Skeleton) -> float | None:
@@ -78,39 +117,49 @@ def _stature(skeleton: Skeleton) -> float | None:
         return None
 
 
-def _skeleton_rows(skeleton: Skeleton) -> list[tuple[str, str]]:
+def _skeleton_rows(skeleton: Skeleton, asf: str | None = None) -> list[tuple[str, str]]:
     height, lying = _rest_pose(skeleton)
     rows = [
         ("skeleton", skeleton.name or "-"),
+        *([("skeleton file", asf)] if asf else []),
         ("joints", str(skeleton.n_joints)),
         ("end sites", str(skeleton.n_sites)),
         ("unit", unit_text(unit_label(skeleton))),
-        (
-            "rest pose height (cm)",
-            f"- (rest pose not upright: it lies along {lying})" if lying else _cm(height),
-        ),
+        ("rest pose height (cm)", _rest_pose_text(height, lying)),
     ]
+    translations = _translations_text(skeleton)
+    if translations:
+        rows.append(("position channels", translations))
     stature = _stature(skeleton)
     if stature is not None:
         rows.append(("ankle-to-head bone chain (cm)", _cm(stature)))
     return rows
 
 
-def _skeleton_doc(skeleton: Skeleton) -> dict[str, object]:
+def _skeleton_doc(skeleton: Skeleton, asf: str | None = None) -> dict[str, object]:
     height, lying = _rest_pose(skeleton)
-    return {
+    doc: dict[str, object] = {
         "skeleton": skeleton.name,
         "joints": skeleton.n_joints,
         "end_sites": skeleton.n_sites,
         **unit_label(skeleton),
-        "rest_pose_height_cm": None if lying else height,
-        "rest_pose_lies_along": lying,
+        "rest_pose_height_cm": None if lying and lying != "?" else height,
+        "rest_pose_lies_along": None if lying == "?" else lying,
+        "body_axis_known": lying != "?",
         "ankle_to_head_cm": _stature(skeleton),
     }
+    if asf:
+        doc["skeleton_file"] = asf
+    if "bvh_translations" in skeleton.extras:
+        doc["position_channels"] = skeleton.extras["bvh_translations"]
+        doc["position_channels_detected"] = bool(skeleton.extras["bvh_translations_guessed"])
+    return doc
 
 
 def _frame_count(motion: Motion) -> str:
     n = motion.n_frames
+    if n == 0:
+        return "0 (no frames)"
     amc = motion.skeleton.extras.get("format") == "asf"
     numbering = f"; numbered 1 to {n} in the AMC file" if amc else ""
     return f"{n} (frames 0 to {n - 1}{numbering})"
@@ -128,11 +177,14 @@ def _pelvis(motion: Motion) -> int:
 
 
 def _motion_measures(motion: Motion) -> tuple[float, str, list[float]]:
-    """Median vertical extent over frames, the pelvis joint and its position at frame 0."""
+    """Median vertical extent over frames, the pelvis joint and its position at frame 0 (NaN
+    for a clip of no frames)."""
     import numpy as np
 
     from quatmotion.motion import forward_kinematics, standing_height
 
+    if motion.n_frames == 0:
+        return float("nan"), motion.skeleton.joint_names[_pelvis(motion)], [float("nan")] * 3
     # Absurd but finite values (reported as warnings) may overflow on the way: show what comes.
     with np.errstate(all="ignore"):
         step = max(1, motion.n_frames // 200)
@@ -142,12 +194,12 @@ def _motion_measures(motion: Motion) -> tuple[float, str, list[float]]:
     return float(extent), motion.skeleton.joint_names[pelvis], [float(v) for v in at_start]
 
 
-def _motion_summary(motion: Motion) -> Table:
+def _motion_summary(motion: Motion, asf: str | None = None) -> Table:
     table = Table(show_header=False)
     table.add_column("field", style="bold")
     table.add_column("value")
-    rows = _skeleton_rows(motion.skeleton)
-    rows[3:3] = [
+    rows = _skeleton_rows(motion.skeleton, asf)
+    rows[3 + bool(asf) : 3 + bool(asf)] = [
         ("frames", _frame_count(motion)),
         ("fps", f"{motion.fps:g}"),
         ("duration (s)", f"{motion.duration:.3f}"),
@@ -160,10 +212,10 @@ def _motion_summary(motion: Motion) -> Table:
     return table
 
 
-def _motion_doc(motion: Motion) -> dict[str, object]:
+def _motion_doc(motion: Motion, asf: str | None = None) -> dict[str, object]:
     extent, pelvis, at_start = _motion_measures(motion)
     return {
-        **_skeleton_doc(motion.skeleton),
+        **_skeleton_doc(motion.skeleton, asf),
         "frames": motion.n_frames,
         "fps": motion.fps,
         "duration_s": motion.duration,
@@ -177,11 +229,24 @@ def _title(path: Path) -> None:
     console.print(str(path), markup=False, highlight=False, soft_wrap=True)
 
 
+def _asf_used(file: Path, skeleton: Path | None) -> tuple[Path | None, str | None]:
+    """The ASF an AMC is read with, and how it was found, for ``info`` to say."""
+    if file.suffix.lower() != ".amc" or not file.is_file():
+        return skeleton, None
+    if skeleton is not None:
+        return skeleton, f"{skeleton} (given)"
+    from quatmotion.io import match_asf_for_amc
+
+    match = match_asf_for_amc(file)
+    return match.path, f"{match.path} ({match.rule})"
+
+
 @app.command()
 def info(
     file: Annotated[Path, typer.Argument(help="A .amc, .bvh or .asf file.")],
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    translations: TranslationsOption = "auto",
     as_json: JsonOption = False,
 ) -> None:
     """Print a clip's skeleton, unit, frames, fps, duration and body measures (cm)."""
@@ -190,11 +255,7 @@ def info(
         if file.suffix.lower() == ".asf":
             from quatmotion.io import read_asf
 
-            if units is not None:
-                raise CliInputError(
-                    f"{file}: --units applies to BVH input only (an ASF states its unit)"
-                )
-            sk = read_asf(require_file(file))
+            sk = read_asf(require_file(file), units)
             if as_json:
                 print_json({"file": str(file), **_skeleton_doc(sk)})
                 return
@@ -204,12 +265,13 @@ def info(
                 table.add_row(field, value)
             console.print(table)
             return
-        motion = read_clip(file, skeleton, units)
+        asf, asf_text = _asf_used(require_file(file), skeleton)
+        motion = read_clip(file, asf, units, translations=translations)
         if as_json:
-            print_json({"file": str(file), **_motion_doc(motion)})
+            print_json({"file": str(file), **_motion_doc(motion, asf_text)})
             return
         _title(file)
-        console.print(_motion_summary(motion))
+        console.print(_motion_summary(motion, asf_text))
 
 
 @app.command()
@@ -222,6 +284,7 @@ def convert(
     ],
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    translations: TranslationsOption = "auto",
     to: Annotated[str, typer.Option(help="Output format when writing into a folder.")] = "bvh",
     force: ForceOption = False,
 ) -> None:
@@ -237,6 +300,7 @@ def convert(
             raise CliInputError("convert needs at least one input and an output")
         *inputs, out = paths
         check_units(units)
+        check_translations(translations)
         fmt = "." + to.lower().lstrip(".")
         if fmt not in MOTION_SUFFIXES:
             raise CliInputError(f"--to must be one of amc, bvh; got {to!r}")
@@ -263,10 +327,14 @@ def convert(
         with progress_bar() as progress:
             task = progress.add_task("reading", total=len(inputs))
             for path in inputs:
-                # In a batch, --skeleton is for its AMC files and --units for its BVH files.
+                # In a batch, --skeleton is for its AMC files, --units and --bvh-translations
+                # for its BVH files (as every batch command reads them).
                 bvh, alone = path.suffix.lower() == ".bvh", len(inputs) == 1
                 sk = skeleton if alone or not bvh else None
-                motions.append(read_clip(path, sk, units if alone or bvh else None))
+                how = translations if bvh else "auto"
+                motions.append(
+                    read_clip(path, sk, units if alone or bvh else None, translations=how)
+                )
                 progress.advance(task)
         planned = [clip_files(t, m.skeleton) for m, t in zip(motions, targets, strict=True)]
         check_outputs([f for files in planned for f in files], [*inputs, skeleton], force=force)

@@ -50,7 +50,7 @@ FORMAT_VERSION = 1
 """The version this code writes and the newest it reads."""
 PREAMBLE_BYTES = len(MAGIC) + 2
 TAGS = {b"H": "header", b"S": "skeleton", b"L": "library", b"C": "clip"}
-SOURCE_FORMATS = ("", "amc", "bvh")
+SOURCE_FORMATS = ("", "amc", "bvh", "glb", "gltf")  # codes append-only: a code never changes
 
 
 @dataclass(frozen=True)
@@ -91,7 +91,7 @@ class ClipEntry:
     source_bytes : int
         Size of the file it came from (AMC or BVH text), 0 when unknown.
     source_format : str
-        ``"amc"``, ``"bvh"`` or ``""``.
+        ``"amc"``, ``"bvh"``, ``"glb"``, ``"gltf"`` or ``""``.
     max_error, arms : float
         The clip's largest joint-position error and ARMS as encoded, centimetres.
     """

@@ -25,6 +25,7 @@ Conventions
 from __future__ import annotations
 
 import json
+import warnings
 import zlib
 from dataclasses import replace
 from importlib import resources
@@ -34,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from quatmotion import quat
-from quatmotion.errors import FormatError
+from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.io import asf_text, bvh_text, parse_asf, parse_bvh
 from quatmotion.motion import Motion, Skeleton
 
@@ -140,7 +141,9 @@ def skeleton_from_record(
         if kind == RECORD_ASF:
             return parse_asf(text, "record.asf")
         if kind in (RECORD_BVH, RECORD_BVH_GUESSED):
-            skeleton = parse_bvh(text, "record.bvh", scale=scale).skeleton
+            with warnings.catch_warnings():  # what the clip's reading said was said then
+                warnings.simplefilter("ignore", FormatWarning)
+                skeleton = parse_bvh(text, "record.bvh", scale=scale).skeleton
             if kind == RECORD_BVH_GUESSED:
                 extras = {**skeleton.extras, "bvh_unit_guessed": True}
                 skeleton = replace(skeleton, extras=extras)

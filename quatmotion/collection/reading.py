@@ -32,7 +32,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from quatmotion._settings import Settings
 from quatmotion.collection.refs import ClipRef, content_hash, duplicates, motion_hash, unique_names
 from quatmotion.errors import FormatError
-from quatmotion.io import BVH_UNITS
+from quatmotion.io import LENGTH_UNITS, TRANSLATION_MODES
 from quatmotion.motion import Motion
 
 __all__ = [
@@ -52,24 +52,32 @@ class ReadSettings(Settings):
     Attributes
     ----------
     units : str, float or None
-        Length unit of BVH input: a name of :data:`quatmotion.io.BVH_UNITS` or centimetres per
-        unit; None guesses it from the figure's size (and says so in every clip's reference).
+        Length unit of the BVH and glTF input: a name of :data:`quatmotion.io.LENGTH_UNITS` or
+        centimetres per unit; None guesses a BVH's from the figure's stature (and says so in
+        every clip's reference) and takes glTF's metre. An ASF's stated unit is kept in a
+        collection (a mixed library's BVH unit never rescales its CMU skeletons); one AMC read
+        alone takes a unit (:func:`quatmotion.io.read_motion`).
     skeleton : str or None
         An ASF file (the skeleton of every AMC) or a folder of ASF files; None finds each
         AMC's by the conventions of :func:`find_skeleton`.
     strict : bool
         Refuse a clip with coordinates beyond a kilometre (not human motion capture) instead of
         reporting it as a doubt.
+    translations : str
+        What position channels on BVH joints other than the root mean: ``"auto"`` (detected),
+        or one of :data:`quatmotion.io.TRANSLATION_MODES` (see :func:`quatmotion.io.read_bvh`).
     """
 
     units: str | float | None = None
     skeleton: str | None = None
     strict: bool = True
+    translations: str = "auto"
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
-        "units": [None, Interval(Real, 0, None, closed="neither"), StrOptions(set(BVH_UNITS))],
+        "units": [None, Interval(Real, 0, None, closed="neither"), StrOptions(set(LENGTH_UNITS))],
         "skeleton": [str, None],
         "strict": ["boolean"],
+        "translations": [StrOptions({"auto", *TRANSLATION_MODES})],
     }
 
     def __post_init__(self) -> None:
@@ -206,7 +214,7 @@ def read_clip(source: ClipSource | ClipRef, read: ReadSettings | None = None) ->
     FileNotFoundError
         A reference whose file is gone.
     """
-    from quatmotion.io import implausible_values, read_motion
+    from quatmotion.io import implausible_values, read_motion_checked
 
     read = read or ReadSettings()
     if isinstance(source, ClipRef):
@@ -214,18 +222,19 @@ def read_clip(source: ClipSource | ClipRef, read: ReadSettings | None = None) ->
         asf = None if source.skeleton_path is None else Path(source.skeleton_path)
         source = ClipSource(source.name, source.sha256, path, asf)
     if source.motion is not None:
-        motion = source.motion
+        motion, doubts = source.motion, implausible_values(source.motion)
     else:
         assert source.path is not None
         amc = source.path.suffix.lower() == ".amc"
-        motion = read_motion(
+        bvh = source.path.suffix.lower() == ".bvh"
+        motion, doubts = read_motion_checked(
             source.path,
             source.skeleton_path if amc else None,
             units=None if amc else read.units,
+            translations=read.translations if bvh else "auto",
         )
     if motion.name != source.name:
         motion = motion.renamed(source.name)
-    doubts = implausible_values(motion)
     if read.strict:
         for doubt in doubts:
             if doubt.kind == "far":

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 from quatmotion.io._text import decode_text
 from quatmotion.io.asf_amc import (
+    AsfMatch,
     asf_bone_end_positions,
     asf_text,
     find_asf_for_amc,
+    match_asf_for_amc,
     parse_amc,
     parse_asf,
     read_amc,
@@ -20,7 +22,7 @@ from quatmotion.io.asf_amc import (
 )
 from quatmotion.io.bvh import (
     BVH_UNITS,
-    PLAUSIBLE_FIGURE_CM,
+    TRANSLATION_MODES,
     bvh_text,
     detect_bvh_scale,
     parse_bvh,
@@ -38,24 +40,40 @@ from quatmotion.io.files import (
     parse_motion,
     posed_size_cm,
     read_motion,
+    read_motion_checked,
+    unit_reading,
     write_motion,
+)
+from quatmotion.io.units import (
+    LENGTH_UNITS,
+    PLAUSIBLE_FIGURE_CM,
+    body_size,
+    find_body,
+    length_unit,
 )
 
 __all__ = [
+    "AsfMatch",
     "BVH_UNITS",
     "FAR_CM",
     "Doubt",
+    "LENGTH_UNITS",
     "MOTION_SUFFIXES",
     "PLAUSIBLE_FIGURE_CM",
     "PLAUSIBLE_FPS",
+    "TRANSLATION_MODES",
     "asf_bone_end_positions",
     "asf_text",
+    "body_size",
     "bvh_text",
     "decode_text",
     "detect_bvh_scale",
     "find_asf_for_amc",
+    "find_body",
     "find_motion_files",
     "implausible_values",
+    "length_unit",
+    "match_asf_for_amc",
     "parse_amc",
     "posed_size_cm",
     "parse_asf",
@@ -65,7 +83,9 @@ __all__ = [
     "read_asf",
     "read_bvh",
     "read_motion",
+    "read_motion_checked",
     "to_bvh_skeleton",
+    "unit_reading",
     "write_amc",
     "write_asf",
     "write_bvh",

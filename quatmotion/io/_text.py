@@ -2,10 +2,14 @@
 
 Conventions
 -----------
-* Files are read as bytes and decoded as Latin-1, so that every byte maps to one character and
-  comments in legacy encodings (HDM05 ASF headers carry Latin-1 umlauts) never fail to decode.
-  Control bytes other than white space (NUL, escape, ...) mean the file is not text: a
+* Files are read as bytes and decoded as UTF-8 (joint names in Japanese, German, French...),
+  a byte that is not part of a UTF-8 sequence as the Latin-1 character it is (comments in
+  legacy encodings: HDM05 ASF headers carry Latin-1 umlauts), so decoding never fails and a
+  UTF-8 name never comes out garbled. A UTF-8 byte-order mark is skipped. Control bytes other
+  than white space (NUL, escape, ...) mean the file is not text: a
   :class:`~quatmotion.FormatError` naming the line is raised.
+* Tokens are separated by ASCII white space only (:func:`fields`): ``str.split()`` would also
+  split at U+0085, U+00A0 or U+3000 inside a name. Writers write UTF-8.
 * Line numbers are 1-based, as an editor shows them.
 * Numbers are parsed in bulk by a Numba-compiled scanner (:func:`scan_tokens`); the readers check
   the layout of the whole table with vectorised comparisons and only fall back to a careful
@@ -22,6 +26,7 @@ Conventions
 
 from __future__ import annotations
 
+import codecs
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -41,10 +46,31 @@ _TEXT_BYTES = bytes(b for b in range(256) if not _BINARY.match(bytes([b])))
 
 
 _UTF8_BOM = b"\xef\xbb\xbf"
+_LATIN1_FALLBACK = "quatmotion-latin1"
+
+
+def _as_latin1(error: UnicodeError) -> tuple[str, int]:
+    """Codec error handler: a byte that is not UTF-8 is the Latin-1 character it encodes."""
+    if not isinstance(error, UnicodeDecodeError):
+        raise error
+    return error.object[error.start : error.end].decode("latin-1"), error.end
+
+
+codecs.register_error(_LATIN1_FALLBACK, _as_latin1)
+_ASCII_SPACE = re.compile(r"[ \t\n\r\x0b\x0c]+")
+
+
+def fields(line: str) -> list[str]:
+    """The tokens of ``line``, split at ASCII white space only (``str.split()`` without
+    arguments also splits at U+0085, U+00A0, U+3000..., which occur inside UTF-8 names)."""
+    if line.isascii():
+        return line.split()
+    return [token for token in _ASCII_SPACE.split(line) if token]
 
 
 def read_text(path: str | Path) -> str:
-    """The whole file as a string (Latin-1), refusing binary content.
+    """The whole file as a string (UTF-8, Latin-1 for bytes that are not), refusing binary
+    content.
 
     Parameters
     ----------
@@ -78,7 +104,8 @@ def decode_text(data: bytes, path: str | Path) -> str:
     Returns
     -------
     str
-        Latin-1 text with line endings normalised to ``\\n``.
+        The text (UTF-8; a byte outside a UTF-8 sequence as its Latin-1 character) with line
+        endings normalised to ``\\n``.
 
     Raises
     ------
@@ -92,7 +119,7 @@ def decode_text(data: bytes, path: str | Path) -> str:
     if bad is not None:
         line = data.count(b"\n", 0, bad.start()) + 1
         raise FormatError(f"not a text file (byte 0x{data[bad.start()]:02x})", path, line)
-    text = data.decode("latin-1")
+    text = data.decode("utf-8", errors=_LATIN1_FALLBACK)
     if "\r" in text:
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     return text
@@ -125,8 +152,8 @@ def parse_int(token: str, path: str | Path, line: int, what: str = "integer") ->
 
 
 def atomic_write(path: str | Path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically, encoded as Latin-1 (motion files are ASCII)."""
-    atomic_write_bytes(path, text.encode("latin-1"))
+    """Write ``text`` to ``path`` atomically, encoded as UTF-8 (ASCII for ASCII names)."""
+    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 _AXIS_INDEX = {"x": 1, "y": 2, "z": 3}
@@ -318,9 +345,9 @@ def _scan_tokens(buf, pow10):  # pragma: no cover - compiled
 
 
 def token_hash(token: str) -> int:
-    """The hash :func:`scan_tokens` gives a token (FNV-1a 64 of its Latin-1 bytes)."""
+    """The hash :func:`scan_tokens` gives a token (FNV-1a 64 of its UTF-8 bytes)."""
     h = 14695981039346656037
-    for byte in token.encode("latin-1"):
+    for byte in token.encode("utf-8"):
         h = ((h ^ byte) * 1099511628211) & 0xFFFFFFFFFFFFFFFF
     return h
 
@@ -328,14 +355,15 @@ def token_hash(token: str) -> int:
 def scan_tokens(
     text: str,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.uint64], NDArray[np.int64]]:
-    """Split ``text`` at white space and parse every token that is a decimal number, in one pass.
+    """Split ``text`` at ASCII white space and parse every token that is a decimal number, in
+    one pass.
 
     Compiled with Numba: this is the bulk path of the readers (hundreds of MB/s).
 
     Parameters
     ----------
     text : str
-        Latin-1 text (as returned by :func:`read_text`).
+        Text as :func:`read_text` returns it (scanned as its UTF-8 bytes).
 
     Returns
     -------
@@ -350,7 +378,7 @@ def scan_tokens(
     lines : ndarray of int, shape (N,)
         0-based line of each token within ``text``.
     """
-    buf = np.frombuffer(text.encode("latin-1"), dtype=np.uint8)
+    buf = np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
     if buf.size == 0:
         return (
             np.zeros(0),

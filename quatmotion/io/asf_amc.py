@@ -35,7 +35,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,6 +46,7 @@ from quatmotion.io._text import (
     atomic_write,
     compose_joint_channels,
     decompose_channels,
+    fields,
     parse_float,
     parse_floats,
     parse_int,
@@ -53,12 +54,15 @@ from quatmotion.io._text import (
     scan_tokens,
     token_hash,
 )
+from quatmotion.io.units import length_unit
 from quatmotion.motion import Motion, Skeleton, WorldTransforms, forward_kinematics
 
 __all__ = [
+    "AsfMatch",
     "asf_bone_end_positions",
     "asf_text",
     "find_asf_for_amc",
+    "match_asf_for_amc",
     "parse_amc",
     "parse_asf",
     "read_amc",
@@ -92,7 +96,7 @@ def _asf_lines(text: str) -> list[tuple[int, list[str]]]:
     out = []
     for number, raw in enumerate(text.split("\n"), start=1):
         body = raw.split("#", 1)[0]
-        tokens = body.split()
+        tokens = fields(body)
         if tokens:
             out.append((number, tokens))
     return out
@@ -173,12 +177,17 @@ def _parse_bone(block: list[tuple[int, list[str]]], path: Path, begin_line: int)
     return bone
 
 
-def read_asf(path: str | Path) -> Skeleton:
+def read_asf(path: str | Path, units: str | float | None = None) -> Skeleton:
     """Read an Acclaim ASF skeleton (CMU and HDM05 variants).
 
     Parameters
     ----------
     path : str or Path
+    units : str, float or None
+        A length unit replacing the one the file states (a name of
+        :data:`quatmotion.io.units.LENGTH_UNITS` or centimetres per unit): for exporters whose
+        ``:units length`` means something else (NaturalMotion's ``length 0.01`` for metres).
+        Kept as ``extras["length_scale"]`` with ``extras["length_unit_given"] = True``.
 
     Returns
     -------
@@ -194,10 +203,10 @@ def read_asf(path: str | Path) -> Skeleton:
         ``:hierarchy``, unknown bones, bad numbers, cycles, unreachable bones...
     """
     path = Path(path)
-    return parse_asf(read_text(path), path)
+    return parse_asf(read_text(path), path, units)
 
 
-def parse_asf(text: str, path: str | Path) -> Skeleton:
+def parse_asf(text: str, path: str | Path, units: str | float | None = None) -> Skeleton:
     """Parse the text of an ASF file: :func:`read_asf` without reading a file.
 
     Parameters
@@ -206,6 +215,8 @@ def parse_asf(text: str, path: str | Path) -> Skeleton:
         The whole ASF text.
     path : str or Path
         The name messages give and whose stem names the skeleton (it is not opened).
+    units : str, float or None
+        As for :func:`read_asf`.
 
     Returns
     -------
@@ -213,8 +224,10 @@ def parse_asf(text: str, path: str | Path) -> Skeleton:
         As :func:`read_asf` returns it.
     """
     path = Path(path)
+    given = None if units is None else length_unit(units)
     sections = _AsfSections.split(_asf_lines(text), path)
-    units, to_cm, to_rad, angle_unit = _parse_units(sections.body.get("units", []), path)
+    stated, to_cm, to_rad, angle_unit = _parse_units(sections.body.get("units", []), path)
+    to_cm = to_cm if given is None else given
     root = _parse_root(sections.body["root"], path)
     bones = _parse_bones(sections.body["bonedata"], sections.line["bonedata"], path)
     parent_of, hierarchy = _parse_hierarchy(
@@ -226,7 +239,7 @@ def parse_asf(text: str, path: str | Path) -> Skeleton:
         "asf_version": sections.header.get("version", "1.10"),
         "asf_name": sections.header.get("name", ""),
         "asf_documentation": tuple(" ".join(t) for _, t in sections.body.get("documentation", [])),
-        "asf_units": tuple(units),
+        "asf_units": tuple(stated),
         "asf_root": {k: root[k] for k in ("order", "axis", "position", "orientation")},
         "asf_bones": tuple(
             {
@@ -246,6 +259,8 @@ def parse_asf(text: str, path: str | Path) -> Skeleton:
         "length_scale": to_cm,
         "angle_unit": angle_unit,
     }
+    if given is not None:
+        extras["length_unit_given"] = True
     try:
         return _asf_skeleton(order, parent_of, root, bones, to_cm, to_rad, path, extras)
     except ValueError as error:  # e.g. lengths so large they overflow once in centimetres
@@ -504,9 +519,29 @@ def _require_asf(skeleton: Skeleton, what: str) -> None:
 # --------------------------------------------------------------------------------------------
 
 
+class AsfMatch(NamedTuple):
+    """The ASF found for an AMC (:func:`match_asf_for_amc`) and the rule that found it."""
+
+    path: Path
+    rule: str
+    """``"named for the AMC"``, ``"CMU naming"``, ``"HDM05 naming"`` or ``"the only ASF in
+    its folder"``."""
+
+
 def find_asf_for_amc(path: str | Path, folder: str | Path | None = None) -> Path:
     """The ASF that goes with an AMC: same name first, then the CMU or HDM05 conventions, then
-    the only ASF of the folder.
+    the only ASF of the folder (the path of :func:`match_asf_for_amc`).
+
+    Raises
+    ------
+    FormatError
+        As :func:`match_asf_for_amc`.
+    """
+    return match_asf_for_amc(path, folder).path
+
+
+def match_asf_for_amc(path: str | Path, folder: str | Path | None = None) -> AsfMatch:
+    """The ASF that goes with an AMC, and by which rule.
 
     In order: ``NAME.asf`` beside ``NAME.amc`` (where quatmotion writes it); CMU:
     ``SS_TT.amc`` -> ``SS.asf`` in the same folder; HDM05: ``clips/CLASS/HDM_AA_....amc`` ->
@@ -524,27 +559,30 @@ def find_asf_for_amc(path: str | Path, folder: str | Path | None = None) -> Path
     path = Path(path)
     stem = path.stem
     parts = stem.split("_")
+    candidates: list[tuple[Path, str]]
     if folder is not None:
         base = Path(folder)
-        names = [f"{stem}.asf"]
+        candidates = [(base / f"{stem}.asf", "named for the AMC")]
         if len(parts) >= 2:
-            names += [f"{parts[0]}.asf", f"{parts[0]}_{parts[1]}.asf"]
-        candidates = [base / n for n in names]
+            candidates += [
+                (base / f"{parts[0]}.asf", "CMU naming"),
+                (base / f"{parts[0]}_{parts[1]}.asf", "HDM05 naming"),
+            ]
     else:
         base = path.parent
-        candidates = [path.with_suffix(".asf")]
+        candidates = [(path.with_suffix(".asf"), "named for the AMC")]
         if "_" in stem:
-            candidates.append(path.with_name(stem.split("_", 1)[0] + ".asf"))
+            candidates.append((path.with_name(stem.split("_", 1)[0] + ".asf"), "CMU naming"))
         if len(parts) >= 2 and parts[0].upper() == "HDM":
             actor = f"{parts[0]}_{parts[1]}.asf"
-            candidates.append(path.parent.parent.parent / "skeletons" / actor)
-            candidates.append(path.parent / actor)
-    for candidate in candidates:
+            candidates.append((path.parent.parent.parent / "skeletons" / actor, "HDM05 naming"))
+            candidates.append((path.parent / actor, "HDM05 naming"))
+    for candidate, rule in candidates:
         if candidate.is_file():
-            return candidate
+            return AsfMatch(candidate, rule)
     found = sorted(p for p in base.glob("*") if p.suffix.lower() == ".asf" and p.is_file())
     if len(found) == 1:
-        return found[0]
+        return AsfMatch(found[0], "the only ASF in its folder")
     if found:
         listed = ", ".join(p.name for p in found[:6]) + (" ..." if len(found) > 6 else "")
         raise FormatError(
@@ -554,23 +592,26 @@ def find_asf_for_amc(path: str | Path, folder: str | Path | None = None) -> Path
         )
     raise FormatError(
         "cannot find the ASF skeleton for this AMC (looked for "
-        f"{', '.join(str(c) for c in candidates)}, and {base} holds no ASF file); "
+        f"{', '.join(str(c) for c, _ in candidates)}, and {base} holds no ASF file); "
         "pass it (--skeleton)",
         path,
     )
 
 
 def _amc_header(text: str, path: Path) -> tuple[int, int, bool | None]:
-    """Offset and line number where frames start, and whether angles are degrees (None: unsaid)."""
+    """Offset and line number where frames start (the end of the text for a header without
+    frames: a clip of no frames), and whether angles are degrees (None: unsaid)."""
     degrees: bool | None = None
     offset = 0
     line = 1
+    header = False
     while offset < len(text):
         end = text.find("\n", offset)
         end = len(text) if end < 0 else end
         stripped = text[offset:end].strip()
         if stripped and not stripped.startswith("#"):
             if stripped.startswith(":"):
+                header = True
                 key = stripped.split()[0].upper()
                 if key == ":DEGREES":
                     degrees = True
@@ -582,7 +623,9 @@ def _amc_header(text: str, path: Path) -> tuple[int, int, bool | None]:
                 raise FormatError(f"expected a frame number, got {stripped[:40]!r}", path, line)
         offset = end + 1
         line += 1
-    raise FormatError("no frames (file empty or truncated?)", path, line)
+    if header:
+        return len(text), line, degrees
+    raise FormatError("no frames and no header (file empty or truncated?)", path, line)
 
 
 def _amc_layout(
@@ -598,7 +641,7 @@ def _amc_layout(
     if len(head) < len(body):
         head_lines = head_lines[:-1]
     for k, raw in enumerate(head_lines, start=first_line + 1):
-        tokens = raw.split()
+        tokens = fields(raw)
         if not tokens:
             continue
         if _INTEGER.fullmatch(tokens[0]) and len(tokens) == 1:
@@ -683,7 +726,7 @@ def _amc_values_careful(
             rows.append(row)
 
     for line, raw in enumerate(body.split("\n"), start=first_line):
-        tokens = raw.split()
+        tokens = fields(raw)
         if not tokens or tokens[0].startswith("#"):
             continue
         if len(tokens) == 1 and _INTEGER.fullmatch(tokens[0]):
@@ -717,7 +760,11 @@ def _amc_values_careful(
 
 
 def read_amc(
-    path: str | Path, skeleton: Skeleton | str | Path | None = None, fps: float = DEFAULT_AMC_FPS
+    path: str | Path,
+    skeleton: Skeleton | str | Path | None = None,
+    fps: float = DEFAULT_AMC_FPS,
+    *,
+    units: str | float | None = None,
 ) -> Motion:
     """Read an Acclaim AMC motion.
 
@@ -729,6 +776,9 @@ def read_amc(
         by the CMU / HDM05 naming conventions (:func:`find_asf_for_amc`).
     fps : float
         Frame rate (AMC files do not store it); 120 for CMU and HDM05.
+    units : str, float or None
+        A length unit replacing the one the ASF states (see :func:`read_asf`); not with a
+        ``Skeleton`` given (read it with the unit instead).
 
     Returns
     -------
@@ -743,9 +793,11 @@ def read_amc(
     """
     path = Path(path)
     if skeleton is None:
-        skeleton = read_asf(find_asf_for_amc(path))
+        skeleton = read_asf(find_asf_for_amc(path), units)
     elif not isinstance(skeleton, Skeleton):
-        skeleton = read_asf(skeleton)
+        skeleton = read_asf(skeleton, units)
+    elif units is not None:
+        raise ValueError("a unit applies when the ASF is read: pass its path, not a Skeleton")
     _require_asf(skeleton, "read_amc")
     return parse_amc(read_text(path), path, skeleton, fps)
 
@@ -777,6 +829,13 @@ def parse_amc(
     if degrees is None:
         degrees = skeleton.extras["angle_unit"] == "deg"
     body = text[offset:]
+    if not body.strip():
+        names = ["root"] + [b["name"] for b in skeleton.extras["asf_bones"] if b["dof"]]
+        counts = [len(skeleton.channels[0])] + [
+            len(b["dof"]) for b in skeleton.extras["asf_bones"] if b["dof"]
+        ]
+        values = np.zeros((0, sum(counts)))
+        return _motion_from_values(skeleton, values, names, counts, True, fps, path.stem)
     names, counts = _amc_layout(skeleton, body, path, first_line)
     values = _amc_values_fast(body, names, counts)
     if values is None:

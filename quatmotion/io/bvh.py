@@ -8,25 +8,45 @@ Conventions
 * Rotations compose intrinsically in channel order: for ``Zrotation Xrotation Yrotation`` the
   local rotation is ``Rz @ Rx @ Ry`` (``Skeleton.euler == "intrinsic"``). Angles in the file are
   degrees.
-* Position channels are the joint's local translation: they replace its ``OFFSET`` (component
-  by component). Root position channels give ``Motion.root_translation``; position channels on
-  other joints (Bandai: six channels on every joint) give ``Motion.joint_translations``.
+* Joint names are the rest of their ``ROOT``/``JOINT`` line: ``Bip01 L Thigh`` (3ds Max's
+  Biped) keeps its spaces, runs of white space made one space, and is written back so.
+* Position channels are the joint's local translation. Root position channels give
+  ``Motion.root_translation``; position channels on other joints (Bandai: six channels on every
+  joint) give ``Motion.joint_translations``. Exporters mean two things by them (see
+  :data:`TRANSLATION_MODES`): ``absolute``, the translation itself, replacing the ``OFFSET``
+  component by component (Truebones and Bandai write the offsets there), or ``relative``, added
+  to the ``OFFSET`` (MakeHuman writes zeros); ``root-only`` ignores them on every joint but the
+  root. The root's own channels are relative in relative mode only when they hold values near
+  zero too (a T-pose's), else they are its position. ``translations="auto"`` (the default)
+  detects the mode when joints other than the root have position channels: values near zero
+  (their median under a tenth of the offsets') are relative,
+  since read as absolute they would put every joint on its parent; any others are absolute
+  (values equal to the offsets, or a studio's bones under offsets that only lay the skeleton
+  out). A relative reading detected is said in a :class:`~quatmotion.errors.FormatWarning`. The
+  mode is kept in ``Skeleton.extras`` (``bvh_translations``, ``bvh_translations_guessed``,
+  ``bvh_root_relative``) and the writer writes in it.
 * Units: BVH has no unit field. ``read_bvh(path, scale=...)`` takes the unit, by name
-  (:data:`BVH_UNITS`: ``cm``, ``mm``, ``m``, ``in`` and ``asf``, the CMU/ASF unit of 1/0.45 inch) or
-  as centimetres per file unit; ``scale="auto"`` (the default) looks at the rest skeleton's largest
-  extent (the standing height, or the arm span of a T-pose) and picks the named unit that makes it
-  closest to 170 cm (in ratio). Bandai files come out in centimetres, the CMU BVH conversion in the
-  ASF unit. A guess can be wrong (a 90 cm child in centimetres is nearer 170 cm read as inches):
-  :func:`quatmotion.io.implausible_values` checks the figure against :data:`PLAUSIBLE_FIGURE_CM`.
-  The scale is kept in ``Skeleton.extras`` (``bvh_scale``, cm per unit; ``bvh_unit``, its name or
-  None; ``bvh_unit_guessed``) and :func:`write_bvh` writes in the same unit, so a read-write trip
-  keeps the file's numbers.
+  (:data:`BVH_UNITS`: ``mm``, ``cm``, ``dm``, ``m``, ``in`` and ``asf``, the CMU/ASF unit of 1/0.45
+  inch) or as centimetres per file unit; ``scale="auto"`` (the default) weighs every named unit
+  against a plausible human stature (:func:`quatmotion.io.units.guess_length_unit`: the stature
+  chain from an ankle to the head, whatever the pose), and keeps centimetres for a skeleton that
+  is not a body (a lone hand). Bandai files come out in centimetres, the CMU BVH conversion in the
+  ASF unit, MakeHuman's in decimetres. :func:`quatmotion.io.implausible_values` says when even
+  the best reading is no human. The scale is kept in ``Skeleton.extras`` (``bvh_scale``, cm per
+  unit; ``bvh_unit``, its name or None; ``bvh_unit_guessed``) and :func:`write_bvh` writes in the
+  same unit, so a read-write trip keeps the file's numbers.
+* The ``MOTION`` header: blank lines before and between ``Frames:`` and ``Frame Time:`` are
+  allowed, and so is no space after their colons. ``Frames: 0`` is a clip of no frames (the
+  writer writes it for one). A frame line more than announced is read, with a warning (an
+  exporter's off-by-one); fewer is an error naming both numbers.
 * Frame rate: ``1 / Frame Time``, rounded to the nearest integer when within 0.01 % of it
   (files store ``0.0333333`` for 30 frames/s).
 """
 
 from __future__ import annotations
 
+import re
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -34,22 +54,33 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion import quat
-from quatmotion.errors import FormatError
+from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.io._text import (
     atomic_write,
     compose_joint_channels,
     decompose_channels,
+    fields,
     parse_float,
     parse_floats,
     parse_int,
     read_text,
     scan_tokens,
 )
+from quatmotion.io.units import (
+    LENGTH_UNITS,
+    PLAUSIBLE_FIGURE_CM,
+    body_size,
+    guess_length_unit,
+    length_unit,
+    rescaled,
+    unit_name,
+)
 from quatmotion.motion import Motion, Skeleton
 
 __all__ = [
     "BVH_UNITS",
     "PLAUSIBLE_FIGURE_CM",
+    "TRANSLATION_MODES",
     "bvh_text",
     "detect_bvh_scale",
     "parse_bvh",
@@ -67,12 +98,12 @@ _CHANNEL_TOKENS = {
     "zrotation": "rz",
 }
 _FILE_CHANNELS = {v: k[0].upper() + k[1:] for k, v in _CHANNEL_TOKENS.items()}
-BVH_UNITS: dict[str, float] = {"cm": 1.0, "mm": 0.1, "m": 100.0, "in": 2.54, "asf": 2.54 / 0.45}
-"""Length units a BVH file may be in, by name: centimetres per file unit."""
-TYPICAL_HEIGHT_CM = 170.0
-PLAUSIBLE_FIGURE_CM = (50.0, 220.0)
-"""The largest extent of a human figure at rest (height, or arm span): an infant to a very tall
-adult. A unit guess outside it is doubtful."""
+BVH_UNITS = LENGTH_UNITS
+"""Length units a BVH file may be in, by name: centimetres per file unit
+(:data:`quatmotion.io.units.LENGTH_UNITS`)."""
+TRANSLATION_MODES = ("absolute", "relative", "root-only")
+"""What position channels mean (see the module docstring); ``"auto"`` detects it."""
+_NEAR_ZERO = 0.1  # position values this small against the offsets (medians) are relative
 _MAX_DEPTH = 200  # far deeper than any body; keeps recursion bounded on hostile input
 
 
@@ -96,6 +127,21 @@ class _Tokens:
 
     def peek(self) -> str | None:
         return self.tokens[self.position][0] if self.position < len(self.tokens) else None
+
+    def name(self, what: str) -> tuple[str, int]:
+        """A joint name: the tokens left on the keyword's line (up to a ``{``), one space
+        between them (``Bip01 L Thigh``)."""
+        token, line = self.next(what)
+        if token == "{" or token == "}":
+            raise FormatError(f"expected {what}, got {token!r}", self.path, line)
+        words = [token]
+        while self.position < len(self.tokens):
+            following, following_line = self.tokens[self.position]
+            if following_line != line or following == "{":
+                break
+            words.append(following)
+            self.position += 1
+        return " ".join(words), line
 
     def expect(self, word: str) -> int:
         token, line = self.next(repr(word))
@@ -155,7 +201,7 @@ def _parse_hierarchy(tokens: _Tokens):
             if upper == "}":
                 return
             if upper == "JOINT":
-                child, child_line = tokens.next("joint name")
+                child, child_line = tokens.name("joint name")
                 joint(j, child, child_line, depth + 1)
             elif upper == "END":
                 tokens.expect("Site")
@@ -174,66 +220,80 @@ def _parse_hierarchy(tokens: _Tokens):
 
     tokens.expect("HIERARCHY")
     tokens.expect("ROOT")
-    root_name, root_line = tokens.next("root name")
+    root_name, root_line = tokens.name("root name")
     joint(-1, root_name, root_line)
     return names, parents, offsets, channels, site_names, site_parents, site_offsets
 
 
 def detect_bvh_scale(rest_positions: NDArray[np.float64]) -> float:
-    """Centimetres per file unit that make a rest skeleton human-sized.
+    """Centimetres per file unit that make a figure of these points a plausible human, by the
+    points' largest extent (:func:`quatmotion.io.units.guess_length_unit`).
+
+    The reader weighs the stature chain of the clip instead (whatever the pose); this is the
+    same guess for a bare cloud of points.
 
     Parameters
     ----------
     rest_positions : ndarray, shape (N, 3)
-        Joint and end-site positions at rest, in file units.
+        Joint and end-site positions, in file units.
 
     Returns
     -------
     float
-        The value of :data:`BVH_UNITS` that brings the largest extent closest (in
-        ratio) to 170 cm; 1.0 for a degenerate skeleton.
+        A value of :data:`BVH_UNITS`; 1.0 for a degenerate skeleton.
     """
     extent = float(np.max(np.ptp(rest_positions, axis=0))) if len(rest_positions) else 0.0
-    if not np.isfinite(extent) or extent <= 0:
-        return 1.0
-    scales = np.array(list(BVH_UNITS.values()))
-    return float(scales[np.argmin(np.abs(np.log(extent * scales / TYPICAL_HEIGHT_CM)))])
+    return guess_length_unit(extent) or 1.0
 
 
 def _frame_values(
     block: str, first_line: int, n_frames: int, n_channels: int, path: Path
 ) -> NDArray[np.float64]:
-    """The ``(n_frames, n_channels)`` table; bulk path first, line by line to explain errors."""
+    """The ``(T, n_channels)`` table of every frame line; bulk path first, line by line to
+    explain errors. More lines than ``n_frames``: read, with a warning; fewer: an error."""
     values, numeric, _, lines = scan_tokens(block)
-    if (
-        values.size == n_frames * n_channels
-        and n_channels > 0
-        and numeric.all()
-        and np.isfinite(values).all()
-    ):
-        lines = lines.reshape(n_frames, n_channels)
+    table = None
+    if values.size % n_channels == 0 and numeric.all() and np.isfinite(values).all():
+        T = values.size // n_channels
+        lines = lines.reshape(T, n_channels)
         if np.all(lines == lines[:, :1]) and np.all(np.diff(lines[:, 0]) == 1):
-            return values.reshape(n_frames, n_channels)
-    rows: list[list[float]] = []
-    for line, raw in enumerate(block.split("\n"), start=first_line):
-        tokens = raw.split()
-        if not tokens:
-            continue
-        if len(tokens) != n_channels:
-            raise FormatError(f"frame has {len(tokens)} values, expected {n_channels}", path, line)
-        if len(rows) == n_frames:
-            raise FormatError(f"more frames than the {n_frames} announced in 'Frames:'", path, line)
-        rows.append(parse_floats(tokens, path, line, "channel value"))
-    if len(rows) != n_frames:
+            table = values.reshape(T, n_channels)
+            last_line = first_line + (int(lines[-1, 0]) if T else 0)
+    if table is None:
+        rows: list[list[float]] = []
+        last_line = first_line
+        for line, raw in enumerate(block.split("\n"), start=first_line):
+            tokens = fields(raw)
+            if not tokens:
+                continue
+            if len(tokens) != n_channels:
+                raise FormatError(
+                    f"frame has {len(tokens)} values, expected {n_channels}", path, line
+                )
+            rows.append(parse_floats(tokens, path, line, "channel value"))
+            last_line = line
+        table = np.asarray(rows, dtype=np.float64).reshape(len(rows), n_channels)
+    found = table.shape[0]
+    if found < n_frames:
         raise FormatError(
-            f"'Frames:' announces {n_frames} frames but the file has {len(rows)} (truncated?)",
+            f"'Frames:' announces {n_frames} frames but the file has {found} (truncated?)",
             path,
             first_line + block.count("\n"),
         )
-    return np.asarray(rows, dtype=np.float64).reshape(n_frames, n_channels)
+    if found > n_frames:
+        warnings.warn(
+            FormatWarning(
+                f"'Frames:' announces {n_frames} frames but the file has {found} frame lines: "
+                f"read all {found}",
+                path,
+                last_line,
+            ),
+            stacklevel=2,
+        )
+    return table
 
 
-def read_bvh(path: str | Path, scale: float | str = "auto") -> Motion:
+def read_bvh(path: str | Path, scale: float | str = "auto", translations: str = "auto") -> Motion:
     """Read a BVH file.
 
     Parameters
@@ -241,8 +301,9 @@ def read_bvh(path: str | Path, scale: float | str = "auto") -> Motion:
     path : str or Path
     scale : float, str or "auto"
         The file's length unit: a name of :data:`BVH_UNITS` or centimetres per file unit;
-        ``"auto"`` guesses it from the rest skeleton's size (see the module docstring and
-        :func:`detect_bvh_scale`).
+        ``"auto"`` guesses it from the figure's stature (see the module docstring).
+    translations : {"auto", "absolute", "relative", "root-only"}
+        What position channels on joints other than the root mean (see the module docstring).
 
     Returns
     -------
@@ -250,21 +311,29 @@ def read_bvh(path: str | Path, scale: float | str = "auto") -> Motion:
         Skeleton with ``euler="intrinsic"``, offsets in centimetres, ``extras`` with
         ``format="bvh"``, ``bvh_scale`` (cm per file unit), ``bvh_unit`` (its name in
         :data:`BVH_UNITS`, or None) and ``bvh_unit_guessed``; ``joint_translations`` when
-        joints other than the root have position channels.
+        joints other than the root have position channels (and then ``bvh_translations``).
 
     Raises
     ------
     FormatError
         Naming the file and line: bad hierarchy, unknown channels, missing ``MOTION``,
-        frame count or value count mismatches, bad or non-finite numbers.
+        fewer frames than announced, value count mismatches, bad or non-finite numbers.
     ValueError
-        For an unknown unit name or a scale that is not a positive number.
+        For an unknown unit name, a scale that is not a positive number, or an unknown
+        translations mode.
+
+    Warns
+    -----
+    FormatWarning
+        More frame lines than announced; position channels detected as relative.
     """
     path = Path(path)
-    return parse_bvh(read_text(path), path, scale)
+    return parse_bvh(read_text(path), path, scale, translations)
 
 
-def parse_bvh(text: str, path: str | Path, scale: float | str = "auto") -> Motion:
+def parse_bvh(
+    text: str, path: str | Path, scale: float | str = "auto", translations: str = "auto"
+) -> Motion:
     """Parse the text of a BVH file: :func:`read_bvh` without reading a file.
 
     Parameters
@@ -275,18 +344,25 @@ def parse_bvh(text: str, path: str | Path, scale: float | str = "auto") -> Motio
         The name messages give and whose stem names the motion (it is not opened).
     scale : float, str or "auto"
         As for :func:`read_bvh`.
+    translations : str
+        As for :func:`read_bvh`.
 
     Returns
     -------
     Motion
     """
     path = Path(path)
-    cm_per_unit = None if isinstance(scale, str) and scale == "auto" else _unit_scale(scale)
+    cm_per_unit = None if isinstance(scale, str) and scale == "auto" else length_unit(scale)
+    if translations != "auto" and translations not in TRANSLATION_MODES:
+        raise ValueError(
+            f"unknown translations mode {translations!r}; choose from auto, "
+            f"{', '.join(TRANSLATION_MODES)}"
+        )
     head_end, motion_line, found = _find_motion_keyword(text)
     hierarchy_tokens = [
         (token, number)
         for number, raw in enumerate(text[:head_end].split("\n"), start=1)
-        for token in raw.split()
+        for token in fields(raw)
     ]
     tokens = _Tokens(hierarchy_tokens, path, motion_line)
     hierarchy = _parse_hierarchy(tokens)
@@ -296,49 +372,125 @@ def parse_bvh(text: str, path: str | Path, scale: float | str = "auto") -> Motio
         raise FormatError(f"expected MOTION after the hierarchy, got {token!r}", path, line)
     if not found:
         raise FormatError("no MOTION section (truncated?)", path, motion_line)
-    n_frames, frame_time, block = _motion_header(text[head_end:], motion_line, path)
+    n_frames, frame_time, block, block_line = _motion_header(text[head_end:], motion_line, path)
     n_channels = sum(len(c) for c in channels)
     if n_channels == 0:
         raise FormatError("no joint has channels", path, motion_line)
-    values = _frame_values(block, motion_line + 3, n_frames, n_channels, path)
+    values = _frame_values(block, block_line, n_frames, n_channels, path)
     offsets_units = np.asarray(offsets, dtype=np.float64)
+    mode, mode_guessed, root_relative = _translation_mode(
+        translations, channels, offsets_units, values, path
+    )
     site_units = np.asarray(site_offsets, dtype=np.float64).reshape(-1, 3)
-    guessed = cm_per_unit is None
-    if cm_per_unit is None:
-        cm_per_unit = _detect_file_scale(parents, offsets_units, site_parents, site_units)
     try:
         # Huge values overflow once scaled: the Skeleton and Motion checks then name them, so
         # NumPy's own warning (with its internal file paths) would only be noise.
         with np.errstate(over="ignore", invalid="ignore"):
-            return _build_motion(
-                names,
-                parents,
-                offsets_units,
-                channels,
-                site_names,
-                site_parents,
-                site_units,
-                cm_per_unit,
-                guessed,
-                values,
-                frame_time,
-                path.stem,
+            skeleton = Skeleton(
+                joint_names=tuple(names),
+                parents=np.asarray(parents, dtype=np.int64),
+                offsets=offsets_units,
+                channels=tuple(channels),
+                euler="intrinsic",
+                site_names=tuple(site_names),
+                site_parents=np.asarray(site_parents, dtype=np.int64),
+                site_offsets=site_units,
+                name=path.stem,
+                extras={"format": "bvh", "bvh_scale": 1.0},
             )
+            in_file_units = _motion_from_table(
+                skeleton, values, _fps(frame_time), path.stem, mode, root_relative
+            )
+            guessed = cm_per_unit is None
+            if cm_per_unit is None:
+                cm_per_unit = guess_length_unit(body_size(in_file_units)) or 1.0
+            extras: dict[str, object] = {
+                "bvh_scale": cm_per_unit,
+                "bvh_unit": unit_name(cm_per_unit),
+                "bvh_unit_guessed": guessed,
+            }
+            if mode_guessed is not None:
+                extras |= {"bvh_translations": mode, "bvh_translations_guessed": mode_guessed}
+            if root_relative:
+                extras["bvh_root_relative"] = True
+            return rescaled(in_file_units, cm_per_unit, extras)
     except ValueError as error:  # e.g. values so large they overflow once scaled
         raise FormatError(str(error), path) from error
 
 
-def _unit_scale(scale: float | str) -> float:
-    """Centimetres per file unit of a unit name or number; ValueError if neither."""
-    if isinstance(scale, str):
-        unit = scale.strip().lower()
-        if unit not in BVH_UNITS:
-            raise ValueError(f"unknown length unit {scale!r}; choose from {', '.join(BVH_UNITS)}")
-        return BVH_UNITS[unit]
-    cm_per_unit = float(scale)
-    if not (np.isfinite(cm_per_unit) and cm_per_unit > 0):
-        raise ValueError(f"scale must be a positive number of cm per unit or 'auto', got {scale!r}")
-    return cm_per_unit
+def _fps(frame_time: float) -> float:
+    fps = 1.0 / frame_time
+    return float(round(fps)) if abs(fps - round(fps)) <= 1e-4 * fps else fps
+
+
+def _position_table(
+    channels: list[tuple[str, ...]], values: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Every joint's position channels as ``(T, J, 3)`` (0 where a component has none), and
+    which components have one ``(J, 3)``."""
+    T, J = values.shape[0], len(channels)
+    table = np.zeros((T, J, 3))
+    present = np.zeros((J, 3), dtype=bool)
+    column = 0
+    for j, chans in enumerate(channels):
+        for c in chans:
+            if c[0] == "t":
+                axis = "xyz".index(c[1])
+                table[:, j, axis] = values[:, column]
+                present[j, axis] = True
+            column += 1
+    return table, present
+
+
+def _near_zero_joints(
+    table: NDArray[np.float64], present: NDArray[np.bool_], offsets: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per joint: the length of its offset's components that have channels, and the median
+    length over frames of those channels' values."""
+    with np.errstate(over="ignore", invalid="ignore"):  # absurd values: a doubt of their own
+        size = np.linalg.norm(np.where(present, offsets, 0.0), axis=1)
+        if not len(table):
+            return size, np.zeros_like(size)
+        return size, np.median(np.linalg.norm(table, axis=2), axis=0)
+
+
+def _translation_mode(
+    given: str,
+    channels: list[tuple[str, ...]],
+    offsets: NDArray[np.float64],
+    values: NDArray[np.float64],
+    path: Path,
+) -> tuple[str, bool | None, bool]:
+    """The translations mode, whether it was detected (None: no joint but the root has
+    position channels, so the mode does not matter and is not recorded), and whether the
+    root's channels are relative too (relative mode, and values near zero: a T-pose's)."""
+    table, present = _position_table(channels, values)
+    moved = np.flatnonzero(present[1:].any(axis=1)) + 1
+    size, typical = _near_zero_joints(table, present, offsets)
+    root_relative = bool(present[0].any() and size[0] and typical[0] < _NEAR_ZERO * size[0])
+    if not len(moved):
+        mode = "absolute" if given == "auto" else given
+        return mode, None, mode == "relative" and root_relative
+    if given != "auto":
+        return given, False, given == "relative" and root_relative
+    evidence = moved[size[moved] > 0]  # a zero offset: both readings agree
+    # Values near zero read as absolute would put every joint on its parent: no figure at all.
+    near_zero = (
+        len(evidence) > 0
+        and len(values) > 0
+        and np.median(typical[evidence]) < _NEAR_ZERO * np.median(size[evidence])
+    )
+    if near_zero:
+        warnings.warn(
+            FormatWarning(
+                f"position channels on {len(moved)} joints hold values near zero, not near "
+                "their offsets: read as relative to the offsets (--bvh-translations relative)",
+                path,
+            ),
+            stacklevel=3,
+        )
+        return "relative", True, root_relative
+    return "absolute", True, False
 
 
 def _find_motion_keyword(text: str) -> tuple[int, int, bool]:
@@ -356,89 +508,50 @@ def _find_motion_keyword(text: str) -> tuple[int, int, bool]:
     return head_end, line_number, False
 
 
-def _motion_header(section: str, motion_line: int, path: Path) -> tuple[int, float, str]:
-    """``Frames: N`` and ``Frame Time: dt`` after ``MOTION``: ``(N, dt, frame text)``."""
-    rest = section.split("\n", 3)
-    if len(rest) < 3:
-        raise FormatError(
-            "MOTION section lacks 'Frames:' and 'Frame Time:' (truncated?)", path, motion_line
-        )
-    frames_tokens = rest[1].split()
-    if len(frames_tokens) != 2 or frames_tokens[0].lower() != "frames:":
-        raise FormatError(f"expected 'Frames: N', got {rest[1].strip()!r}", path, motion_line + 1)
-    n_frames = parse_int(frames_tokens[1], path, motion_line + 1, "frame count")
-    if n_frames < 1:
-        raise FormatError(f"frame count must be positive, got {n_frames}", path, motion_line + 1)
-    time_tokens = rest[2].split()
-    if len(time_tokens) != 3 or [t.lower() for t in time_tokens[:2]] != ["frame", "time:"]:
-        raise FormatError(
-            f"expected 'Frame Time: SECONDS', got {rest[2].strip()!r}", path, motion_line + 2
-        )
-    frame_time = parse_float(time_tokens[2], path, motion_line + 2, "frame time")
+_FRAMES = re.compile(r"frames\s*:\s*(\S*)", re.IGNORECASE)
+_FRAME_TIME = re.compile(r"frame\s*time\s*:\s*(\S*)", re.IGNORECASE)
+
+
+def _motion_header(section: str, motion_line: int, path: Path) -> tuple[int, float, str, int]:
+    """``Frames: N`` and ``Frame Time: dt`` after ``MOTION`` (blank lines around them and no
+    space after a colon allowed): ``(N, dt, frame text, its first line number)``."""
+    lines = section.split("\n")
+    k = 1
+    found = []
+    for pattern, what in ((_FRAMES, "'Frames: N'"), (_FRAME_TIME, "'Frame Time: SECONDS'")):
+        while k < len(lines) and not lines[k].strip():
+            k += 1
+        if k >= len(lines):
+            raise FormatError(f"MOTION section lacks {what} (truncated?)", path, motion_line)
+        match = pattern.fullmatch(lines[k].strip())
+        if match is None or not match.group(1):
+            raise FormatError(f"expected {what}, got {lines[k].strip()!r}", path, motion_line + k)
+        found.append((match.group(1), motion_line + k))
+        k += 1
+    (count_token, count_line), (time_token, time_line) = found
+    n_frames = parse_int(count_token, path, count_line, "frame count")
+    if n_frames < 0:
+        raise FormatError(f"frame count must be 0 or more, got {n_frames}", path, count_line)
+    frame_time = parse_float(time_token, path, time_line, "frame time")
     if frame_time <= 0:
-        raise FormatError(f"frame time must be positive, got {frame_time}", path, motion_line + 2)
-    return n_frames, frame_time, rest[3] if len(rest) > 3 else ""
-
-
-def _detect_file_scale(
-    parents: list[int],
-    offsets_units: NDArray[np.float64],
-    site_parents: list[int],
-    site_units: NDArray[np.float64],
-) -> float:
-    """:func:`detect_bvh_scale` of the rest skeleton, from offsets in file units."""
-    rest = np.zeros((len(parents), 3))
-    for j in range(1, len(parents)):  # parents come first in file order
-        rest[j] = rest[parents[j]] + offsets_units[j]
-    rest = np.concatenate((rest, rest[np.asarray(site_parents, dtype=np.int64)] + site_units))
-    with np.errstate(over="ignore", invalid="ignore"):
-        return detect_bvh_scale(rest)
-
-
-def _build_motion(
-    names: list[str],
-    parents: list[int],
-    offsets_units: NDArray[np.float64],
-    channels: list[tuple[str, ...]],
-    site_names: list[str],
-    site_parents: list[int],
-    site_units: NDArray[np.float64],
-    cm_per_unit: float,
-    guessed: bool,
-    values: NDArray[np.float64],
-    frame_time: float,
-    name: str,
-) -> Motion:
-    unit = next((n for n, cm in BVH_UNITS.items() if cm == cm_per_unit), None)
-    skeleton = Skeleton(
-        joint_names=tuple(names),
-        parents=np.asarray(parents, dtype=np.int64),
-        offsets=offsets_units * cm_per_unit,
-        channels=tuple(channels),
-        euler="intrinsic",
-        site_names=tuple(site_names),
-        site_parents=np.asarray(site_parents, dtype=np.int64),
-        site_offsets=site_units * cm_per_unit,
-        name=name,
-        extras={
-            "format": "bvh",
-            "bvh_scale": cm_per_unit,
-            "bvh_unit": unit,
-            "bvh_unit_guessed": guessed,
-        },
-    )
-    fps = 1.0 / frame_time
-    if abs(fps - round(fps)) <= 1e-4 * fps:
-        fps = float(round(fps))
-    return _motion_from_table(skeleton, values, fps, name)
+        raise FormatError(f"frame time must be positive, got {frame_time}", path, time_line)
+    offset = sum(len(line) + 1 for line in lines[:k])
+    return n_frames, frame_time, section[offset:], motion_line + k
 
 
 def _motion_from_table(
-    skeleton: Skeleton, values: NDArray[np.float64], fps: float, name: str
+    skeleton: Skeleton,
+    values: NDArray[np.float64],
+    fps: float,
+    name: str,
+    mode: str,
+    root_relative: bool = False,
 ) -> Motion:
+    """The clip of a frame table in the skeleton's units, position channels read per ``mode``
+    (:data:`TRANSLATION_MODES`); the root's are never ignored, and relative only with
+    ``root_relative``."""
     J = skeleton.n_joints
     T = values.shape[0]
-    cm = skeleton.extras["bvh_scale"]
     columns = np.full((J, 3), -1, dtype=np.int64)
     letters = [""] * J
     translations = np.repeat(skeleton.offsets[None], T, axis=0)
@@ -449,8 +562,11 @@ def _motion_from_table(
             if c[0] == "r":
                 columns[j, len(letters[j])] = column
                 letters[j] += c[1]
-            else:
-                translations[:, j, "xyz".index(c[1])] = values[:, column] * cm
+            elif j == 0 or mode != "root-only":
+                axis = "xyz".index(c[1])
+                relative = mode == "relative" and (j > 0 or root_relative)
+                base = skeleton.offsets[j, axis] if relative else 0.0
+                translations[:, j, axis] = base + values[:, column]
                 moves_joints = moves_joints or j > 0
             column += 1
     rotations = compose_joint_channels(np.deg2rad(values), columns, letters, intrinsic=True)
@@ -520,7 +636,8 @@ def bvh_channel_values(motion: Motion) -> NDArray[np.float64]:
     """The BVH frame table of a motion on a BVH-style skeleton: ``(T, C)`` in file units.
 
     Rotation channels in degrees (extracted for exactly each joint's axes), position channels
-    in the skeleton's ``bvh_scale`` units.
+    in the skeleton's ``bvh_scale`` units, relative to the offsets when the file's were
+    (``bvh_translations``).
     """
     sk = motion.skeleton
     cm = sk.extras.get("bvh_scale", 1.0)
@@ -533,6 +650,11 @@ def bvh_channel_values(motion: Motion) -> NDArray[np.float64]:
         else np.repeat(sk.offsets[None], T, axis=0)
     )
     translations[:, 0] = motion.root_translation
+    if sk.extras.get("bvh_translations") == "relative":
+        root = translations[:, 0].copy()
+        translations -= sk.offsets
+        if not sk.extras.get("bvh_root_relative"):
+            translations[:, 0] = root
     groups: dict[str, tuple[list[int], list[list[int]]]] = {}
     column = 0
     for j, chans in enumerate(sk.channels):

@@ -6,24 +6,27 @@ the command line, the benchmarks, the demo and every batch job use these.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Literal, NamedTuple
 
 import numpy as np
 
-from quatmotion.errors import FormatError
+from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.io._text import decode_text
 from quatmotion.io.asf_amc import parse_amc, parse_asf, read_amc, write_amc
-from quatmotion.io.bvh import (
-    BVH_UNITS,
+from quatmotion.io.bvh import parse_bvh, read_bvh, write_bvh
+from quatmotion.io.gltf import GLTF_SUFFIXES, parse_gltf, read_gltf, write_gltf
+from quatmotion.io.units import (
+    LENGTH_UNITS,
     PLAUSIBLE_FIGURE_CM,
     TYPICAL_HEIGHT_CM,
-    parse_bvh,
-    read_bvh,
-    write_bvh,
+    body_size,
+    posed_extent,
+    unit_name,
 )
-from quatmotion.motion import Motion, Skeleton, forward_kinematics
+from quatmotion.motion import Motion, Skeleton
 
 __all__ = [
     "FAR_CM",
@@ -35,10 +38,12 @@ __all__ = [
     "parse_motion",
     "posed_size_cm",
     "read_motion",
+    "read_motion_checked",
+    "unit_reading",
     "write_motion",
 ]
 
-MOTION_SUFFIXES = (".amc", ".bvh")
+MOTION_SUFFIXES = (".amc", ".bvh", *GLTF_SUFFIXES)
 """File suffixes of motion clips (compared case-insensitively)."""
 
 
@@ -94,19 +99,28 @@ def read_motion(
     skeleton: Skeleton | str | Path | None = None,
     *,
     units: str | float | None = None,
+    translations: str = "auto",
+    animation: str | int | None = None,
 ) -> Motion:
     """Read a motion file, choosing the reader by extension.
 
     Parameters
     ----------
     path : str or Path
-        ``.amc`` (Acclaim; the skeleton is found by naming convention unless given) or
-        ``.bvh``.
+        ``.amc`` (Acclaim; the skeleton is found by naming convention unless given),
+        ``.bvh``, or glTF 2.0 ``.glb`` / ``.gltf`` (:func:`quatmotion.io.gltf.read_gltf`).
     skeleton : Skeleton, str, Path or None
         For ``.amc`` only: the skeleton or its ASF path (see :func:`read_amc`).
     units : str, float or None
-        For ``.bvh`` only: the file's length unit, a name of :data:`BVH_UNITS` or centimetres
-        per unit; ``None`` guesses it (see :func:`read_bvh`). An ASF states its own.
+        The file's length unit, a name of :data:`LENGTH_UNITS` or centimetres per unit.
+        ``None``: a BVH's is guessed (see :func:`read_bvh`), an ASF's is the one it states,
+        glTF's is the metre; given, it replaces the ASF's or the metre (an exporter that wrote
+        ``:units length 0.01`` for metres, or centimetres into a glTF).
+    translations : str
+        For ``.bvh`` only: what position channels mean (:data:`TRANSLATION_MODES` or
+        ``"auto"``, see :func:`read_bvh`).
+    animation : str, int or None
+        For glTF only: the animation's name or position (the first when None).
 
     Returns
     -------
@@ -115,24 +129,52 @@ def read_motion(
     Raises
     ------
     ValueError
-        For another extension, a skeleton given for a BVH file, a unit given for an AMC file,
-        or an unknown unit.
+        For another extension, a skeleton given for a BVH file, or an unknown unit.
     FormatError
         For a malformed file.
     """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".amc":
-        if units is not None:
-            raise ValueError("an AMC's length unit is the one its ASF states; do not pass one")
-        return read_amc(path, skeleton)
+        return read_amc(path, skeleton, units=units)
     if suffix == ".bvh":
         if skeleton is not None:
             raise ValueError("a BVH file carries its own skeleton; do not pass one")
-        return read_bvh(path, "auto" if units is None else units)
+        return read_bvh(path, "auto" if units is None else units, translations)
+    if suffix in GLTF_SUFFIXES:
+        if skeleton is not None:
+            raise ValueError("a glTF file carries its own skeleton; do not pass one")
+        return read_gltf(path, animation, units=units)
     raise ValueError(
         f"unknown motion file type {path.suffix!r} (expected one of {MOTION_SUFFIXES})"
     )
+
+
+def read_motion_checked(
+    path: str | Path,
+    skeleton: Skeleton | str | Path | None = None,
+    *,
+    units: str | float | None = None,
+    translations: str = "auto",
+    animation: str | int | None = None,
+) -> tuple[Motion, list[Doubt]]:
+    """:func:`read_motion`, and what is doubtful in the clip: what the reader tolerated or
+    assumed (its :class:`~quatmotion.errors.FormatWarning`, as doubts of kind ``"read"``)
+    followed by :func:`implausible_values`. What every command and batch job reads with."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", FormatWarning)
+        motion = read_motion(
+            path, skeleton, units=units, translations=translations, animation=animation
+        )
+    doubts = []
+    for warning in caught:
+        message = warning.message
+        if isinstance(message, FormatWarning):
+            where = f"line {message.line}: " if message.line is not None else ""
+            doubts.append(Doubt("read", f"{where}{message.reason}"))
+        else:  # not ours: on to the caller's filters
+            warnings.warn_explicit(message, warning.category, warning.filename, warning.lineno)
+    return motion, doubts + implausible_values(motion)
 
 
 def parse_motion(
@@ -149,7 +191,8 @@ def parse_motion(
     Parameters
     ----------
     data : bytes
-        The whole ``.amc`` or ``.bvh`` file.
+        The whole ``.amc``, ``.bvh``, ``.glb`` or ``.gltf`` file (a ``.gltf`` with its data
+        embedded).
     name : str
         Its file name.
     skeleton : Skeleton, bytes or None
@@ -174,6 +217,10 @@ def parse_motion(
         if skeleton is not None:
             raise ValueError("a BVH file carries its own skeleton; do not pass one")
         return parse_bvh(decode_text(data, name), name)
+    if suffix in GLTF_SUFFIXES:
+        if skeleton is not None:
+            raise ValueError("a glTF file carries its own skeleton; do not pass one")
+        return parse_gltf(data, name)
     if suffix == ".amc":
         if skeleton is None:
             raise FormatError("an AMC holds no skeleton: give its ASF file too", name)
@@ -190,7 +237,8 @@ def write_motion(motion: Motion, path: str | Path) -> None:
 
     ``.amc`` writes only the AMC (the motion's skeleton must come from an ASF; write the
     skeleton with :func:`write_asf` where it is needed). ``.bvh`` writes any motion (an ASF
-    motion goes through :func:`to_bvh_skeleton`).
+    motion goes through :func:`to_bvh_skeleton`); so do ``.glb`` and ``.gltf``
+    (:func:`quatmotion.io.gltf.write_gltf`, in metres).
 
     Parameters
     ----------
@@ -203,6 +251,8 @@ def write_motion(motion: Motion, path: str | Path) -> None:
         write_amc(motion, path)
     elif suffix == ".bvh":
         write_bvh(motion, path)
+    elif suffix in GLTF_SUFFIXES:
+        write_gltf(motion, path)
     else:
         raise ValueError(
             f"unknown motion file type {path.suffix!r} (expected one of {MOTION_SUFFIXES})"
@@ -212,9 +262,11 @@ def write_motion(motion: Motion, path: str | Path) -> None:
 class Doubt(NamedTuple):
     """Something unlikely in a clip that was read without error."""
 
-    kind: Literal["unit", "far", "rate"]
-    """``"unit"``: a guessed unit makes an implausible figure, or another unit a likelier one;
-    ``"far"``: beyond 1 km; ``"rate"``: a frame rate motion capture does not run at."""
+    kind: Literal["unit", "far", "rate", "read"]
+    """``"unit"``: a guessed or stated unit makes an implausible figure, or another unit a
+    likelier one, or a skeleton that is no body gave no ground to guess; ``"far"``: beyond
+    1 km; ``"rate"``: a frame rate motion capture does not run at; ``"read"``: something the
+    reader tolerated or assumed (:func:`read_motion_checked`)."""
     message: str
     """One sentence, without the file name."""
 
@@ -229,14 +281,13 @@ def implausible_values(motion: Motion) -> list[Doubt]:
 
     Three checks:
 
-    * a BVH length unit that was guessed (the file has no unit field) and is doubtful: the
-      posed figure's size (:func:`posed_size_cm`: the height standing, the length lying) falls
-      outside :data:`PLAUSIBLE_FIGURE_CM`, or another unit of :data:`BVH_UNITS` makes it a
-      plausible figure nearer a typical adult's 170 cm: a figure near a unit boundary (a
-      135 cm figure in inches read as 53 cm, a child's torso, when its rest pose is no
-      standing pose). The message names the other readings. Every wrong guess that reads a
-      plausible figure too small (the error bounds of the codec then hold in the wrong unit,
-      too loose) meets the second test;
+    * the stature, whatever the format, when the length unit was guessed (a BVH) or stated by
+      the file (an ASF, a glTF), not given by the user: the body's size
+      (:func:`quatmotion.io.units.body_size`: the stature chain from an ankle to the head, or
+      the posed figure's extent) falls outside :data:`PLAUSIBLE_FIGURE_CM`, or another unit of
+      :data:`LENGTH_UNITS` makes it a plausible figure nearer a typical adult's 170 cm. The
+      message names the other readings. A guessed unit of a skeleton that is not a body (a lone
+      hand) is a doubt too: nothing could be guessed from its size;
     * coordinates or bones beyond :data:`FAR_CM`;
     * a frame rate outside :data:`PLAUSIBLE_FPS`.
 
@@ -257,14 +308,14 @@ def implausible_values(motion: Motion) -> list[Doubt]:
     with np.errstate(over="ignore", invalid="ignore"):
         root = float(np.max(np.abs(motion.root_translation), initial=0.0))
         bones = float(np.max(np.abs(sk.offsets), initial=0.0))
-        if motion.joint_translations is not None:
+        if motion.joint_translations is not None and motion.n_frames:
             bones = max(bones, float(np.max(np.abs(motion.joint_translations))))
     if root > FAR_CM:
         doubts.append(Doubt("far", f"the root is {root:.3g} cm from the origin, over 1 km"))
     if bones > FAR_CM:
         doubts.append(Doubt("far", f"a bone is {bones:.3g} cm long, over 1 km"))
-    if sk.extras.get("bvh_unit_guessed") and bones <= FAR_CM:
-        doubt = _unit_doubt(sk, posed_size_cm(motion))
+    if bones <= FAR_CM:
+        doubt = _unit_doubt(motion)
         if doubt is not None:
             doubts.append(doubt)
     low, high = PLAUSIBLE_FPS
@@ -279,55 +330,72 @@ def implausible_values(motion: Motion) -> list[Doubt]:
     return doubts
 
 
-def _unit_doubt(skeleton: Skeleton, size: float) -> Doubt | None:
-    """The doubt about a guessed unit that reads the figure ``size`` cm large, if any."""
+def unit_reading(skeleton: Skeleton) -> tuple[float, str, str]:
+    """How a skeleton's lengths were read: ``(cm per file unit, source, unit text)``, the
+    source one of ``"guessed"`` (a BVH's unit, from the figure's size), ``"given"`` (by the
+    user), ``"stated"`` (by the file: an ASF's ``:units length``, glTF's metres) or ``"cm"``
+    (a skeleton made in code)."""
+    extras = skeleton.extras
+    kind = extras.get("format")
+    if kind == "bvh":
+        cm = float(extras.get("bvh_scale", 1.0))
+        source = "guessed" if extras.get("bvh_unit_guessed") else "given"
+        return cm, source, unit_name(cm) or f"{cm:g} cm"
+    if "length_scale" in extras:  # an ASF, a glTF
+        cm = float(extras["length_scale"])
+        source = "given" if extras.get("length_unit_given") else "stated"
+        if kind == "asf" and source == "stated":
+            length = dict((k.lower(), v) for k, v in extras.get("asf_units", ())).get("length")
+            said = f":units length {length}" if length else "no :units length (inches)"
+            return cm, source, f"the unit its ASF states ({said}: {cm:.4g} cm a unit)"
+        return cm, source, unit_name(cm) or f"{cm:g} cm"
+    return 1.0, "cm", "cm"
+
+
+def _unit_doubt(motion: Motion) -> Doubt | None:
+    """The doubt about a guessed or stated unit, if any (see :func:`implausible_values`)."""
+    cm, source, unit = unit_reading(motion.skeleton)
+    if source not in ("guessed", "stated"):
+        return None
+    size = body_size(motion)
+    if size is None:
+        if source != "guessed":
+            return None
+        return Doubt(
+            "unit",
+            "the skeleton is not a body (no head or legs found), so its size cannot tell the "
+            f"length unit: read in {unit}",
+        )
     low, high = PLAUSIBLE_FIGURE_CM
-    cm = skeleton.extras["bvh_scale"]
 
     def typicality(value: float) -> float:  # distance from a typical adult, as a ratio
         return abs(np.log(value / TYPICAL_HEIGHT_CM))
 
     readings = {
         name: size / cm * other
-        for name, other in BVH_UNITS.items()
-        if other != cm and low <= size / cm * other <= high
+        for name, other in LENGTH_UNITS.items()
+        if abs(other - cm) > 1e-9 * cm and low <= size / cm * other <= high
     }
     plausible = low <= size <= high
     likelier = {n: v for n, v in readings.items() if typicality(v) < typicality(size)}
-    if plausible and not likelier:
+    if plausible and (source == "stated" or not likelier):
         return None
     shown = likelier if plausible else readings
     others = " or ".join(f"{value:.3g} cm read in {name}" for name, value in shown.items())
-    unit = skeleton.extras.get("bvh_unit") or f"{cm:g} cm"
     said = f"; it would be {others}" if others else ""
+    how = f"with the length unit guessed as {unit}" if source == "guessed" else f"in {unit}"
     if plausible:
         return Doubt(
             "unit",
-            f"the figure is {size:.3g} cm tall or long with the length unit guessed as {unit}, "
-            f"small for an adult and near a unit boundary{said}",
+            f"the figure is {size:.3g} cm tall {how}, small for an adult and near a unit "
+            f"boundary{said}",
         )
     return Doubt(
         "unit",
-        f"the figure is {size:.3g} cm tall or long with the length unit guessed as {unit}; a "
-        f"human figure is {low:g} to {high:g} cm{said}",
+        f"the figure is {size:.3g} cm tall {how}; a human figure is {low:g} to {high:g} cm{said}",
     )
 
 
 def posed_size_cm(motion: Motion, n_frames: int = 30) -> float:
-    """The figure's size as posed: the median over frames of its largest extent, cm.
-
-    Unlike the rest pose's extent (what :func:`quatmotion.io.detect_bvh_scale` measures), this
-    holds for skeletons whose rest pose is no pose at all (Bandai's lies along X, 4.5 m long).
-    A root that stays put while position channels of other joints carry the body is a
-    reference node, not part of the figure, and is left out (Bandai's stays on the floor at the
-    origin while its Hips walk away). ``n_frames`` evenly spaced frames are measured.
-    """
-    clip = motion.slice(0, None, max(1, motion.n_frames // n_frames))
-    with np.errstate(over="ignore", invalid="ignore"):
-        points = forward_kinematics(clip).all_positions()
-        carried = clip.joint_translations is not None and np.any(
-            np.ptp(clip.joint_translations[:, 1:], axis=0) > 0
-        )
-        if carried and np.all(points[:, 0] == points[:1, 0]):
-            points = points[:, 1:]
-        return float(np.median(np.max(np.ptp(points, axis=1), axis=-1)))
+    """The figure's size as posed, cm: :func:`quatmotion.io.units.posed_extent`."""
+    return posed_extent(motion, n_frames)

@@ -17,14 +17,17 @@ from quatmotion.errors import ClipNameError
 
 __all__ = ["match_clip"]
 
-_SUFFIXES = (".amc", ".bvh")  # io.files.MOTION_SUFFIXES (importing it here would be circular)
+# io.files.MOTION_SUFFIXES (importing it here would be circular)
+_SUFFIXES = (".amc", ".bvh", ".glb", ".gltf")
 
 
 def _bare(text: str) -> tuple[str, ...]:
     """Path components of ``text`` with a motion-file suffix removed from the last."""
     parts = PurePath(text).parts
-    if parts and parts[-1].lower().endswith(_SUFFIXES):
-        parts = (*parts[:-1], parts[-1][:-4])  # every suffix is four characters
+    last = parts[-1].lower() if parts else ""
+    suffix = next((s for s in _SUFFIXES if last.endswith(s)), None)
+    if suffix is not None:
+        parts = (*parts[:-1], parts[-1][: -len(suffix)])
     return parts
 
 

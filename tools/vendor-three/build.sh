@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Rebuild the vendored three.js of the viewer: quatmotion/viz/static/three.min.js and its licence.
+# Rebuild the vendored three.js of the viewer: quatmotion/viz/static/three.min.js, its glTF loader
+# (GLTFLoader.min.js) and their licence.
 #
 # three.js ships ES modules only (build/three.module.js imports ./three.core.js), and a module's
 # relative imports cannot be resolved from a script inlined in a standalone HTML page, so the
@@ -19,9 +20,18 @@ version="$(node -p "require('./node_modules/three/package.json').version")"
   npx esbuild entry.js --bundle --minify --format=iife --global-name=THREE \
     --legal-comments=inline --target=es2020 --log-level=warning
 } > "$static/three.min.js"
+# The glTF loader: a script of its own, loaded after three.min.js (the viewer does not need it).
+{
+  printf '/*! three.js %s GLTFLoader (examples/jsm/loaders/GLTFLoader.js), MIT licence: see\n' "$version"
+  printf ' * LICENSE.three.txt beside this file. Bundled by tools/vendor-three/build.sh; needs three.min.js. */\n'
+  npx esbuild gltf-entry.js --bundle --minify --format=iife --global-name=THREE_GLTF \
+    --alias:three=./three-global.cjs --legal-comments=inline --target=es2020 --log-level=warning
+} > "$static/GLTFLoader.min.js"
 cp node_modules/three/LICENSE "$static/LICENSE.three.txt"
-if grep -qi '</script' "$static/three.min.js"; then
-  echo "three.min.js contains '</script' and cannot be inlined in a page" >&2
-  exit 1
-fi
-echo "wrote $static/three.min.js (three.js $version, $(wc -c < "$static/three.min.js") bytes)"
+for script in three.min.js GLTFLoader.min.js; do
+  if grep -qi '</script' "$static/$script"; then
+    echo "$script contains '</script' and cannot be inlined in a page" >&2
+    exit 1
+  fi
+  echo "wrote $static/$script (three.js $version, $(wc -c < "$static/$script") bytes)"
+done

@@ -1,0 +1,2 @@
+// 'three' inside the GLTFLoader bundle: the THREE that three.min.js defined on the page.
+module.exports = globalThis.THREE;
