@@ -138,7 +138,7 @@ def _load(
             motion = read_motion(p, skeleton if amc else None, units=None if amc else units)
             out.append((motion, p.parent.name))
         return out
-    from quatmotion.motion.synthetic import generate_library
+    from quatmotion.synthetic import generate_library
 
     return generate_library(1 if quick else 2, seed=seed)
 
@@ -516,7 +516,7 @@ def build_library(
     if sources:
         files, labels = find_motion_files(sources), None
     else:
-        from quatmotion.motion.synthetic import generate_library
+        from quatmotion.synthetic import generate_library
 
         generated = generate_library(2, seed=seed)
         report("clips", 0, len(generated))

@@ -264,7 +264,7 @@ def _write_stamp(group: str, key: str, done: GroupReport) -> None:
 def _write_library(folder: Path) -> tuple[str, ...]:
     """Three short generated clips in ``folder``: two as BVH, one as AMC with its ASF."""
     from quatmotion.io import write_asf, write_motion
-    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.synthetic import generate_clip
 
     files = []
     for k, kind in enumerate(("walk", "jump", "squat")):

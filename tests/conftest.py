@@ -194,10 +194,10 @@ def motion_library(tmp_path_factory) -> dict[str, Path]:
     """Paths ``clips`` (folder), ``library`` (.qmz), ``index`` (.qidx), ``poses`` (pose index)."""
     from quatmotion import codec
     from quatmotion.io import read_motion, write_motion
-    from quatmotion.motion.synthetic import generate_clip
     from quatmotion.pose.data import PoseClip
     from quatmotion.pose.library import PoseLibrary
     from quatmotion.retrieval.build import build_index
+    from quatmotion.synthetic import generate_clip
 
     root = tmp_path_factory.mktemp("served")
     clips = root / "clips"
@@ -237,7 +237,7 @@ def studio_walk() -> Callable[[float, float], tuple[Any, Any]]:
 
     from quatmotion import io
     from quatmotion.motion import Motion
-    from quatmotion.motion.synthetic import cmu_skeleton, generate_clip
+    from quatmotion.synthetic import cmu_skeleton, generate_clip
 
     def make(height_cm: float, cm_per_unit: float) -> tuple[Motion, Motion]:
         truth = generate_clip("walk", 3, n_frames=120, skeleton=cmu_skeleton(height_cm))

@@ -148,7 +148,7 @@ def test_generated_clip_through_generate_info_and_convert(tmp_path):
     assert int(_field(info.stdout, "joints")) == 31
     bvh = tmp_path / "walk_01.bvh"
     assert _invoke("convert", amc, bvh).exit_code == 0
-    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.synthetic import generate_clip
 
     expected = _positions(generate_clip("walk", 4, n_frames=48))
     np.testing.assert_allclose(_positions(io.read_motion(bvh)), expected, atol=1e-3)
@@ -172,7 +172,7 @@ def test_bad_input_exits_2_with_one_line(tmp_path):
 
 
 def test_broken_amc_exits_2(tmp_path):
-    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.synthetic import generate_clip
 
     m = generate_clip("squat", 0, n_frames=5)
     io.write_asf(m.skeleton, tmp_path / "s.asf")
@@ -265,7 +265,7 @@ def test_demo_quick_writes_figure_and_beats_the_identity(tmp_path):
     # Reference: reconstructing every displacement as the identity (no motion at all).
     from quatmotion.demo import sample_step
     from quatmotion.motion import angular_displacements
-    from quatmotion.motion.synthetic import generate_library
+    from quatmotion.synthetic import generate_library
 
     clips = [m for m, _ in generate_library(1, seed=1)]
     samples = np.concatenate([angular_displacements(m, step=sample_step(m)) for m in clips])

@@ -26,7 +26,7 @@ from test_cli_usability import _assert_bad_input, _invoke  # the same command-li
 
 from quatmotion import codec, io
 from quatmotion.motion import Motion, forward_kinematics
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 
 INCH_CM = 2.54
 

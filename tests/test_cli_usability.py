@@ -111,7 +111,7 @@ def test_no_help_page_breaks_a_sentence_where_the_source_did(width, monkeypatch)
 
 
 def test_generate_help_lists_the_motion_kinds():
-    from quatmotion.motion.synthetic import KINDS
+    from quatmotion.synthetic import KINDS
 
     result = _invoke("generate", "--help")
     text = " ".join(result.stdout.split())

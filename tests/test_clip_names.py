@@ -9,8 +9,8 @@ import pytest
 from quatmotion import codec
 from quatmotion.errors import ClipNameError
 from quatmotion.io.names import match_clip
-from quatmotion.motion.synthetic import generate_clip
 from quatmotion.retrieval.index import ClipIndex, ClipRecord
+from quatmotion.synthetic import generate_clip
 
 
 @pytest.mark.parametrize(

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from quatmotion.cli import app
 from quatmotion.io import read_motion, write_bvh
 from quatmotion.motion import forward_kinematics
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 
 runner = CliRunner()
 

@@ -11,7 +11,7 @@ from quatmotion.codec.container import FORMAT_VERSION, MAGIC, scan_chunks
 from quatmotion.errors import FormatError
 from quatmotion.io import read_motion, write_bvh
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 
 
 @pytest.fixture(scope="module")

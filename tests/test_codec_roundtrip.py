@@ -14,7 +14,7 @@ from quatmotion.datasets import data_root
 from quatmotion.io import parse_asf, parse_bvh, read_motion, write_bvh
 from quatmotion.io.asf_amc import asf_text
 from quatmotion.motion import forward_kinematics
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 
 DATA = data_root(must_exist=False)
 REAL = {

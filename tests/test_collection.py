@@ -28,7 +28,7 @@ from quatmotion.collection import (
 from quatmotion.errors import FormatError
 from quatmotion.io import write_asf, write_motion
 from quatmotion.io.labels import read_labels_csv, sidecar_labels
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 
 
 @dataclasses.dataclass(frozen=True)

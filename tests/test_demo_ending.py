@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from quatmotion.cli import app
 from quatmotion.io import write_asf, write_motion
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 
 
 def _demo(*args: object):

@@ -12,7 +12,7 @@ import pytest
 from quatmotion import io
 from quatmotion.io.gltf import gltf_bytes
 from quatmotion.motion import forward_kinematics
-from quatmotion.motion.synthetic import cmu_skeleton, generate_clip
+from quatmotion.synthetic import cmu_skeleton, generate_clip
 from quatmotion.viz import viewer
 
 THREE_CM = 0.1

@@ -17,7 +17,7 @@ from quatmotion.datasets import data_root
 from quatmotion.errors import FormatError
 from quatmotion.io.gltf import read_gltf, write_gltf
 from quatmotion.motion import forward_kinematics
-from quatmotion.motion.synthetic import cmu_skeleton, generate_clip
+from quatmotion.synthetic import cmu_skeleton, generate_clip
 
 DATA = data_root(must_exist=False)
 ROUND_TRIP_CM = 1e-4

@@ -7,7 +7,7 @@ import pytest
 
 from quatmotion.errors import FormatError
 from quatmotion.io import decode_text, parse_motion, read_asf, read_motion, write_asf, write_motion
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 
 
 @pytest.fixture(scope="module")

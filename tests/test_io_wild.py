@@ -16,7 +16,7 @@ from quatmotion.cli import app
 from quatmotion.collection import ReadSettings
 from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.motion import forward_kinematics
-from quatmotion.motion.synthetic import cmu_skeleton, generate_clip
+from quatmotion.synthetic import cmu_skeleton, generate_clip
 
 # A humanoid in centimetres: (name, parent, offset, end-site offset). Its stature chain, from an
 # ankle up to the top of its head, is 176 cm; in a T-pose its arm span is 176 cm too.

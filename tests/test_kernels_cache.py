@@ -22,7 +22,7 @@ import quatmotion
 from quatmotion import _jit, warmup
 from quatmotion.cli import app
 from quatmotion.io import write_motion
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 
 COMPILING = "compiling kernels, once"
 

@@ -319,7 +319,7 @@ def test_dask_and_the_local_pool_write_the_same_qmz_bytes(
     import dataclasses
 
     from quatmotion import codec
-    from quatmotion.motion.synthetic import generate_clip
+    from quatmotion.synthetic import generate_clip
 
     clips = [
         dataclasses.replace(generate_clip(kind, seed, n_frames=90), name=f"{kind}_{seed}")

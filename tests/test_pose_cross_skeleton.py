@@ -18,9 +18,9 @@ from scipy.spatial.distance import cdist
 from quatmotion import io
 from quatmotion.datasets import data_root
 from quatmotion.motion import Motion
-from quatmotion.motion.synthetic import generate_clip
 from quatmotion.pose.data import PoseClip
 from quatmotion.pose.library import PoseLibrary
+from quatmotion.synthetic import generate_clip
 
 DATA = data_root(must_exist=False)
 HDM = DATA / "hdm05" / "clips"

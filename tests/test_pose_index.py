@@ -255,9 +255,9 @@ def test_library_file_checks_its_format_version(tmp_path: pathlib.Path) -> None:
 
 @pytest.mark.parametrize("n_clips", [1, 3])
 def test_default_metric_is_gpd_lms_with_a_diagonal_projection(n_clips: int) -> None:
-    from quatmotion.motion.synthetic import generate_clip
     from quatmotion.pose.data import PoseClip
     from quatmotion.pose.library import DEFAULT_METRIC
+    from quatmotion.synthetic import generate_clip
 
     clips = [
         PoseClip.from_motion(generate_clip(k, 1, n_frames=240), fps=15, height=170, name=k)
@@ -278,8 +278,8 @@ def test_default_metric_is_gpd_lms_with_a_diagonal_projection(n_clips: int) -> N
 def test_a_query_far_outside_the_library_range_does_not_swamp_its_pose() -> None:
     """Issue 9 (1): a feature of a query far outside the library's range (a body unlike the
     library's) is clipped to the range instead of dominating the unit-length vector."""
-    from quatmotion.motion.synthetic import generate_clip
     from quatmotion.pose.data import PoseClip
+    from quatmotion.synthetic import generate_clip
 
     class _Projection:  # linear, RDSR's interface; the scaling is under test, not RDSR
         def __init__(self, n_components: int, random_state: int = 0) -> None:

@@ -229,8 +229,8 @@ def _reproportioned(motion: Motion, factors: dict[str, float], default: float) -
 def test_a_pose_on_a_body_of_other_proportions_gets_the_same_description() -> None:
     """Issue 9 (1): the same motion on a body with 1.3x legs and trunk, 0.7x arms and a neck
     twice as long is described exactly as on the original body."""
-    from quatmotion.motion.synthetic import generate_clip
     from quatmotion.pose.data import PoseClip
+    from quatmotion.synthetic import generate_clip
 
     motion = generate_clip("jumping_jack", 5, n_frames=60)
     arms = {n: 0.7 for n in ("lradius", "lwrist", "rradius", "rwrist")}
@@ -262,8 +262,8 @@ def test_a_skeleton_whose_mapped_joints_coincide_is_refused() -> None:
 
 
 def test_a_mirrored_clip_swaps_left_and_right() -> None:
-    from quatmotion.motion.synthetic import generate_clip
     from quatmotion.pose.data import PoseClip
+    from quatmotion.synthetic import generate_clip
 
     clip = PoseClip.from_motion(generate_clip("wave", 2, n_frames=40), fps=30, height=170)
     mirror = clip.mirrored()

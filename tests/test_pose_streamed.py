@@ -95,8 +95,8 @@ def test_pose_index_cli_skips_a_bad_file_and_exits_1(
 
     from quatmotion.cli import app
     from quatmotion.io import write_bvh
-    from quatmotion.motion.synthetic import generate_clip
     from quatmotion.pose import library
+    from quatmotion.synthetic import generate_clip
 
     monkeypatch.setattr(library, "RDSR", lambda n_components, random_state: PCA(n_components))
     for seed, kind in enumerate(["walk", "squat", "kick"]):

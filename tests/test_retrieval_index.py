@@ -16,8 +16,8 @@ from typer.testing import CliRunner
 
 from quatmotion.cli import app
 from quatmotion.io import write_motion
-from quatmotion.motion.synthetic import generate_clip
 from quatmotion.retrieval.index import FORMAT_VERSION, ClipIndex
+from quatmotion.synthetic import generate_clip
 
 runner = CliRunner()
 

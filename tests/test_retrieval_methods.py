@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from quatmotion import quat
-from quatmotion.motion.synthetic import generate_clip
 from quatmotion.retrieval import distances
 from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, Library, QueryFeatures
+from quatmotion.synthetic import generate_clip
 
 KINDS = ("walk", "squat", "kick", "jumping_jack")
 POSITION_METHODS = ("dtw-positions", "dtw-motion", "pooled", DEFAULT_METHOD)

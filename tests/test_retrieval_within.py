@@ -7,9 +7,9 @@ import pytest
 
 from quatmotion import quat
 from quatmotion.motion import Motion
-from quatmotion.motion.synthetic import generate_clip
 from quatmotion.retrieval.distances import find_within
 from quatmotion.retrieval.features import feature_step, motion_frames
+from quatmotion.synthetic import generate_clip
 
 SEGMENT = 360  # frames at 120 fps: 3 s per planted motion
 

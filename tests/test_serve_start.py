@@ -25,8 +25,8 @@ from typer.testing import CliRunner
 
 from quatmotion.cli import app as cli
 from quatmotion.io import write_asf, write_motion
-from quatmotion.motion.synthetic import generate_clip
 from quatmotion.server import listen
+from quatmotion.synthetic import generate_clip
 
 URL = re.compile(r"http://127\.0\.0\.1:(\d+)/")
 
@@ -163,7 +163,7 @@ def test_serve_dir_compresses_indexes_and_serves_a_folder_then_removes_its_work(
 
 def test_serve_without_files_serves_the_demos_library(monkeypatch, tmp_path) -> None:
     # The demo's library, made smaller here: three short clips of two kinds.
-    from quatmotion.motion import synthetic
+    from quatmotion import synthetic
 
     def small_library(n_per_kind, seed=0, **_):
         return [

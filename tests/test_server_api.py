@@ -18,9 +18,9 @@ from quatmotion import codec
 from quatmotion.errors import FormatError
 from quatmotion.io import read_motion, write_asf, write_motion
 from quatmotion.motion import forward_kinematics
-from quatmotion.motion.synthetic import generate_clip
 from quatmotion.server import allowed_hosts_for, create_app, is_loopback, parse_size
 from quatmotion.server import clips as clips_module
+from quatmotion.synthetic import generate_clip
 from quatmotion.viz import frame_data
 
 BASE = "http://127.0.0.1"  # the app answers loopback host names only

@@ -7,7 +7,7 @@ import pytest
 
 from quatmotion import io, quat
 from quatmotion.motion import forward_kinematics
-from quatmotion.motion.synthetic import (
+from quatmotion.synthetic import (
     KINDS,
     cmu_skeleton,
     foot_positions,

@@ -15,8 +15,8 @@ import pytest
 from quatmotion import codec, io
 from quatmotion.datasets import data_root
 from quatmotion.motion import forward_kinematics
-from quatmotion.motion.synthetic import cmu_skeleton, generate_clip
 from quatmotion.retrieval.build import build_index
+from quatmotion.synthetic import cmu_skeleton, generate_clip
 
 DATA = data_root(must_exist=False)
 INCH_CM = 2.54

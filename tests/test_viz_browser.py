@@ -16,7 +16,7 @@ from PIL import Image
 from quatmotion import codec
 from quatmotion.io import read_motion
 from quatmotion.motion import Motion, forward_kinematics
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 from quatmotion.viz import write_view
 
 

@@ -13,7 +13,7 @@ from quatmotion import quat
 from quatmotion.datasets import data_root
 from quatmotion.io import read_motion
 from quatmotion.motion import Motion, Skeleton
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 from quatmotion.viz import frame_data
 from quatmotion.viz.framing import body_framing
 

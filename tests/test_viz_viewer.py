@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from quatmotion.cli import app
 from quatmotion.io import write_motion
 from quatmotion.motion import Motion, forward_kinematics
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 from quatmotion.viz import frame_data, viewer
 
 

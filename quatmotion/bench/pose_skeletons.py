@@ -31,9 +31,9 @@ from quatmotion import io
 from quatmotion._atomic import atomic_write_json
 from quatmotion.datasets import data_root
 from quatmotion.motion import Motion
-from quatmotion.motion.synthetic import generate_clip
 from quatmotion.pose.data import PoseClip
 from quatmotion.pose.library import PoseLibrary
+from quatmotion.synthetic import generate_clip
 from quatmotion.viz import pyplot, save_figure
 
 __all__ = ["run"]

@@ -59,7 +59,7 @@ def _motion(source: tuple[str, str, str | None]) -> Motion:
     """A clip from ``("file", path, asf)`` or ``("generated", kind, seed)``."""
     what, a, b = source
     if what == "generated":
-        from quatmotion.motion.synthetic import generate_clip
+        from quatmotion.synthetic import generate_clip
 
         return generate_clip(a, int(b or 0))
     from quatmotion.io import read_motion
@@ -88,7 +88,7 @@ def _load(name: str, quick: bool, seed: int, log: Callable[[str], None]) -> _Dat
 
     sources: list[tuple[str, str, str | None]]
     if name == "synthetic":
-        from quatmotion.motion.synthetic import KINDS as MOTION_KINDS
+        from quatmotion.synthetic import KINDS as MOTION_KINDS
 
         per_kind = 4 if quick else 12
         seeds = np.random.SeedSequence(seed).generate_state(per_kind * len(MOTION_KINDS))

@@ -67,12 +67,12 @@ from quatmotion._atomic import atomic_write_json
 from quatmotion.bench import provenance
 from quatmotion.codec.compress import clip_jobs, code_clip
 from quatmotion.io import read_motion
-from quatmotion.motion.synthetic import KINDS, generate_clip
 from quatmotion.parallel import available_cpus, imap_batch, run_batch, shutdown_pools
 from quatmotion.pose.data import PoseClip
 from quatmotion.pose.library import PoseLibrary, load_pose_clip, project_gpd, projected_clip
 from quatmotion.retrieval.build import ClipJob, index_clip
 from quatmotion.retrieval.index import ClipRecord
+from quatmotion.synthetic import KINDS, generate_clip
 
 FPS = 30.0
 HEIGHT_CM = 170.0

@@ -5,7 +5,7 @@ of 10,000-frame clips on a 31-joint skeleton (joints and end sites drawn):
 
 * ``cmu``: real frames, the CMU clips of one subject (the one with the most frames, clips by
   size) concatenated and cut to 10,000 frames; skipped without the data folder.
-* ``synthetic_walk``: :func:`quatmotion.motion.synthetic.generate_clip` ``("walk", seed)``,
+* ``synthetic_walk``: :func:`quatmotion.synthetic.generate_clip` ``("walk", seed)``,
   which walks about 100 m, so the page's root-relative quantisation is exercised at range.
 * ``compare``: the ``cmu`` clip (else the walk) against itself with every quaternion component
   rounded to 2 decimals, a stand-in for a decoded clip: two clips and the error data.
@@ -34,7 +34,7 @@ from quatmotion._atomic import atomic_write_json
 from quatmotion.bench._provenance import provenance
 from quatmotion.datasets import DataNotFoundError, catalogue
 from quatmotion.motion import Motion, forward_kinematics
-from quatmotion.motion.synthetic import generate_clip
+from quatmotion.synthetic import generate_clip
 from quatmotion.viz import frame_data, viewer
 from quatmotion.viz.browser import headless_chromium, missing_browser, time_to_first_play
 

@@ -355,7 +355,7 @@ class _GenerateCommand(TyperCommand):
     (importing it when the command line starts would slow every command down)."""
 
     def format_help(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
-        from quatmotion.motion.synthetic import KINDS
+        from quatmotion.synthetic import KINDS
 
         self.help = f"Write one procedural clip. KIND is one of: {', '.join(KINDS)}."
         super().format_help(ctx, formatter)
@@ -381,7 +381,7 @@ def generate(
         if frames is not None:
             at_least("--frames", frames, 1, MAX_GENERATED_FRAMES)
         number_in("--fps", fps, *FPS_RANGE)
-        from quatmotion.motion.synthetic import KINDS, cmu_skeleton, generate_clip
+        from quatmotion.synthetic import KINDS, cmu_skeleton, generate_clip
 
         if kind not in KINDS:
             raise CliInputError(f"unknown motion kind {kind!r}; choose from {', '.join(KINDS)}")

@@ -111,7 +111,7 @@ _JOINT_MAPS: dict[str, tuple[str, ...]] = {
 # Length of the bone from each joint's parent to the joint on the canonical body, as a fraction
 # of its stature (the ankle-to-head chain LFoot-LKnee-LHip-Hip-Chest-Neck-Head, which sums to
 # 1), with the Hip midway between the hip joints. The proportions are those of the generator's
-# CMU-like body (motion.synthetic.cmu_skeleton, CMU subject 02 mirrored), fixed here so that
+# CMU-like body (synthetic.cmu_skeleton, CMU subject 02 mirrored), fixed here so that
 # indexed libraries do not change with the generator.
 _CANONICAL_BONE_FRACTIONS: dict[str, float] = {
     "Chest": 0.2157, "Neck": 0.0746, "Head": 0.1129,
