@@ -47,9 +47,7 @@ class _Counting:
         return est
 
 
-def test_cached_dictionaries_give_the_uncached_bytes_and_learn_once_per_layout(
-    clips, monkeypatch
-):
+def test_cached_dictionaries_give_the_uncached_bytes_and_learn_once_per_layout(clips, monkeypatch):
     counting = _Counting(sparse.QSSD)
     monkeypatch.setattr(sparse, "QSSD", counting)
     monkeypatch.setattr(sparse, "_FIT_CACHE", {})  # this test's cache only (restored after)
