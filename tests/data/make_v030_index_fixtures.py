@@ -7,10 +7,11 @@ format version 2), from the checkout's root:
 
 It writes three small generated BVH clips (two of them with one stem, in two folders), a
 labels CSV, a clip index of them (``index_v030.qidx``: motion features only, to stay small)
-and a pose library (``pose_v030.npz``, RDSR of rank 2 to stay small) with the commands of that release, then the values
-the tests compare against (``index_pose_v030.json``). The files are committed; the tests
-check that the current code opens them and reads the same values. Do not run it again with a
-newer quatmotion: the point of the files is that an older release wrote them.
+and a pose library (``pose_v030.npz``, RDSR of rank 2 to stay small) with the commands of
+that release, then the values the tests compare against (``index_pose_v030.json``). The
+files are committed; the tests check that the current code opens them and reads the same
+values. Do not run it again with a newer quatmotion: the point of the files is that an older
+release wrote them.
 """
 
 from __future__ import annotations
