@@ -7,9 +7,9 @@ from __future__ import annotations
 import pytest
 
 from quatmotion import codec
+from quatmotion.collection import ClipRef
 from quatmotion.errors import ClipNameError
 from quatmotion.io.names import match_clip
-from quatmotion.collection import ClipRef
 from quatmotion.retrieval.index import ClipIndex, ClipRecord
 from quatmotion.synthetic import generate_clip
 

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from quatmotion import codec, io
+from quatmotion.collection import ReadSettings
 from quatmotion.datasets import data_root
 from quatmotion.motion import forward_kinematics
-from quatmotion.collection import ReadSettings
 from quatmotion.retrieval import ClipIndex, IndexSettings
 from quatmotion.synthetic import cmu_skeleton, generate_clip
 

@@ -66,11 +66,11 @@ import numpy as np
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench import provenance
 from quatmotion.codec.compress import clip_jobs, code_clip
+from quatmotion.collection import ReadSettings, find_clips
 from quatmotion.io import read_motion
 from quatmotion.parallel import available_cpus, imap_batch, run_batch, shutdown_pools
 from quatmotion.pose.data import PoseClip
 from quatmotion.pose.library import PoseLibrary, load_pose_clip, project_gpd, projected_clip
-from quatmotion.collection import ReadSettings, find_clips
 from quatmotion.retrieval.build import ClipJob, index_clip
 from quatmotion.retrieval.index import ClipRecord
 from quatmotion.synthetic import KINDS, generate_clip
