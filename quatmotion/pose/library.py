@@ -101,7 +101,7 @@ FPS_RANGE = (1.0, 1000.0)
 HEIGHT_RANGE = (50.0, 300.0)  # cm: a stature from a small child to beyond the tallest adult
 _NOT_A_LIBRARY = (
     f"not a quatmotion pose library (expected a file written by 'quatmotion pose index': "
-    f"format {_FORMAT}, version {_VERSION})"
+    f"format {_FORMAT}, {FORMAT.versions_text()})"
 )
 # Fewer transition pairs than this teach a metric too little: use consecutive frames instead.
 _MIN_TRANSITION_PAIRS = 10
