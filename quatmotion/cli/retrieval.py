@@ -99,7 +99,7 @@ def _build(
     *,
     add: bool,
 ) -> None:
-    from quatmotion.parallel import resolve_scheduler
+    from quatmotion.parallel import Runner
     from quatmotion.retrieval.index import ClipIndex
 
     with user_errors():
@@ -121,7 +121,7 @@ def _build(
                 bar.update(task, completed=done, total=total)
 
             options = {
-                "runner": resolve_scheduler(scheduler, workers=workers),
+                "runner": Runner.resolve(scheduler, workers=workers),
                 "workers": workers,
                 "progress": advance,
                 "labels": label_map,

@@ -69,7 +69,7 @@ from quatmotion.errors import FormatError
 from quatmotion.io import Doubt
 from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion
-from quatmotion.parallel import Failure, Scheduler, imap_batch
+from quatmotion.parallel import Failure, Runner, Scheduler, imap_batch
 from quatmotion.pose import labels
 from quatmotion.pose.baselines import LMS
 from quatmotion.pose.data import PoseClip, PoseData
@@ -299,7 +299,7 @@ class PoseLibrary:
         out: str | os.PathLike[str],
         settings: PoseSettings | None = None,
         *,
-        runner: str | Scheduler | None = None,
+        runner: Runner | str | Scheduler | None = None,
         workers: int | None = None,
         progress: Callable[[str, int, int], None] | None = None,
         log: Callable[[str], None] | None = None,
@@ -341,7 +341,7 @@ class PoseLibrary:
             ef_construction=settings.ef_construction,
             metric_name=settings.metric,
             workers=workers,
-            scheduler=runner,
+            scheduler=runner.scheduler if isinstance(runner, Runner) else runner,
             chunk_size=settings.chunk_size,
             flush_poses=settings.flush_poses,
             index_threads=settings.index_threads,

@@ -32,7 +32,7 @@ from quatmotion.collection import (
 )
 from quatmotion.io import Doubt
 from quatmotion.io.labels import read_labels_csv
-from quatmotion.parallel import Failure, Scheduler, imap_batch
+from quatmotion.parallel import Failure, Runner, Scheduler
 from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
 from quatmotion.retrieval.index import ClipIndex, ClipRecord, IndexSettings
 
@@ -152,7 +152,7 @@ def _compute_and_write(
     labels: Mapping[str, str],
     report: BuildReport,
     *,
-    runner: str | Scheduler | None,
+    runner: Runner | str | Scheduler | None,
     workers: int | None,
     progress: Callable[[int, int], None] | None,
     on_doubt: Callable[[str, Doubt], None] | None,
@@ -166,7 +166,9 @@ def _compute_and_write(
         report.added.extend(r.ref for r in pending)
         pending.clear()
 
-    stream = imap_batch(_index_clip, jobs, workers=workers, scheduler=runner, progress=progress)
+    if not isinstance(runner, Runner):
+        runner = Runner.resolve(runner, workers=workers)
+    stream = runner.map(_index_clip, jobs, progress=progress)
     with stream:
         for outcome in stream:
             if outcome.failure is not None:
@@ -188,6 +190,7 @@ def _compute_and_write(
                 flush()
     if pending:
         flush()
+    report.stats = stream.stats()
 
 
 def _key(s: ClipSource) -> tuple[str, str]:
@@ -226,7 +229,7 @@ def _run(
     report: BuildReport,
     *,
     labels: Mapping[str, str] | None,
-    runner: str | Scheduler | None,
+    runner: Runner | str | Scheduler | None,
     workers: int | None,
     progress: Callable[[int, int], None] | None,
     on_doubt: Callable[[str, Doubt], None] | None,
@@ -259,7 +262,7 @@ def build(
     out: str | Path,
     settings: IndexSettings | None = None,
     *,
-    runner: str | Scheduler | None = None,
+    runner: Runner | str | Scheduler | None = None,
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     labels: Mapping[str, str] | None = None,
@@ -276,10 +279,13 @@ def build(
         The ``.qidx`` file: created, or resumed when it is there (``details["resumed"]``).
     settings : IndexSettings, optional
         Defaults when None; stored in the file.
-    runner : str or Scheduler, optional
-        Where the features are computed (:func:`quatmotion.parallel.resolve_scheduler`).
+    runner : Runner, str or Scheduler, optional
+        Where the features are computed: a :class:`quatmotion.parallel.Runner`, or a
+        scheduler as :func:`quatmotion.parallel.resolve_scheduler` reads it (``None``:
+        ``$QUATMOTION_SCHEDULER``, else a local pool).
     workers : int, optional
-        Local processes (default: every core; 1 computes in this process).
+        With a scheduler rather than a Runner: local processes (default: every core; 1
+        computes in this process).
     progress : callable, optional
         ``progress(done, total)`` as clips finish.
     labels : mapping, optional
@@ -318,7 +324,7 @@ def add(
     sources: Iterable[Any],
     *,
     settings: IndexSettings | None = None,
-    runner: str | Scheduler | None = None,
+    runner: Runner | str | Scheduler | None = None,
     workers: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     labels: Mapping[str, str] | None = None,
