@@ -349,9 +349,9 @@ def _index_and_search(space: _Workspace, kinds: tuple[str, ...]) -> None:
     with ClipIndex.open(out) as index:
         for method in METHODS:
             if set(METHODS[method].kinds) <= set(kinds):
-                search(index, query, method=method, top=2)
+                search(index, query, method=method, k=2)
         if "motion" in kinds:
-            search_within(index, query, top=2)
+            search_within(index, query, k=2)
 
 
 def _retrieval(space: _Workspace) -> None:

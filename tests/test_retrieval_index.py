@@ -131,7 +131,9 @@ def test_remove_and_ls(clip_folder, tmp_path):
     _build(clip_folder, out)
     assert runner.invoke(app, ["index", "remove", str(out), "walk_1"]).exit_code == 0
     listed = runner.invoke(app, ["index", "ls", str(out), "--json"])
-    names = {r["name"] for r in json.loads(listed.output)}
+    doc = json.loads(listed.output)
+    names = {r["name"] for r in doc["clips"]}
+    assert doc["settings"]["kinds"] == ["motion"] and doc["format"]["version"] == FORMAT_VERSION
     assert "walk_1" not in names and len(names) == 8
 
 
