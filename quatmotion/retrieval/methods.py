@@ -13,6 +13,9 @@ features of every method it was built for.
   baseline a user would try first.
 - ``"dtw-motion"``: DTW over the motion frames (positions and the Hip's travel), band 0.2,
   every clip.
+- ``"dtw-heading"``: the plain baseline of issue 19: unbanded DTW over the path frames (the
+  16 joints relative to the Hip and the Hip's trajectory, in the first frame's heading, in leg
+  lengths), Euclidean frame cost, path cost divided by ``n + m``, every clip.
 - ``"pooled"``: Euclidean distance of the pooled embeddings (blind to temporal order).
 - ``"pooled+dtw"`` (the default, :data:`DEFAULT_METHOD`): the pooled embedding shortlists
   ``K = 64`` clips, DTW over the motion frames (band 0.2, at most :data:`MAX_WARP_S`)
@@ -109,6 +112,15 @@ class Library:
             self._cache["frames"] = dist.pack_sequences(self._need("frames"))
         return self._cache["frames"]  # type: ignore[return-value]
 
+    def packed(self, key: str) -> tuple[NDArray[np.float32], NDArray[np.int64]]:
+        """Concatenated per-frame arrays ``key`` of every clip and their offsets."""
+        if key == "frames":
+            return self.frames
+        cache_key = f"packed:{key}"
+        if cache_key not in self._cache:
+            self._cache[cache_key] = dist.pack_sequences(self._need(key))
+        return self._cache[cache_key]  # type: ignore[return-value]
+
     @property
     def embeddings(self) -> NDArray[np.float32]:
         """Pooled embeddings, shape (C, 156), float32."""
@@ -186,6 +198,21 @@ class SequenceDTW:
 
 
 @dataclass(frozen=True)
+class PathDTW:
+    """Unbanded Euclidean DTW over the ``path`` frames (features module), every clip: an exact
+    ranking of the whole library."""
+
+    name: str
+    kinds: tuple[str, ...] = ("motion",)
+    keys: tuple[str, ...] = ("path",)
+
+    def rank(self, library: Library, query: QueryFeatures, exclude: int = -1) -> Ranking:
+        frames, offsets = library.packed("path")
+        d = dist.dtw_euclidean_to_library(query.arrays["path"], frames, offsets)
+        return _sorted(np.arange(len(library), dtype=np.int64), d, exclude)
+
+
+@dataclass(frozen=True)
 class PooledEmbedding:
     """Euclidean distance of the pooled embeddings."""
 
@@ -257,6 +284,7 @@ METHODS: dict[str, RetrievalMethod] = {
     "paper-ksvd": DictionaryMatching("paper-ksvd", "ksvd"),
     "dtw-positions": SequenceDTW("dtw-positions", dims=POSITION_DIM, band=0.1),
     "dtw-motion": SequenceDTW("dtw-motion", dims=52, band=0.2),
+    "dtw-heading": PathDTW("dtw-heading"),
     "pooled": PooledEmbedding("pooled"),
     DEFAULT_METHOD: ShortlistThenDTW(DEFAULT_METHOD, max_radius=MAX_WARP_S * FEATURE_FPS),
 }
