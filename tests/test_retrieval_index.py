@@ -17,6 +17,7 @@ from typer.testing import CliRunner
 from quatmotion.cli import app
 from quatmotion.io import write_motion
 from quatmotion.retrieval.index import FORMAT_VERSION, ClipIndex
+from quatmotion.retrieval.methods import DEFAULT_METHOD
 from quatmotion.synthetic import generate_clip
 
 runner = CliRunner()
@@ -68,7 +69,7 @@ def test_build_search_json_and_twice_indexed_clip(clip_folder, tmp_path):
     )
     assert result.exit_code == 0, result.output
     doc = json.loads(result.output)
-    assert doc["method"] == "pooled+dtw"
+    assert doc["method"] == DEFAULT_METHOD
     names = [r["clip"] for r in doc["results"]]
     assert set(names[:2]) == {"walk_0", "walk_0_again"}
     assert doc["results"][0]["distance"] == pytest.approx(0.0, abs=1e-9)
