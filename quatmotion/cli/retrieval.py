@@ -41,7 +41,10 @@ index_app = typer.Typer(
 )
 app.add_typer(index_app, name="index")
 
-_KINDS_HELP = "Feature kinds to compute: motion, qssd, ksvd (comma-separated)."
+_KINDS_HELP = (
+    "Feature kinds to compute: motion, qssd, ksvd (comma-separated; qssd and ksvd only for "
+    "the paper-qssd and paper-ksvd methods, which cost several times motion alone)."
+)
 
 
 def _kinds(text: str) -> tuple[str, ...]:
@@ -130,7 +133,7 @@ def build_command(
     skeleton: SkeletonOption = None,
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP)] = None,
     units: UnitsOption = None,
-    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
+    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
@@ -150,7 +153,7 @@ def add_command(
     skeleton: SkeletonOption = None,
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP)] = None,
     units: UnitsOption = None,
-    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
+    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
