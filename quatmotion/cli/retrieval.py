@@ -44,7 +44,10 @@ index_app = typer.Typer(
 )
 app.add_typer(index_app, name="index")
 
-_KINDS_HELP = "Feature kinds to compute: motion, qssd, ksvd (comma-separated)."
+_KINDS_HELP = (
+    "Feature kinds to compute: motion, qssd, ksvd (comma-separated; qssd and ksvd only for "
+    "the paper-qssd and paper-ksvd methods, which cost several times motion alone)."
+)
 
 
 def _kinds(text: str) -> tuple[str, ...]:
@@ -174,7 +177,7 @@ def build_command(
     skeleton: SkeletonPath = None,
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
-    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
+    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
     label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
@@ -198,7 +201,7 @@ def add_command(
     skeleton: SkeletonPath = None,
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
-    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
+    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
     label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
@@ -288,10 +291,18 @@ def ls_command(
 
 @app.command("search")
 def search_command(
-    query: Annotated[
-        str, typer.Argument(help="An .amc/.bvh file, or an indexed clip's name, file name or stem.")
-    ],
     index: Annotated[Path, typer.Option(help="Index file (.qidx).")],
+    query: Annotated[
+        str | None,
+        typer.Argument(help="An .amc/.bvh file, or an indexed clip's name, file name or stem."),
+    ] = None,
+    queries: Annotated[
+        Path | None,
+        typer.Option(
+            help="Many queries in one process: a folder of motion files (searched recursively) "
+            "or a text file of queries, one a line (files or indexed clip names)."
+        ),
+    ] = None,
     top: Annotated[int, typer.Option(help="Results to show.")] = 20,
     method: Annotated[
         str | None, typer.Option(help="Retrieval method (default: the best measured).")
@@ -318,35 +329,61 @@ def search_command(
         name = method or DEFAULT_METHOD
         if within and method not in (None, DEFAULT_METHOD):
             raise CliInputError("--within uses the motion frames; leave out --method")
+        if (query is None) == (queries is None):
+            raise CliInputError("give one query, or --queries, not both")
         check_units(units)
         if skeleton is not None:
             require_file(skeleton)
-        path = Path(query)
-        # A motion file if there is one; else the name of an indexed clip (walk.bvh included).
-        is_file = path.suffix.lower() in MOTION_SUFFIXES and path.exists()
-        if not is_file and (skeleton is not None or units is not None):
-            raise CliInputError("--skeleton and --units apply to a query file")
+        if queries is not None:
+            if queries.is_dir():
+                texts = [
+                    str(p)
+                    for p in sorted(queries.rglob("*"))
+                    if p.is_file() and p.suffix.lower() in MOTION_SUFFIXES
+                ]
+            else:
+                require_file(queries)
+                lines = queries.read_text(encoding="utf-8").splitlines()
+                texts = [t.strip() for t in lines if t.strip() and not t.startswith("#")]
+            if not texts:
+                raise CliInputError(f"{queries}: no queries in it")
+        else:
+            texts = [str(query)]
+        answers = []
         with ClipIndex.open(index) as idx:
-            target = read_clip(path, skeleton, units) if is_file else query
-            try:
-                results = (
-                    search_within(idx, target, k=top)
-                    if within
-                    else search(idx, target, method=name, k=top)
-                )
-            except ClipNameError as error:
-                looks_like_file = path.suffix.lower() in MOTION_SUFFIXES
-                raise CliInputError(
-                    f"{query}: no such file, and {error}" if looks_like_file else str(error)
-                ) from None
+            for text in texts:
+                path = Path(text)
+                # A motion file if there is one; else an indexed clip's name (walk.bvh too).
+                is_file = path.suffix.lower() in MOTION_SUFFIXES and path.exists()
+                if not is_file and (skeleton is not None or units is not None):
+                    raise CliInputError("--skeleton and --units apply to a query file")
+                target = read_clip(path, skeleton, units) if is_file else text
+                try:
+                    answers.append(
+                        search_within(idx, target, k=top)
+                        if within
+                        else search(idx, target, method=name, k=top)
+                    )
+                except ClipNameError as error:
+                    looks_like_file = path.suffix.lower() in MOTION_SUFFIXES
+                    raise CliInputError(
+                        f"{text}: no such file, and {error}" if looks_like_file else str(error)
+                    ) from None
+    method_name = "subsequence-dtw" if within else name
     if as_json:
-        doc = {
-            "query": query,
-            "method": "subsequence-dtw" if within else name,
-            "results": [r.as_dict() for r in results],
-        }
-        print_json(doc)
+        docs = [
+            {"query": t, "method": method_name, "results": [r.as_dict() for r in rs]}
+            for t, rs in zip(texts, answers, strict=True)
+        ]
+        print_json(docs[0] if queries is None else {"method": method_name, "queries": docs})
         return
+    for text, results in zip(texts, answers, strict=True):
+        if queries is not None:
+            console.print(f"query {text}")
+        _print_results(results, within)
+
+
+def _print_results(results: list, within: bool) -> None:
     cols = ["rank", "clip", "label", "distance"] + (["frames (first-last)"] if within else [])
     table = Table(*cols)
     for r in results:

@@ -363,7 +363,7 @@ def build_index(
     paths: Iterable[str | Path],
     out: str | Path,
     *,
-    kinds: Iterable[str] = ("motion", "qssd", "ksvd"),
+    kinds: Iterable[str] = ("motion",),
     labels: dict[str, str] | None = None,
     skeletons: str | Path | None = None,
     units: str | float | None = None,

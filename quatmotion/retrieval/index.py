@@ -92,7 +92,9 @@ class IndexSettings(Settings):
     ----------
     kinds : tuple of str
         Feature kinds computed (:data:`~quatmotion.retrieval.methods.FEATURE_KINDS`): ``motion``
-        serves the default method and ``--within``; ``qssd``/``ksvd`` the paper's dictionaries.
+        serves the default method and ``--within``; ``qssd``/``ksvd`` the paper's dictionaries,
+        computed only when asked for (they cost several times ``motion`` and only the
+        ``paper-*`` methods read them).
     batch : int
         Clips per committed transaction (what a killed build keeps).
     label_folders : bool
@@ -103,7 +105,7 @@ class IndexSettings(Settings):
         How the clips are read (BVH unit, the AMC skeletons...).
     """
 
-    kinds: tuple[str, ...] = FEATURE_KINDS
+    kinds: tuple[str, ...] = ("motion",)
     batch: int = 16
     label_folders: bool = False
     label_sidecars: bool = True

@@ -53,6 +53,9 @@ def method_keys(method: str) -> tuple[str, ...]:
     """The stored feature arrays a method reads."""
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    explicit = getattr(METHODS[method], "keys", None)
+    if explicit is not None:
+        return tuple(explicit)
     keys: list[str] = []
     for kind in METHODS[method].kinds:
         keys += ["frames", "embedding"] if kind == "motion" else [kind]
