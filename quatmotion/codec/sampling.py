@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion.codec._decode_kernels import evaluate_at, nlerp_rows
+from quatmotion.codec._decode_kernels import sample_poses
 from quatmotion.codec.channels import _kernel_tables, _rotations_kernel
 from quatmotion.codec.spline import MIN_SPLINE_FRAMES, knot_vector, segment_bounds
 from quatmotion.errors import FormatError
@@ -90,6 +90,8 @@ class ClipSampler:
         self._spline = spline
         self._frame_rotations: NDArray[np.float64] | None = None
         self._names = {n: j for j, n in enumerate(parts.skeleton.joint_names)}
+        self._all = np.arange(parts.skeleton.n_joints, dtype=np.int64)
+        self._selections: dict[bytes, tuple] = {}
 
     def _flatten(self, plan, rows, cols, scale) -> _Spline | None:
         knots, knot_start, coef, row_start, first, last = [], [0], [], [], [], []
@@ -148,6 +150,9 @@ class ClipSampler:
         return out
 
     def _positions(self, times, mode: str) -> tuple[NDArray[np.float64], bool]:
+        if isinstance(times, float | int) and mode == "clamp" and np.isfinite(times):
+            u = min(max(float(times) * self.fps, 0.0), self.n_frames - 1.0)  # the one-pose path
+            return np.array([u]), True
         if mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(map(repr, MODES))}, not {mode!r}")
         try:
@@ -181,52 +186,48 @@ class ClipSampler:
             self._ref[sel],
         )  # fmt: skip
 
+    def _tables(self, sel: NDArray[np.int64]) -> tuple:
+        """The kernel's arguments that depend on the joint selection (cached per selection)."""
+        key = sel.tobytes()
+        cached = self._selections.get(key)
+        if cached is not None:
+            return cached
+        L = self._layout
+        sp = self._spline
+        if sp is None:
+            cols_at = np.zeros(0, dtype=np.int64)
+            spline = (_NO_INT, _NO_INT, _NO_FLOAT, np.zeros(1, dtype=np.int64),
+                      np.zeros((0, 0)), _NO_INT, _NO_INT, _NO_FLOAT, np.zeros((0, 0)))  # fmt: skip
+        else:
+            cols_at = np.flatnonzero(np.isin(sp.cols, self._needed_columns(sel)))
+            corr = sp.correction if sp.correction is not None else np.zeros((0, 0))
+            spline = (
+                sp.seg_first, sp.seg_last, sp.knots, sp.knot_start,
+                np.ascontiguousarray(sp.coef[:, cols_at]), sp.row_start,
+                np.ascontiguousarray(sp.cols[cols_at]), np.ascontiguousarray(sp.scale[cols_at]),
+                corr,
+            )  # fmt: skip
+        rotation = tuple(
+            np.ascontiguousarray(a[sel])
+            for a in (L.kinds, L.starts, L.counts, self._dof_axes, self._pre, self._ref)
+        )
+        cached = (spline, sel, rotation)
+        if len(self._selections) > 32:
+            self._selections.clear()
+        self._selections[key] = cached
+        return cached
+
     def sample(self, times, joints=None, *, mode: str = "clamp"):
         """See :meth:`quatmotion.codec.archive.Archive.sample`."""
-        sel = self._joints(joints)
+        sel = self._all if joints is None else self._joints(joints)
         u, scalar = self._positions(times, mode)
-        T = self.n_frames
-        i0 = np.minimum(np.floor(u).astype(np.int64), T - 1)
-        frac = u - i0
-        n = len(u)
-        root = np.empty((n, 3))
-        rot = np.empty((n, len(sel), 4))
-        on_spline = np.zeros(n, dtype=bool)
-        sp = self._spline
-        if sp is not None:
-            seg = np.searchsorted(sp.seg_first, u, side="right") - 1
-            segc = np.maximum(seg, 0)
-            on_spline = (seg >= 0) & (u <= sp.seg_last[segc])
-        if on_spline.any():
-            k = np.flatnonzero(on_spline)
-            need = self._needed_columns(sel)
-            cols_at = np.flatnonzero(np.isin(sp.cols, need))
-            out = np.empty((len(k), len(cols_at)))
-            evaluate_at(
-                sp.knots, sp.knot_start, np.ascontiguousarray(sp.coef[:, cols_at]), sp.row_start,
-                segc[k], u[k] - sp.seg_first[segc[k]], out,
-            )  # fmt: skip
-            X = np.zeros((len(k), self._layout.n_channels))
-            X[:, sp.cols[cols_at]] = out / sp.scale[cols_at]
-            if sp.correction is not None:
-                j1 = np.minimum(i0[k] + 1, T - 1)
-                f = frac[k, None]
-                X += (1.0 - f) * sp.correction[i0[k]] + f * sp.correction[j1]
-            root[k] = X[:, :3]
-            rot[k] = self._rotations(X, sel)
-        rest = np.flatnonzero(~on_spline)
-        if len(rest):
-            a = i0[rest]
-            b = (a + 1) % T if mode == "loop" else np.minimum(a + 1, T - 1)
-            f = frac[rest]
-            R = self.frame_rotations()
-            ra, rb = R[a][:, sel], R[b][:, sel]
-            out = np.empty_like(ra)
-            nlerp_rows(ra, rb, f, out)
-            rot[rest] = out
-            root[rest] = (1.0 - f[:, None]) * self.channels[a, :3] + f[:, None] * self.channels[
-                b, :3
-            ]
+        spline, sel, rotation = self._tables(sel)
+        root = np.empty((len(u), 3))
+        rot = np.empty((len(u), len(sel), 4))
+        sample_poses(
+            u, mode == "loop", *spline, self.channels, self.frame_rotations(), sel, *rotation,
+            root, rot,
+        )  # fmt: skip
         if scalar:
             return root[0], rot[0]
         return root, rot
@@ -237,6 +238,10 @@ class ClipSampler:
         for j in sel:
             cols.append(np.arange(L.starts[j], L.starts[j] + L.counts[j]))
         return np.unique(np.concatenate(cols))
+
+
+_NO_INT = np.zeros(0, dtype=np.int64)
+_NO_FLOAT = np.zeros(0)
 
 
 def sampler_for(archive, clip: int | str) -> ClipSampler:

@@ -193,13 +193,11 @@ class ClipPlan:
             raise FormatError("clip: segment breaks out of range")
         inserted = {}
         for s in range(len(breaks) + 1):
-            knots = []
-            pos = 0
-            for _ in range(r.uvarint(n_frames)):
-                pos += r.uvarint(n_frames)
-                knots.append(pos)
-            if knots:
-                inserted[s] = tuple(knots)
+            deltas = r.uvarints(r.uvarint(n_frames))
+            if len(deltas):
+                if deltas.max() > n_frames:
+                    raise FormatError(f"clip: an inserted knot exceeds {n_frames}")
+                inserted[s] = tuple(int(k) for k in np.cumsum(deltas.astype(np.int64)))
         return cls(spacing, step, tuple(breaks), inserted)
 
 
