@@ -166,3 +166,17 @@ def test_corrections_are_exact_at_frames(clips, monkeypatch):
     s_root, s_rot = archive.sample(0, np.arange(entry.n_frames) / entry.fps)
     assert quat.angle(s_rot, rot).max() < 1e-9
     assert np.abs(s_root - root).max() < 1e-9
+
+
+def test_bench_resampling_keeps_the_shared_frames(clips):
+    from quatmotion.bench.decode import resample
+
+    clip = clips[0]  # 100 frames
+    slow = resample(clip, clip.fps / 5)
+    assert slow.n_frames == 20 and slow.fps == clip.fps / 5
+    assert quat.angle(slow.rotations, clip.rotations[::5]).max() < 1e-9
+    assert np.abs(slow.root_translation - clip.root_translation[::5]).max() < 1e-9
+    half = resample(clip, clip.fps * 2)
+    assert half.n_frames == 199
+    mid = quat.slerp(clip.rotations[3], clip.rotations[4], 0.5)
+    assert quat.angle(half.rotations[7], mid).max() < 1e-9
