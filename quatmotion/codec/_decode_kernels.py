@@ -6,7 +6,9 @@ Conventions
 -----------
 * A clip's spline is flattened across segments: ``knots`` holds every spline segment's clamped
   knot vector back to back (``knot_start[s]`` .. ``knot_start[s + 1]``), ``coef`` every
-  segment's coefficient rows (``row_start[s]`` ..), one column per channel evaluated.
+  segment's coefficient rows (``row_start[s]`` ..), one column per channel evaluated; the
+  de Boor steps are :func:`quatmotion.codec.spline._evaluate`'s, so that frame times give the
+  decoded frames.
 * Positions ``x`` are in frames from the segment's first frame, within ``[0, L - 1]``.
 """
 
@@ -17,7 +19,7 @@ import numpy as np
 
 from quatmotion.codec.channels import _rotations_kernel
 
-__all__ = ["evaluate_at", "nlerp_rows", "read_uvarints", "sample_poses"]
+__all__ = ["read_uvarints", "sample_poses"]
 
 
 @numba.njit(cache=True)
@@ -47,20 +49,6 @@ def _evaluate_point(knots, t0, m, coef, r0, xv, d, out, k):  # pragma: no cover
                 d[q, ch] = (1.0 - alpha) * d[q - 1, ch] + alpha * d[q, ch]
     for ch in range(C):
         out[k, ch] = d[3, ch]
-
-
-@numba.njit(cache=True)
-def evaluate_at(knots, knot_start, coef, row_start, seg, x, out):  # pragma: no cover
-    """``out[k] = spline_seg[k](x[k])`` for every sample ``k`` (de Boor, as
-    :func:`quatmotion.codec.spline._evaluate` so that frame times give the same values).
-
-    Shapes: ``seg, x`` (n,), ``coef`` (rows, c), ``out`` (n, c).
-    """
-    d = np.empty((4, coef.shape[1]))
-    for k in range(x.shape[0]):
-        s = seg[k]
-        t0 = knot_start[s]
-        _evaluate_point(knots, t0, knot_start[s + 1] - t0, coef, row_start[s], x[k], d, out, k)
 
 
 @numba.njit(cache=True)
@@ -157,27 +145,6 @@ def sample_poses(
                 norm = np.sqrt(norm)
                 for c in range(4):
                     out_rot[k, j, c] /= norm
-
-
-@numba.njit(cache=True)
-def nlerp_rows(a, b, frac, out):  # pragma: no cover
-    """Normalised lerp of unit quaternions ``a, b`` ``(n, J, 4)`` by ``frac`` ``(n,)`` along
-    the shorter arc, into ``out``."""
-    n, J = a.shape[0], a.shape[1]
-    for k in range(n):
-        f = frac[k]
-        for j in range(J):
-            dot = a[k, j, 0] * b[k, j, 0] + a[k, j, 1] * b[k, j, 1]
-            dot += a[k, j, 2] * b[k, j, 2] + a[k, j, 3] * b[k, j, 3]
-            sign = -1.0 if dot < 0.0 else 1.0
-            norm = 0.0
-            for c in range(4):
-                v = (1.0 - f) * a[k, j, c] + f * sign * b[k, j, c]
-                out[k, j, c] = v
-                norm += v * v
-            norm = np.sqrt(norm)
-            for c in range(4):
-                out[k, j, c] /= norm
 
 
 @numba.njit(cache=True)

@@ -38,7 +38,7 @@ _CACHED_CLIPS = 16
 
 @dataclass(frozen=True)
 class _Spline:
-    """A clip's spline segments flattened for :func:`evaluate_at`."""
+    """A clip's spline segments flattened for the sampling kernel."""
 
     cols: NDArray[np.int64]  # active channels (coefficient columns)
     scale: NDArray[np.float64]  # (c,) channel = weighted / scale
