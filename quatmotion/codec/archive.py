@@ -66,7 +66,6 @@ class DamagedClip:
     reason: str
 
 
-
 @dataclass(frozen=True)
 class ClipParts:
     """One clip's parts before its method payload is decoded (:meth:`Archive.clip_parts`)."""
@@ -356,7 +355,6 @@ class Archive:
         """What decoding clip ``clip`` needs, parsed (its prefix read, the method payload not
         yet decoded): the shared step of :meth:`read_channels` and of sampling."""
         i = self.index_of(clip)
-        self._check_intact(i)
         self._check_intact(i)
         entry = self.header.clips[i]
         skeleton = self.skeleton(entry.skeleton)
