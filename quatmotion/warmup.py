@@ -54,6 +54,8 @@ KERNEL_MODULES: tuple[str, ...] = (
     "quatmotion.sparse._kernels",
     "quatmotion.sparse._linear_kernels",
     "quatmotion.codec.channels",
+    "quatmotion.codec.entropy",
+    "quatmotion.codec._decode_kernels",
     "quatmotion.codec.spline",
     "quatmotion.codec.methods.spline",
     "quatmotion.retrieval._kernels",
@@ -326,6 +328,7 @@ def _compress(space: _Workspace, methods: Iterable[str]) -> None:
         with codec.open(out) as library:
             for name in library.names():
                 library.read(name)
+                library.sample(name, [0.0, 0.01])
 
 
 def _codec(space: _Workspace) -> None:
