@@ -264,9 +264,9 @@ def _search_by_example(
     report = build_index(files, index_path, kinds=("motion",), labels=labels)
     query = clips[0][0]
     with ClipIndex.open(index_path) as index:
-        results = search(index, query.name, top=5)
+        results = search(index, query.name, k=5)
     console.print(
-        f"search by example: {report.added} clips indexed ({index_path}); the clips most like "
+        f"search by example: {len(report.added)} clips indexed ({index_path}); the clips most like "
         f"{query.name} under {DEFAULT_METHOD}, the example itself left out",
         markup=False,
         highlight=False,
@@ -553,7 +553,7 @@ def build_library(
         workers=workers,
         progress=lambda done, total: report("index", done, total),
     )
-    failed.update(dict(built.failed))
+    failed.update({str(f.item): f.message for f in built.failures})
     pose_path = None
     if poses:
         import functools

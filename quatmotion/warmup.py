@@ -54,6 +54,8 @@ KERNEL_MODULES: tuple[str, ...] = (
     "quatmotion.sparse._kernels",
     "quatmotion.sparse._linear_kernels",
     "quatmotion.codec.channels",
+    "quatmotion.codec.entropy",
+    "quatmotion.codec._decode_kernels",
     "quatmotion.codec.spline",
     "quatmotion.codec.methods.spline",
     "quatmotion.retrieval._kernels",
@@ -326,6 +328,7 @@ def _compress(space: _Workspace, methods: Iterable[str]) -> None:
         with codec.open(out) as library:
             for name in library.names():
                 library.read(name)
+                library.sample(name, [0.0, 0.01])
 
 
 def _codec(space: _Workspace) -> None:
@@ -349,9 +352,9 @@ def _index_and_search(space: _Workspace, kinds: tuple[str, ...]) -> None:
     with ClipIndex.open(out) as index:
         for method in METHODS:
             if set(METHODS[method].kinds) <= set(kinds):
-                search(index, query, method=method, top=2)
+                search(index, query, method=method, k=2)
         if "motion" in kinds:
-            search_within(index, query, top=2)
+            search_within(index, query, k=2)
 
 
 def _retrieval(space: _Workspace) -> None:

@@ -196,7 +196,7 @@ def motion_library(tmp_path_factory) -> dict[str, Path]:
     from quatmotion.io import read_motion, write_motion
     from quatmotion.pose.data import PoseClip
     from quatmotion.pose.library import PoseLibrary
-    from quatmotion.retrieval.build import build_index
+    from quatmotion.retrieval import ClipIndex, IndexSettings
     from quatmotion.synthetic import generate_clip
 
     root = tmp_path_factory.mktemp("served")
@@ -207,8 +207,9 @@ def motion_library(tmp_path_factory) -> dict[str, Path]:
         kind, seed = name.rsplit("_", 1)
         write_motion(generate_clip(kind, int(seed), n_frames=120), clips / f"{name}.bvh")
     labels = {name: name.rsplit("_", 1)[0] for name in [*names, "kick_0"]}
-    report = build_index([clips], root / "lib.qidx", kinds=("motion",), labels=labels, workers=1)
-    assert report.added == 7 and not report.failed, report
+    settings = IndexSettings(kinds=("motion",))
+    report = ClipIndex.build([clips], root / "lib.qidx", settings, labels=labels, workers=1)
+    assert len(report.added) == 7 and not report.failures, report
     codec.compress([clips / f"{n}.bvh" for n in names], root / "lib.qmz", max_error=1.0)
     prepared = [
         PoseClip.from_motion(read_motion(f), fps=30, height=170, name=str(f))

@@ -56,11 +56,12 @@ def test_a_write_error_names_the_target_not_the_temporary_file(tmp_path, monkeyp
 def test_an_index_that_cannot_be_written_names_its_file(tmp_path):
     """SQLite's "attempt to write a readonly database" (or "unable to open database file")
     becomes an OSError naming the index, which the command line turns into one error line."""
+    from quatmotion.collection import ClipRef
     from quatmotion.retrieval.index import ClipIndex, ClipRecord
 
     path = tmp_path / "x.qidx"
     ClipIndex.create(path).close()
-    record = ClipRecord("walk", "walk.bvh", "0" * 64, "", 10, 30.0, "s", {})
+    record = ClipRecord(ClipRef("walk", "0" * 64, "/walk.bvh"), "", 10, 30.0, "s", {})
     with ClipIndex.open(path) as index, pytest.raises(OSError) as caught:  # opened read-only
-        index.add([record])
+        index.store([record])
     assert caught.value.filename == str(path) and "readonly" in caught.value.strerror

@@ -362,7 +362,7 @@ def test_search_takes_an_indexed_clip_by_name_and_refuses_an_ambiguous_one(tmp_p
     built = _invoke("index", "build", *folders, "-o", index, "--kinds", "motion")
     assert built.exit_code == 0, built.output
     message = _assert_bad_input(_invoke("search", "walk", "--index", index), "ambiguous")
-    assert "a/walk.bvh" in message and "b/walk.bvh" in message
+    assert "(a/walk, b/walk)" in message  # the two clips by their names (issue 18)
     result = _invoke("search", "b/walk.bvh", "--index", index, "--json")  # not a file here
     assert result.exit_code == 0, result.output
     paths = [r["path"] for r in json.loads(result.stdout)["results"]]

@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from quatmotion import codec
+from quatmotion.collection import ClipRef
 from quatmotion.errors import ClipNameError
 from quatmotion.io.names import match_clip
 from quatmotion.retrieval.index import ClipIndex, ClipRecord
@@ -51,15 +52,16 @@ def test_a_qmz_reads_a_clip_by_its_file_name():
 
 
 def test_an_index_finds_one_clip_of_a_name_or_says_which_ones(tmp_path):
-    def record(path: str) -> ClipRecord:
-        return ClipRecord(path.rsplit("/", 1)[-1][:-4], path, "0" * 64, "", 10, 30.0, "s", {})
+    def record(name: str) -> ClipRecord:
+        ref = ClipRef(name, "0" * 64, f"/data/{name}.bvh")
+        return ClipRecord(ref, "", 10, 30.0, "s", {})
 
     with ClipIndex.create(tmp_path / "x.qidx") as index:
-        index.add([record("a/walk.bvh"), record("b/walk.bvh"), record("a/run.bvh")])
-        assert index.find("run").path == "a/run.bvh"
-        assert index.find("b/walk").path == "b/walk.bvh"
-        with pytest.raises(ValueError, match="ambiguous"):
+        index.store([record("a/walk"), record("b/walk"), record("run")])
+        assert index.find("run").path == "/data/run.bvh"
+        assert index.find("b/walk").name == "b/walk"
+        with pytest.raises(ValueError, match=r"ambiguous.*a/walk, b/walk"):
             index.remove(["walk"])
         assert len(index) == 3  # nothing removed
-        assert index.remove(["a/walk.bvh", "run.bvh"]) == ["a/walk.bvh", "a/run.bvh"]
-        assert [c.path for c in index.clips()] == ["b/walk.bvh"]
+        assert index.remove(["a/walk.bvh", "run.bvh"]) == ["a/walk", "run"]
+        assert [c.name for c in index.clips()] == ["b/walk"]

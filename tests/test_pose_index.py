@@ -241,7 +241,7 @@ def test_library_file_checks_its_format_version(tmp_path: pathlib.Path) -> None:
     with np.load(path) as data:
         arrays = {k: data[k] for k in data.files}
     meta = json.loads(str(arrays["meta"]))
-    for version, word in ((meta["version"] + 1, "newer"), (0, "differs")):
+    for version, word in ((meta["version"] + 1, "newer"), (1, "no longer read")):
         arrays["meta"] = np.asarray(json.dumps({**meta, "version": version}))
         with open(path, "wb") as fh:
             np.savez(fh, **arrays)

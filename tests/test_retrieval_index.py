@@ -17,6 +17,7 @@ from typer.testing import CliRunner
 from quatmotion.cli import app
 from quatmotion.io import write_motion
 from quatmotion.retrieval.index import FORMAT_VERSION, ClipIndex
+from quatmotion.retrieval.methods import DEFAULT_METHOD
 from quatmotion.synthetic import generate_clip
 
 runner = CliRunner()
@@ -68,7 +69,7 @@ def test_build_search_json_and_twice_indexed_clip(clip_folder, tmp_path):
     )
     assert result.exit_code == 0, result.output
     doc = json.loads(result.output)
-    assert doc["method"] == "pooled+dtw"
+    assert doc["method"] == DEFAULT_METHOD
     names = [r["clip"] for r in doc["results"]]
     assert set(names[:2]) == {"walk_0", "walk_0_again"}
     assert doc["results"][0]["distance"] == pytest.approx(0.0, abs=1e-9)
@@ -131,7 +132,9 @@ def test_remove_and_ls(clip_folder, tmp_path):
     _build(clip_folder, out)
     assert runner.invoke(app, ["index", "remove", str(out), "walk_1"]).exit_code == 0
     listed = runner.invoke(app, ["index", "ls", str(out), "--json"])
-    names = {r["name"] for r in json.loads(listed.output)}
+    doc = json.loads(listed.output)
+    names = {r["name"] for r in doc["clips"]}
+    assert doc["settings"]["kinds"] == ["motion"] and doc["format"]["version"] == FORMAT_VERSION
     assert "walk_1" not in names and len(names) == 8
 
 
@@ -197,3 +200,23 @@ def test_bad_file_is_skipped_and_the_pool_builds_the_same_index(clip_folder, tmp
     assert result.exit_code == 1, result.output
     # The same rows, features included, whichever ran the per-clip jobs.
     assert _rows(inline) == _rows(pooled)
+
+
+def test_search_queries_in_one_process_equal_one_at_a_time(clip_folder, tmp_path):
+    out = tmp_path / "lib.qidx"
+    assert _build(clip_folder, out).exit_code == 0
+    files = sorted(str(p) for p in clip_folder.glob("*.bvh"))[:4]
+    listing = tmp_path / "queries.txt"
+    listing.write_text("\n".join(files + ["squat_1"]) + "\n", encoding="utf-8")
+    args = ["--index", str(out), "--top", "5", "--json"]
+    batch = runner.invoke(app, ["search", "--queries", str(listing), *args])
+    assert batch.exit_code == 0, batch.output
+    docs = json.loads(batch.output)["queries"]
+    assert [d["query"] for d in docs] == files + ["squat_1"]
+    for d in docs:
+        single = runner.invoke(app, ["search", d["query"], *args])
+        assert json.loads(single.output)["results"] == d["results"]
+    folder = runner.invoke(app, ["search", "--queries", str(clip_folder), *args])
+    assert [d["query"] for d in json.loads(folder.output)["queries"]][:4] == files
+    both = runner.invoke(app, ["search", files[0], "--queries", str(listing), *args])
+    assert both.exit_code != 0 and "not both" in both.output

@@ -14,7 +14,14 @@ from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, Library, Query
 from quatmotion.synthetic import generate_clip
 
 KINDS = ("walk", "squat", "kick", "jumping_jack")
-POSITION_METHODS = ("dtw-positions", "dtw-motion", "pooled", DEFAULT_METHOD)
+POSITION_METHODS = (
+    "dtw-positions",
+    "dtw-motion",
+    "dtw-heading",
+    "pooled",
+    "pooled+dtw",
+    DEFAULT_METHOD,
+)
 
 
 @pytest.fixture(scope="module")

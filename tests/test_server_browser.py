@@ -79,13 +79,14 @@ def served(motion_library, tmp_path) -> Iterator[str]:
 def real_library(real_clips, tmp_path_factory) -> dict[str, Path]:
     """A ``.qmz`` library and a ``.qidx`` index of one clip of each skeleton family."""
     from quatmotion import codec
-    from quatmotion.retrieval.build import build_index
+    from quatmotion.retrieval import ClipIndex, IndexSettings
 
     root = tmp_path_factory.mktemp("real")
     paths = list(real_clips.values())
     codec.compress(paths, root / "real.qmz", max_error=1.0)
-    report = build_index(paths, root / "real.qidx", kinds=("motion",), workers=1)
-    assert report.added == len(paths) and not report.failed, report
+    settings = IndexSettings(kinds=("motion",))
+    report = ClipIndex.build(paths, root / "real.qidx", settings, workers=1)
+    assert len(report.added) == len(paths) and not report.failures, report
     return {"library": root / "real.qmz", "index": root / "real.qidx"}
 
 

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from quatmotion import codec, io
+from quatmotion.collection import ReadSettings
 from quatmotion.datasets import data_root
 from quatmotion.motion import forward_kinematics
-from quatmotion.retrieval.build import build_index
+from quatmotion.retrieval import ClipIndex, IndexSettings
 from quatmotion.synthetic import cmu_skeleton, generate_clip
 
 DATA = data_root(must_exist=False)
@@ -82,14 +83,15 @@ def test_build_index_hears_the_doubts_its_workers_find(tmp_path, studio_walk):
     io.write_bvh(studio, folder / "studio.bvh")
     io.write_bvh(generate_clip("walk", 1, n_frames=60), folder / "walk.bvh")
     heard = []
-    report = build_index(
-        [folder], tmp_path / "x.qidx", kinds=("motion",), workers=2,
+    report = ClipIndex.build(
+        [folder], tmp_path / "x.qidx", IndexSettings(kinds=("motion",)), workers=2,
         on_doubt=lambda source, doubt: heard.append((source, doubt.kind)),
     )  # fmt: skip
-    assert report.added == 2 and heard == [(str(folder / "studio.bvh"), "unit")]
+    assert len(report.added) == 2 and heard == [(str(folder / "studio.bvh"), "unit")]
     heard.clear()
-    build_index(
-        [folder / "studio.bvh"], tmp_path / "y.qidx", kinds=("motion",), units="cm", workers=1,
+    settings = IndexSettings(kinds=("motion",), read=ReadSettings(units="cm"))
+    ClipIndex.build(
+        [folder / "studio.bvh"], tmp_path / "y.qidx", settings, workers=1,
         on_doubt=lambda source, doubt: heard.append(source),
     )  # fmt: skip
     assert heard == []

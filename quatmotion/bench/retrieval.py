@@ -37,7 +37,7 @@ from quatmotion.retrieval.features import (
 )
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, Library, QueryFeatures, Ranking
 
-__all__ = ["run", "retrieval_scores"]
+__all__ = ["neighbour_share", "run", "retrieval_scores"]
 
 TOP_N = 20
 PRECISION_K = 10
@@ -170,13 +170,17 @@ def retrieval_scores(rankings: list[Ranking], labels: list[str]) -> dict[str, An
 
 def _leave_one_out(data: _Dataset, method: str) -> tuple[dict[str, Any], list[float]]:
     library = Library(data.features, data.fingerprints)
-    rankings, times = [], []
+    rankings: list[Ranking] = []
+    times: list[float] = []
     for i in range(len(data.features)):
         query = QueryFeatures(data.features[i], data.fingerprints[i])
         t0 = time.perf_counter()
         rankings.append(METHODS[method].rank(library, query, exclude=i))
         times.append(time.perf_counter() - t0)
-    return retrieval_scores(rankings, data.labels), times
+    scores = retrieval_scores(rankings, data.labels)
+    if data.name in NEIGHBOURS:
+        scores["neighbour_share10"] = neighbour_share(rankings, data.labels, NEIGHBOURS[data.name])
+    return scores, times
 
 
 def _latency(
@@ -207,6 +211,42 @@ def _latency(
     }
 
 
+def _warped(P: np.ndarray, idx: np.ndarray, rng: np.random.Generator, noise: float) -> np.ndarray:
+    """Frames ``idx`` of ``P`` ``(T, d)`` with Gaussian jitter of ``noise``, float32."""
+    rows = P.astype(np.float64)[idx.astype(int)]
+    return (rows + rng.normal(0.0, noise, rows.shape)).astype(np.float32)
+
+
+def neighbour_share(
+    rankings: list[Ranking], labels: list[str], groups: tuple[tuple[str, ...], ...], k: int = 10
+) -> dict[str, Any]:
+    """Share of a query's top ``k`` taken by a *neighbouring* class: another class of the
+    query's group in ``groups`` (e.g. walk against walk-left). Per query class and over all
+    the queries of the groups' classes (``None`` when no query is in a group)."""
+    lab = np.asarray(labels)
+    per: dict[str, list[float]] = {}
+    for i, ranking in enumerate(rankings):
+        group = next((g for g in groups if labels[i] in g), None)
+        if group is None:
+            continue
+        top = lab[ranking.clips[:k]]
+        per.setdefault(labels[i], []).append(
+            float(np.mean([(t in group) and t != labels[i] for t in top])) if top.size else 0.0
+        )
+    every = [v for vs in per.values() for v in vs]
+    return {
+        "all": float(np.mean(every)) if every else None,
+        "per_class": {c: float(np.mean(v)) for c, v in sorted(per.items())},
+    }
+
+
+NEIGHBOURS: dict[str, tuple[tuple[str, ...], ...]] = {
+    "bandai1": (("walk", "walk-left", "walk-right", "walk-back"), ("bye", "byebye")),
+}
+"""Per data set, the groups of classes whose confusion matters most (issue 19): walks that turn
+or not, waving one hand or both."""
+
+
 def _synthetic_library(
     sources: list[dict[str, np.ndarray]], prints: list[str], n: int, rng: np.random.Generator
 ) -> Library:
@@ -226,6 +266,7 @@ def _synthetic_library(
         V = np.gradient(G, axis=0) * FEATURE_FPS * HORIZON_S if len(G) > 1 else np.zeros_like(G)
         item = {
             "frames": G.astype(np.float32),
+            "path": _warped(src["path"], idx, rng, 0.01),
             "embedding": motion_embedding(G, V).astype(np.float32),
         }
         for kind in ("qssd", "ksvd"):

@@ -66,6 +66,7 @@ import numpy as np
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench import provenance
 from quatmotion.codec.compress import clip_jobs, code_clip
+from quatmotion.collection import ReadSettings, find_clips
 from quatmotion.io import read_motion
 from quatmotion.parallel import available_cpus, imap_batch, run_batch, shutdown_pools
 from quatmotion.pose.data import PoseClip
@@ -87,7 +88,8 @@ REPEATS = 3
 def retrieval_features(path: str) -> ClipRecord:
     """The per-clip job of ``quatmotion index build`` on one BVH file (the default method's
     motion features), as the index build runs it."""
-    return index_clip(ClipJob(str(path), None, ("motion",), "", ""))
+    source = find_clips([path])[0]
+    return index_clip(ClipJob(source, ("motion",), ReadSettings(strict=False)))
 
 
 def generated_pose_clip(spec: tuple[str, int, int], *, fps: float, height: float) -> PoseClip:

@@ -14,7 +14,6 @@ distance.
 
 from __future__ import annotations
 
-import functools
 import time
 from pathlib import Path
 from typing import Annotated
@@ -39,7 +38,6 @@ from quatmotion.cli._common import (
     console,
     doubt_reporter,
     error_console,
-    number_in,
     print_json,
     progress_bar,
     read_clip,
@@ -55,8 +53,7 @@ pose_app = typer.Typer(
 )
 app.add_typer(pose_app, name="pose")
 
-FPS_RANGE = (1.0, 1000.0)
-HEIGHT_RANGE = (50.0, 300.0)  # cm: a stature from a small child to beyond the tallest adult
+from quatmotion.pose.library import FPS_RANGE  # noqa: E402  (the settings' ranges)
 
 
 def _echo(message: str) -> None:
@@ -110,25 +107,14 @@ def index_command(
     """
     from quatmotion.io import find_motion_files
     from quatmotion.parallel import resolve_scheduler
-    from quatmotion.pose.library import METRICS, PoseLibrary, load_pose_clip
+    from quatmotion.pose.library import PoseLibrary
 
     with user_errors():
-        if metric not in METRICS:
-            raise CliInputError(f"unknown --metric {metric!r}; choose from {', '.join(METRICS)}")
-        number_in("--fps", fps, *FPS_RANGE)
-        number_in("--height", height, *HEIGHT_RANGE)
-        for option, value in (
-            ("--rank", rank),
-            ("--unlabeled", unlabeled),
-            ("--pairs", pairs),
-            ("--fit-poses", fit_poses),
-            ("--index-threads", index_threads),
-        ):
-            at_least(option, value, 1)
-        at_least("--seed", seed, 0)
-        check_units(units)
-        if skeleton is not None:
-            require_file(skeleton)
+        settings = _pose_settings(
+            fps=fps, height=height, metric=metric, rank=rank, n_unlabeled=unlabeled,
+            n_pairs=pairs, seed=seed, fit_poses=fit_poses, index_threads=index_threads,
+            skeleton=skeleton, units=units,
+        )  # fmt: skip
         where = resolve_scheduler(scheduler, workers=workers)
         files = find_motion_files(paths)
         check_outputs([output], [*files, skeleton], force=force)
@@ -136,33 +122,95 @@ def index_command(
 
         ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
         _echo(f"{len(files)} clips, prepared on {where.describe()}")
-        load = functools.partial(
-            load_pose_clip, fps=fps, height=height, skeleton=skeleton, units=units
-        )
         with progress_bar(error_console) as bar:
-            library, failures = PoseLibrary.build_streamed(
-                files,
-                load,
-                fit_poses=fit_poses,
-                rank=rank,
-                n_unlabeled=unlabeled,
-                n_pairs=pairs,
-                seed=seed,
-                metric_name=metric,
-                scheduler=where,
-                index_threads=index_threads,
+            report = PoseLibrary.build(
+                paths,
+                output,
+                settings,
+                runner=where,
+                workers=workers,
                 progress=_StageBars(bar),
                 log=lambda message: bar.console.print(message, markup=False, highlight=False),
                 on_doubt=doubt_reporter(bar),
             )
-        library.save(output)
-    report_skipped(failures)
+    library = report.details["library"]
+    report_skipped(report.failures)
     _echo(
         f"wrote {output}: {len(library.clip_of)} poses of {len(library.clip_names)} clips; "
-        f"{len(failures)} of {len(files)} clips failed"
+        f"{len(report.failures)} of {len(files)} clips failed"
     )
-    if failures:
+    if report.failures:
         raise typer.Exit(code=1)
+
+
+_OPTION_OF = {
+    "fps": "--fps", "height": "--height", "metric": "--metric", "rank": "--rank",
+    "n_unlabeled": "--unlabeled", "n_pairs": "--pairs", "seed": "--seed",
+    "fit_poses": "--fit-poses", "index_threads": "--index-threads",
+}  # fmt: skip
+
+
+def _pose_settings(*, skeleton: Path | None, units: str | None, **values):  # -> PoseSettings
+    """One :class:`PoseSettings` of the options, validated once by its constraints; a value
+    refused is named by its option."""
+    import re
+
+    from quatmotion.collection import ReadSettings
+    from quatmotion.pose.library import PoseSettings
+
+    check_units(units)
+    if skeleton is not None and not skeleton.exists():
+        raise CliInputError(f"{skeleton}: no such skeleton file or folder")
+    read = ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton))
+    try:
+        return PoseSettings(**values, read=read)
+    except ValueError as error:
+        text = str(error)
+        found = re.search(r"The '(\w+)' parameter of PoseSettings must be (.*)", text)
+        if found is None:
+            raise CliInputError(text) from None
+        option = _OPTION_OF.get(found.group(1), found.group(1))
+        raise CliInputError(f"{option} must be {found.group(2)}") from None
+
+
+@pose_app.command("ls")
+def ls_command(
+    library_path: Annotated[Path, typer.Argument(help="A library written by 'pose index'.")],
+    as_json: JsonOption = False,
+) -> None:
+    """List the clips of a pose library and the settings it was built with."""
+    import numpy as np
+
+    from quatmotion.pose.library import PoseLibrary
+
+    with user_errors():
+        library = PoseLibrary.open(library_path)
+        refs = library.clips()
+    settings = library.settings.to_dict() if library.settings is not None else None
+    counts = np.bincount(library.clip_of, minlength=len(refs))
+    if as_json:
+        print_json(
+            {
+                "format": {"name": library.format.name, "version": library.version},
+                "settings": settings,
+                "clips": [
+                    {**r.to_dict(), "poses": int(n)} for r, n in zip(refs, counts, strict=True)
+                ],
+            }
+        )
+        return
+    for ref, n in zip(refs, counts, strict=True):
+        console.print(f"{ref.name}\t{int(n)} poses\t{ref.path or ''}", markup=False)
+    made = (
+        "settings not recorded (version 2)"
+        if settings is None
+        else (f"{settings['metric']}, {settings['fps']:g} fps, height {settings['height']:g} cm")
+    )
+    console.print(
+        f"{len(refs)} clips, {len(library.clip_of)} poses; pose library version "
+        f"{library.version}; {made}",
+        markup=False,
+    )
 
 
 class _StageBars:

@@ -1,9 +1,12 @@
 """``quatmotion index build|add|remove|ls`` and ``quatmotion search``: a searchable clip library.
 
 ``index build`` and ``index add`` read every ``.amc``/``.bvh`` under the given folders (AMC
-skeletons by the CMU/HDM05 layouts, or from ``--skeletons DIR``), compute the features of every
-retrieval method on all cores and store them in a SQLite ``.qidx`` file; both resume (clips
-already indexed with the same content hash are skipped) and report bad files without stopping.
+skeletons by the CMU/HDM05 layouts, or from ``--skeleton FILE|DIR``), compute the features of
+every retrieval method on all cores and store them in a SQLite ``.qidx`` file
+(:meth:`quatmotion.retrieval.ClipIndex.build`, one :class:`IndexSettings` made of the options);
+both resume (clips already indexed with the same content hash are skipped, and the command says
+so), apply ``--labels`` to every clip it names, and report bad files without stopping.
+``index label`` changes labels only.
 ``search`` ranks the indexed clips for a query file or an indexed clip's name.
 """
 
@@ -41,7 +44,10 @@ index_app = typer.Typer(
 )
 app.add_typer(index_app, name="index")
 
-_KINDS_HELP = "Feature kinds to compute: motion, qssd, ksvd (comma-separated)."
+_KINDS_HELP = (
+    "Feature kinds to compute: motion, qssd, ksvd (comma-separated; qssd and ksvd only for "
+    "the paper-qssd and paper-ksvd methods, which cost several times motion alone)."
+)
 
 
 def _kinds(text: str) -> tuple[str, ...]:
@@ -56,38 +62,60 @@ def _kinds(text: str) -> tuple[str, ...]:
     return kinds
 
 
+def _settings(
+    kinds: str,
+    skeleton: Path | None,
+    skeletons: Path | None,
+    units: str | None,
+    label_folders: bool,
+):  # -> IndexSettings
+    """The one settings object of a build, from the options (checked once, by the settings'
+    constraints; the ASF option's file-or-folder checked here for its message)."""
+    from quatmotion.collection import ReadSettings
+    from quatmotion.retrieval.index import IndexSettings
+
+    if skeleton is not None and skeletons is not None:
+        raise CliInputError(
+            "give --skeleton (an ASF or a folder of them) once, not --skeletons too"
+        )
+    asf = skeleton if skeleton is not None else skeletons
+    if asf is not None and not asf.exists():
+        raise CliInputError(f"{asf}: no such skeleton file or folder")
+    check_units(units)
+    read = ReadSettings(units=units, skeleton=None if asf is None else str(asf), strict=False)
+    return IndexSettings(kinds=_kinds(kinds), label_folders=label_folders, read=read)
+
+
+def _labels_from(labels: Path | None) -> dict[str, str] | None:
+    from quatmotion.io.labels import read_labels_csv
+
+    return read_labels_csv(require_file(labels)) if labels is not None else None
+
+
 def _build(
     paths: list[Path],
     output: Path,
+    settings,  # IndexSettings
     labels: Path | None,
-    skeletons: Path | None,
-    kinds: str,
     workers: int | None,
     scheduler: str | None,
-    skeleton: Path | None = None,
-    units: str | None = None,
+    *,
+    add: bool,
 ) -> None:
-    from quatmotion.parallel import resolve_scheduler
-    from quatmotion.retrieval.build import build_index, read_labels_csv
+    from quatmotion.parallel import Runner
+    from quatmotion.retrieval.index import ClipIndex
 
     with user_errors():
-        label_map = read_labels_csv(require_file(labels)) if labels else None
-        if skeletons is not None and not skeletons.is_dir():
-            raise CliInputError(f"{skeletons}: --skeletons must be a folder of ASF files")
-        if skeleton is not None and skeletons is not None:
-            raise CliInputError("give --skeleton (one ASF) or --skeletons (a folder), not both")
-        if skeleton is not None:
-            require_file(skeleton)
-        check_units(units)
-        kind_tuple = _kinds(kinds)
+        label_map = _labels_from(labels)
         for path in paths:
             if not path.exists():
                 raise CliInputError(f"{path}: no such file or folder")
-        asf_files = sorted(skeletons.glob("*.asf")) if skeletons is not None else []
-        check_outputs([output], [*paths, labels, skeleton, *asf_files], replace=True)
+        asf = Path(settings.read.skeleton) if settings.read.skeleton else None
+        asf_files = sorted(asf.glob("*.asf")) if asf is not None and asf.is_dir() else [asf]
+        check_outputs([output], [*paths, labels, *asf_files], replace=True)
         from quatmotion.cli.warmup import ensure_kernels
 
-        learn = ("learn",) if {"qssd", "ksvd"} & set(kind_tuple) else ()
+        learn = ("learn",) if {"qssd", "ksvd"} & set(settings.kinds) else ()
         ensure_kernels("read", *learn, "retrieval", workers=workers, scheduler=scheduler)
         with progress_bar(error_console) as bar:
             task = bar.add_task("indexing", total=None)
@@ -95,31 +123,50 @@ def _build(
             def advance(done: int, total: int) -> None:
                 bar.update(task, completed=done, total=total)
 
-            report = build_index(
-                paths,
-                output,
-                kinds=kind_tuple,
-                labels=label_map,
-                skeletons=skeleton or skeletons,
-                units=units,
-                workers=workers,
-                scheduler=resolve_scheduler(scheduler, workers=workers),
-                progress=advance,
-                on_doubt=doubt_reporter(bar),
-            )
-    report_skipped(f"{path}: {reason}" for path, reason in report.failed)
-    console.print(
-        f"{output}: {report.added} clips added, {report.skipped} already indexed, "
-        f"{len(report.failed)} failed",
-        markup=False,
-        highlight=False,
-        soft_wrap=True,
+            options = {
+                "runner": Runner.resolve(scheduler, workers=workers),
+                "workers": workers,
+                "progress": advance,
+                "labels": label_map,
+                "on_doubt": doubt_reporter(bar),
+            }
+            if add:
+                report = ClipIndex.add(output, paths, settings=settings, **options)
+            else:
+                report = ClipIndex.build(paths, output, settings, **options)
+    report_skipped(report.failures)
+    resumed = " (resumed: the index was there)" if report.details.get("resumed") and not add else ""
+    _say(
+        f"{output}: {len(report.added)} clips added, {len(report.skipped)} already indexed, "
+        f"{len(report.failures)} failed{resumed}"
     )
-    if report.failed:
+    if label_map is not None:
+        _say_labels(labels, report.labels_changed, report.unmatched_labels)
+    if report.failures:
         raise typer.Exit(code=1)
 
 
-_SKELETONS_HELP = "Folder of the AMC clips' ASF files (each found by its name)."
+def _say(text: str) -> None:
+    console.print(text, markup=False, highlight=False, soft_wrap=True)
+
+
+def _say_labels(labels: Path | None, changed: int, unmatched: list[str]) -> None:
+    """One line on what a label option did, also when it did nothing."""
+    missed = (
+        f"; {len(unmatched)} keys name no clip ({', '.join(unmatched[:5])})" if unmatched else ""
+    )
+    if changed:
+        _say(f"{labels}: {changed} clips labelled{missed}")
+    else:
+        _say(f"{labels}: changed no label (every clip it names has that label already){missed}")
+
+
+_SKELETON_HELP = (
+    "ASF of the AMC clips: one file (every AMC's), or a folder of them (each found by its name)."
+)
+_SKELETONS_HELP = "Same as --skeleton with a folder (kept for older scripts)."
+_LABEL_FOLDERS_HELP = "Label clips without another label by their folder's name (CLASS/file.amc)."
+SkeletonPath = Annotated[Path | None, typer.Option("--skeleton", "-s", help=_SKELETON_HELP)]
 
 
 @index_app.command("build")
@@ -127,19 +174,23 @@ def build_command(
     paths: Annotated[list[Path], typer.Argument(help="Folders (searched recursively) or clips.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Index file to write (.qidx).")],
     labels: Annotated[Path | None, typer.Option(help="CSV with columns clip,label.")] = None,
-    skeleton: SkeletonOption = None,
-    skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP)] = None,
+    skeleton: SkeletonPath = None,
+    skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
-    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
+    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
+    label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
-    """Index clips (a new file, or resume one: clips already indexed are skipped).
+    """Index clips (a new file, or resume one: clips already indexed are skipped, and said so).
 
-    A file that cannot be read is reported and skipped; the command then exits with code 1
-    after committing the others.
+    --labels applies to every clip named, those already indexed too. A file that cannot be
+    read is reported and skipped; the command then exits with code 1 after committing the
+    others.
     """
-    _build(paths, output, labels, skeletons, kinds, workers, scheduler, skeleton, units)
+    with user_errors():
+        settings = _settings(kinds, skeleton, skeletons, units, label_folders)
+    _build(paths, output, settings, labels, workers, scheduler, add=False)
 
 
 @index_app.command("add")
@@ -147,22 +198,47 @@ def add_command(
     index: Annotated[Path, typer.Argument(help="Index file (.qidx).")],
     paths: Annotated[list[Path], typer.Argument(help="Folders (searched recursively) or clips.")],
     labels: Annotated[Path | None, typer.Option(help="CSV with columns clip,label.")] = None,
-    skeleton: SkeletonOption = None,
-    skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP)] = None,
+    skeleton: SkeletonPath = None,
+    skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
-    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion,qssd,ksvd",
+    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
+    label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
-    """Add clips to an existing index (skipping those already in it with the same content)."""
+    """Add clips to an existing index (skipping those already in it with the same content;
+    --labels relabels those too)."""
     from quatmotion.retrieval.index import ClipIndex
 
     with user_errors():
-        check_units(units)  # the options first, as build checks them
-        if skeleton is not None:
-            require_file(skeleton)
+        settings = _settings(kinds, skeleton, skeletons, units, label_folders)
         ClipIndex.open(index).close()
-    _build(paths, index, labels, skeletons, kinds, workers, scheduler, skeleton, units)
+    _build(paths, index, settings, labels, workers, scheduler, add=True)
+
+
+@index_app.command("label")
+def label_command(
+    index: Annotated[Path, typer.Argument(help="Index file (.qidx).")],
+    labels: Annotated[Path, typer.Option(help="CSV with columns clip,label.")],
+) -> None:
+    """Set or change the labels of indexed clips (by name, file name, stem or path), without
+    reading the clips again."""
+    from quatmotion.collection import ClipSource, match_keys
+    from quatmotion.retrieval.index import ClipIndex
+
+    with user_errors():
+        given = _labels_from(labels) or {}
+        require_file(index)
+        check_outputs([index], [labels], replace=True)
+        with ClipIndex.open(index, write=True) as idx:
+            sources = [
+                ClipSource(r.name, r.sha256, Path(r.ref.path) if r.ref.path else None)
+                for r in idx.rows()
+            ]
+            assignment = match_keys(given, sources)
+            changed = idx.set_labels(assignment.labels)
+
+    _say_labels(labels, changed, assignment.unmatched)
 
 
 @index_app.command("remove")
@@ -186,27 +262,47 @@ def ls_command(
     index: Annotated[Path, typer.Argument(help="Index file (.qidx).")],
     as_json: JsonOption = False,
 ) -> None:
-    """List the clips of an index: name, label, frames, fps, skeleton, path."""
+    """List the clips of an index (name, label, frames, fps, skeleton, path) and the settings
+    it was built with."""
     from quatmotion.retrieval.index import ClipIndex
 
     with user_errors(), ClipIndex.open(index) as idx:
-        rows = idx.clips()
+        rows = idx.rows()
+        settings, version = idx.settings, idx.version
     if as_json:
-        print_json([r.__dict__ for r in rows])
+        print_json(
+            {
+                "format": {"name": idx.format.name, "version": version},
+                "settings": settings.to_dict(),
+                "clips": [r.as_dict() for r in rows],
+            }
+        )
         return
     table = Table("clip", "label", "frames", "fps", "skeleton", "path")
     for r in rows:
         table.add_row(r.name, r.label, str(r.frames), f"{r.fps:g}", r.skeleton[:8], r.path)
     console.print(table)
-    console.print(f"{len(rows)} clips", markup=False)
+    read = settings.read
+    _say(
+        f"{len(rows)} clips; index version {version}; features {', '.join(settings.kinds)}; "
+        f"units {read.units or 'guessed'}; skeleton {read.skeleton or 'found by name'}"
+    )
 
 
 @app.command("search")
 def search_command(
-    query: Annotated[
-        str, typer.Argument(help="An .amc/.bvh file, or an indexed clip's name, file name or stem.")
-    ],
     index: Annotated[Path, typer.Option(help="Index file (.qidx).")],
+    query: Annotated[
+        str | None,
+        typer.Argument(help="An .amc/.bvh file, or an indexed clip's name, file name or stem."),
+    ] = None,
+    queries: Annotated[
+        Path | None,
+        typer.Option(
+            help="Many queries in one process: a folder of motion files (searched recursively) "
+            "or a text file of queries, one a line (files or indexed clip names)."
+        ),
+    ] = None,
     top: Annotated[int, typer.Option(help="Results to show.")] = 20,
     method: Annotated[
         str | None, typer.Option(help="Retrieval method (default: the best measured).")
@@ -233,35 +329,61 @@ def search_command(
         name = method or DEFAULT_METHOD
         if within and method not in (None, DEFAULT_METHOD):
             raise CliInputError("--within uses the motion frames; leave out --method")
+        if (query is None) == (queries is None):
+            raise CliInputError("give one query, or --queries, not both")
         check_units(units)
         if skeleton is not None:
             require_file(skeleton)
-        path = Path(query)
-        # A motion file if there is one; else the name of an indexed clip (walk.bvh included).
-        is_file = path.suffix.lower() in MOTION_SUFFIXES and path.exists()
-        if not is_file and (skeleton is not None or units is not None):
-            raise CliInputError("--skeleton and --units apply to a query file")
+        if queries is not None:
+            if queries.is_dir():
+                texts = [
+                    str(p)
+                    for p in sorted(queries.rglob("*"))
+                    if p.is_file() and p.suffix.lower() in MOTION_SUFFIXES
+                ]
+            else:
+                require_file(queries)
+                lines = queries.read_text(encoding="utf-8").splitlines()
+                texts = [t.strip() for t in lines if t.strip() and not t.startswith("#")]
+            if not texts:
+                raise CliInputError(f"{queries}: no queries in it")
+        else:
+            texts = [str(query)]
+        answers = []
         with ClipIndex.open(index) as idx:
-            target = read_clip(path, skeleton, units) if is_file else query
-            try:
-                results = (
-                    search_within(idx, target, top=top)
-                    if within
-                    else search(idx, target, method=name, top=top)
-                )
-            except ClipNameError as error:
-                looks_like_file = path.suffix.lower() in MOTION_SUFFIXES
-                raise CliInputError(
-                    f"{query}: no such file, and {error}" if looks_like_file else str(error)
-                ) from None
+            for text in texts:
+                path = Path(text)
+                # A motion file if there is one; else an indexed clip's name (walk.bvh too).
+                is_file = path.suffix.lower() in MOTION_SUFFIXES and path.exists()
+                if not is_file and (skeleton is not None or units is not None):
+                    raise CliInputError("--skeleton and --units apply to a query file")
+                target = read_clip(path, skeleton, units) if is_file else text
+                try:
+                    answers.append(
+                        search_within(idx, target, k=top)
+                        if within
+                        else search(idx, target, method=name, k=top)
+                    )
+                except ClipNameError as error:
+                    looks_like_file = path.suffix.lower() in MOTION_SUFFIXES
+                    raise CliInputError(
+                        f"{text}: no such file, and {error}" if looks_like_file else str(error)
+                    ) from None
+    method_name = "subsequence-dtw" if within else name
     if as_json:
-        doc = {
-            "query": query,
-            "method": "subsequence-dtw" if within else name,
-            "results": [r.as_dict() for r in results],
-        }
-        print_json(doc)
+        docs = [
+            {"query": t, "method": method_name, "results": [r.as_dict() for r in rs]}
+            for t, rs in zip(texts, answers, strict=True)
+        ]
+        print_json(docs[0] if queries is None else {"method": method_name, "queries": docs})
         return
+    for text, results in zip(texts, answers, strict=True):
+        if queries is not None:
+            console.print(f"query {text}")
+        _print_results(results, within)
+
+
+def _print_results(results: list, within: bool) -> None:
     cols = ["rank", "clip", "label", "distance"] + (["frames (first-last)"] if within else [])
     table = Table(*cols)
     for r in results:

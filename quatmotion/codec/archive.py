@@ -11,12 +11,13 @@ from __future__ import annotations
 import io
 import os
 import zlib
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from quatmotion.codec.binary import Reader
 from quatmotion.codec.channels import channel_rotations, from_channels
@@ -43,7 +44,7 @@ from quatmotion.errors import FormatError
 from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion, Skeleton
 
-__all__ = ["Archive", "DamagedClip", "DecodedChannels", "open_archive"]
+__all__ = ["Archive", "ClipParts", "DamagedClip", "DecodedChannels", "open_archive"]
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,21 @@ class DamagedClip:
     index: int
     name: str
     reason: str
+
+
+@dataclass(frozen=True)
+class ClipParts:
+    """One clip's parts before its method payload is decoded (:meth:`Archive.clip_parts`)."""
+
+    index: int
+    entry: ClipEntry
+    skeleton: Skeleton
+    layout: LayoutInfo
+    model: Any
+    payload: bytes
+    context: ClipContext
+    at_rest: NDArray[np.bool_]
+    corrections: Corrections
 
 
 @dataclass(frozen=True)
@@ -127,6 +143,7 @@ class Archive:
         self._records: dict[int, str] = {}
         self._skeletons: dict[int, Skeleton] = {}
         self._layouts: dict[int, tuple[LayoutInfo, Any]] = {}
+        self._samplers: OrderedDict[int, Any] = OrderedDict()
 
     def _split(self, chunks: list[ChunkRef]) -> None:
         h = self.header
@@ -334,8 +351,9 @@ class Archive:
         return self._layouts[k]
 
     # ------------------------------------------------------------------ clips
-    def read_channels(self, clip: int | str) -> DecodedChannels:
-        """A clip decoded to channels (corrections applied)."""
+    def clip_parts(self, clip: int | str) -> ClipParts:
+        """What decoding clip ``clip`` needs, parsed (its prefix read, the method payload not
+        yet decoded): the shared step of :meth:`read_channels` and of sampling."""
         i = self.index_of(clip)
         self._check_intact(i)
         entry = self.header.clips[i]
@@ -354,14 +372,70 @@ class Archive:
             if at_rest[k]:
                 active[layout.translation_columns(k)] = False
         context = ClipContext(info, skeleton, entry.n_frames, entry.fps, active)
-        try:
-            X = self.method.decode(model, r.take(r.remaining), context)
-        except FormatError as error:
-            raise FormatError(f"clip {entry.name!r}: {error.reason}", self._name) from None
-        if X.shape != (entry.n_frames, layout.n_channels) or not np.all(np.isfinite(X)):
+        return ClipParts(i, entry, skeleton, info, model, r.take(r.remaining), context,
+                         at_rest, corrections)  # fmt: skip
+
+    def checked_channels(self, parts: ClipParts, X: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``X`` ``(T, C)`` from the method, validated, with the clip's corrections applied."""
+        entry = parts.entry
+        if X.shape != (entry.n_frames, parts.layout.layout.n_channels) or not np.all(
+            np.isfinite(X)
+        ):
             raise FormatError(f"clip {entry.name!r}: decoded channels are invalid", self._name)
-        _apply(corrections, X, info)
-        return DecodedChannels(X, at_rest, info, skeleton, entry)
+        _apply(parts.corrections, X, parts.layout)
+        return X
+
+    def method_error(self, parts: ClipParts, error: FormatError) -> FormatError:
+        """A method's :class:`FormatError` restated with the clip and file names."""
+        return FormatError(f"clip {parts.entry.name!r}: {error.reason}", self._name)
+
+    def read_channels(self, clip: int | str) -> DecodedChannels:
+        """A clip decoded to channels (corrections applied)."""
+        parts = self.clip_parts(clip)
+        try:
+            X = self.method.decode(parts.model, parts.payload, parts.context)
+        except FormatError as error:
+            raise self.method_error(parts, error) from None
+        X = self.checked_channels(parts, X)
+        return DecodedChannels(X, parts.at_rest, parts.layout, parts.skeleton, parts.entry)
+
+    def sample(
+        self,
+        clip: int | str,
+        times: ArrayLike,
+        joints: ArrayLike | None = None,
+        *,
+        mode: str = "clamp",
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Root translation (cm) and local rotations (w-first unit quaternions) of a clip at
+        ``times`` in seconds, between frames as the clip's model defines (see
+        :mod:`quatmotion.codec.sampling`). The clip is decoded on its first sample and kept
+        (the last few clips sampled).
+
+        Parameters
+        ----------
+        clip : int or str
+        times : float or array_like, shape (n,)
+            Seconds from the clip's first frame (frame ``f`` is at ``f / fps``).
+        joints : array_like of int or str, shape (k,), optional
+            A subset of joints (indices or names), in the order wanted; all by default.
+        mode : {"clamp", "loop"}
+            Outside ``[0, (T - 1) / fps]``: hold the end frames, or repeat the clip with period
+            ``T / fps`` (between its last and first frame the pose is interpolated).
+
+        Returns
+        -------
+        root : ndarray, shape (n, 3) (``(3,)`` for a scalar time)
+        rotations : ndarray, shape (n, k, 4) (``(k, 4)`` for a scalar time)
+
+        Raises
+        ------
+        ValueError
+            A time that is not finite, an unknown mode, or a joint that is not in the skeleton.
+        """
+        from quatmotion.codec.sampling import sampler_for
+
+        return sampler_for(self, clip).sample(times, joints, mode=mode)
 
     def read_rotations(self, clip: int | str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """A clip's root translation ``(T, 3)`` cm and local rotations ``(T, J, 4)``: the

@@ -127,6 +127,20 @@ class Reader:
             raise self._fail(f"value {value} exceeds {limit}")
         return value
 
+    def uvarints(self, count: int) -> NDArray[np.uint64]:
+        """``count`` uvarints in a row, ``(count,)`` (one compiled pass: clips hold thousands)."""
+        from quatmotion.codec._decode_kernels import read_uvarints
+
+        out = np.empty(count, dtype=np.uint64)
+        buf = np.frombuffer(self._data, dtype=np.uint8)
+        pos = read_uvarints(buf, self._pos, out)
+        if pos == -1:
+            raise self._fail(f"ends early (in {count} varints from offset {self._pos})")
+        if pos == -2:
+            raise self._fail("varint longer than 64 bits")
+        self._pos = pos
+        return out
+
     def svarint(self) -> int:
         u = self.uvarint()
         return u // 2 if u % 2 == 0 else -(u + 1) // 2

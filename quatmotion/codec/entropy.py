@@ -20,6 +20,7 @@ Conventions
 from __future__ import annotations
 
 import constriction
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -45,6 +46,36 @@ def _update(mean: NDArray[np.float64], block: NDArray[np.int64], starts: NDArray
     if len(rows):
         mean = _DECAY * mean + (1.0 - _DECAY) * np.abs(rows).mean(axis=0)
     return np.maximum(mean, _MIN_SCALE)
+
+
+@numba.njit(cache=True)
+def _block_scales(starts, a, b, mean, start_scale, out):  # pragma: no cover - compiled
+    """``out[:(b - a) C]``: the scales of rows ``a:b``, as :func:`encode_rows` forms them."""
+    C = mean.shape[0]
+    for i in range(a, b):
+        src = start_scale if starts[i] else mean
+        for c in range(C):
+            out[(i - a) * C + c] = src[c]
+
+
+@numba.njit(cache=True)
+def _update_mean(R, starts, a, b, mean):  # pragma: no cover - compiled
+    """:func:`_update` in place (the same arithmetic: a float sum of integers, then one
+    division, so the decoder's scales are the encoder's to the bit)."""
+    count = 0
+    for i in range(a, b):
+        if not starts[i]:
+            count += 1
+    C = mean.shape[0]
+    for c in range(C):
+        if count:
+            total = 0.0
+            for i in range(a, b):
+                if not starts[i]:
+                    total += float(abs(R[i, c]))
+            mean[c] = _DECAY * mean[c] + (1.0 - _DECAY) * (total / count)
+        if mean[c] < _MIN_SCALE:
+            mean[c] = _MIN_SCALE
 
 
 def encode_rows(
@@ -114,12 +145,14 @@ def decode_rows(
     start_scale = np.maximum(np.asarray(start_scale, dtype=np.float64), _MIN_SCALE)
     R = np.empty((n, C), dtype=np.int64)
     zeros = np.zeros(BLOCK_ROWS * C)
+    scales = np.empty(BLOCK_ROWS * C)
+    starts = np.ascontiguousarray(starts, dtype=np.bool_)
     try:
         for a, b in _blocks(n):
-            s = starts[a:b]
-            scales = np.where(s[:, None], start_scale[None, :], mean[None, :]).ravel()
-            R[a:b] = decoder.decode(_LAPLACE, zeros[: scales.size], scales).reshape(b - a, C)
-            mean = _update(mean, R[a:b], s)
+            k = (b - a) * C
+            _block_scales(starts, a, b, mean, start_scale, scales)
+            R[a:b] = decoder.decode(_LAPLACE, zeros[:k], scales[:k]).reshape(b - a, C)
+            _update_mean(R, starts, a, b, mean)
         over = np.abs(R) >= LIMIT
         if np.any(over):
             k = int(over.sum())

@@ -177,15 +177,15 @@ def read_clip_prefix(
     quantum = r.f32()
     if not (np.isfinite(quantum) and quantum > 0):
         raise FormatError("clip: invalid correction quantum")
-    frames = np.empty(n, dtype=np.int64)
-    channels = np.empty(n, dtype=np.int64)
-    values = np.empty(n, dtype=np.int64)
-    f = 0
-    for k in range(n):
-        f += r.uvarint(n_frames)
-        frames[k] = f
-        channels[k] = r.uvarint(n_channels - 1)
-        values[k] = r.svarint()
+    triples = r.uvarints(3 * n).reshape(n, 3)
+    deltas, channel, zigzag = triples[:, 0], triples[:, 1], triples[:, 2]
+    if deltas.max() > n_frames or channel.max() > n_channels - 1:
+        raise FormatError("clip: a correction's frame or channel is out of range")
+    frames = np.cumsum(deltas.astype(np.int64))
+    channels = channel.astype(np.int64)
+    half = (zigzag >> np.uint64(1)).astype(np.int64)
+    values = np.where(zigzag & np.uint64(1), -half - 1, half)
+    f = int(frames[-1])
     if f >= n_frames:
         raise FormatError("clip: a correction lies beyond the last frame")
     return at_rest, Corrections(quantum, frames, channels, values)

@@ -46,17 +46,30 @@ import time
 import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from numbers import Integral, Real
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from sklearn.utils._param_validation import Interval, StrOptions
 
 from quatmotion._atomic import atomic_output
+from quatmotion._format import FileFormat
+from quatmotion._settings import Settings
+from quatmotion.collection import (
+    BuildReport,
+    ClipRef,
+    ClipSource,
+    ReadSettings,
+    content_hash,
+    find_clips,
+    read_clip,
+)
 from quatmotion.errors import FormatError
 from quatmotion.io import Doubt
 from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion
-from quatmotion.parallel import Failure, Scheduler, imap_batch
+from quatmotion.parallel import Failure, Runner, Scheduler, imap_batch
 from quatmotion.pose import labels
 from quatmotion.pose.baselines import LMS
 from quatmotion.pose.data import PoseClip, PoseData
@@ -69,6 +82,7 @@ __all__ = [
     "METRICS",
     "PoseLibrary",
     "PoseMatch",
+    "PoseSettings",
     "ProjectedClip",
     "load_pose_clip",
     "project_gpd",
@@ -78,11 +92,16 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-_FORMAT = "quatmotion-pose-library"
-_VERSION = 2  # 2: poses on the canonical body, features clipped to the library's range
+FORMAT = FileFormat("quatmotion-pose-library", 3, 2, "a quatmotion pose library")
+"""3: the clips' references and the settings in ``meta``; 2 (0.3.0, still read): poses on the
+canonical body, features clipped to the library's range."""
+_FORMAT = FORMAT.name
+_VERSION = FORMAT.version
+FPS_RANGE = (1.0, 1000.0)
+HEIGHT_RANGE = (50.0, 300.0)  # cm: a stature from a small child to beyond the tallest adult
 _NOT_A_LIBRARY = (
     f"not a quatmotion pose library (expected a file written by 'quatmotion pose index': "
-    f"format {_FORMAT}, version {_VERSION})"
+    f"format {_FORMAT}, {FORMAT.versions_text()})"
 )
 # Fewer transition pairs than this teach a metric too little: use consecutive frames instead.
 _MIN_TRANSITION_PAIRS = 10
@@ -91,6 +110,77 @@ _FAR_APART_S = 1.0  # fallback dissimilar pairs: poses of one clip at least this
 METRICS: tuple[str, ...] = ("GPD+LMS", "GPD+RDSR")
 """The pose distances :meth:`PoseLibrary.build` can learn."""
 DEFAULT_METRIC = "GPD+LMS"
+
+
+def _at_least(n: int) -> Interval:
+    return Interval(Integral, n, None, closed="left")
+
+
+@dataclasses.dataclass(frozen=True)
+class PoseSettings(Settings):
+    """How a pose library is built (stored in its ``meta``, shown by ``pose ls``).
+
+    Attributes
+    ----------
+    fps : float
+        Frame rate the poses are sampled at (:data:`FPS_RANGE`).
+    height : float
+        Stature of the canonical body every skeleton is put on, cm (:data:`HEIGHT_RANGE`).
+    metric : str
+        The pose distance learned (:data:`METRICS`).
+    rank : int
+        Rank of RDSR's projection.
+    n_unlabeled : int
+        Unlabeled poses for RDSR's sparse-representation term.
+    n_pairs : int
+        Transition pairs wanted (similar, and as many dissimilar for LMS).
+    seed : int
+        Of the sample, the pairs and the graph.
+    fit_poses : int
+        Poses (of clips drawn at random) the distance is learned on.
+    M, ef_construction : int
+        HNSW graph parameters.
+    flush_poses : int
+        Vectors per insertion into the graph.
+    index_threads : int
+        Threads inserting into the graph (1: the same bytes whatever ran the jobs).
+    chunk_size : int or None
+        Clips per task of the index pass (None: :meth:`PoseLibrary.build_streamed` chooses).
+    read : ReadSettings
+        How the clips are read (``strict``: a clip beyond a kilometre is refused).
+    """
+
+    fps: float = 30.0
+    height: float = 170.0
+    metric: str = DEFAULT_METRIC
+    rank: int = 50
+    n_unlabeled: int = 5000
+    n_pairs: int = 500
+    seed: int = 0
+    fit_poses: int = 20_000
+    M: int = 16
+    ef_construction: int = 100
+    flush_poses: int = 4096
+    index_threads: int = 1
+    chunk_size: int | None = None
+    read: ReadSettings = dataclasses.field(default_factory=ReadSettings)
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "fps": [Interval(Real, *FPS_RANGE, closed="both")],
+        "height": [Interval(Real, *HEIGHT_RANGE, closed="both")],
+        "metric": [StrOptions(set(METRICS))],
+        "rank": [_at_least(1)],
+        "n_unlabeled": [_at_least(1)],
+        "n_pairs": [_at_least(1)],
+        "seed": [_at_least(0)],
+        "fit_poses": [_at_least(1)],
+        "M": [_at_least(2)],
+        "ef_construction": [_at_least(1)],
+        "flush_poses": [_at_least(1)],
+        "index_threads": [_at_least(1)],
+        "chunk_size": [_at_least(1), None],
+        "read": [ReadSettings],
+    }
 
 
 @dataclass(frozen=True)
@@ -149,9 +239,150 @@ class PoseLibrary:
     frame_of: IntArray
     model: dict[str, FloatArray]
     meta: dict[str, Any] = field(default_factory=dict)
+    refs: list[ClipRef] = field(default_factory=list)
+    settings: PoseSettings | None = None
+    version: int = FORMAT.version
+    path: pathlib.Path | None = None
+
+    # -- the collection surface ------------------------------------------------------------
+    @property
+    def format(self) -> FileFormat:
+        """The format, with the version this library was read in (the current one if built)."""
+        return dataclasses.replace(FORMAT, version=self.version)
+
+    def clips(self) -> tuple[ClipRef, ...]:
+        """Every clip's reference, in catalogue order. A version-2 library stored none: its
+        clips' paths (resolved against the library's folder) give them, the content hash of
+        the file found (of the name, where the file is gone: matching no other clip)."""
+        if self.refs:
+            return tuple(self.refs)
+        from quatmotion.collection import unique_names
+
+        base = None if self.path is None else self.path.resolve().parent
+        paths = []
+        for name in self.clip_names:
+            p = pathlib.Path(name)
+            if not p.is_absolute() and base is not None and (base / p).is_file():
+                p = base / p
+            paths.append(pathlib.Path(os.path.abspath(p)))
+        out = []
+        for p, name in zip(paths, unique_names(paths), strict=True):
+            asf = None
+            try:
+                if p.suffix.lower() == ".amc":
+                    from quatmotion.collection import find_skeleton
+
+                    asf = find_skeleton(p)
+                sha = content_hash(p, asf)
+            except (OSError, FormatError):
+                import hashlib
+
+                sha = hashlib.sha256(f"missing clip {p}".encode()).hexdigest()
+            out.append(ClipRef(name, sha, str(p), None if asf is None else str(asf)))
+        return tuple(out)
+
+    @classmethod
+    def open(cls, path: str | os.PathLike[str], ef_search: int = 64) -> PoseLibrary:
+        """Read a library (any version from :data:`FORMAT`'s ``oldest_readable``).
+
+        Raises
+        ------
+        FormatError
+            Not a quatmotion pose library, or a version this code does not read.
+        """
+        return cls.load(path, ef_search)
+
+    @classmethod
+    def _build_file(
+        cls,
+        sources: Sequence[Any],
+        out: str | os.PathLike[str],
+        settings: PoseSettings | None = None,
+        *,
+        runner: Runner | str | Scheduler | None = None,
+        workers: int | None = None,
+        progress: Callable[[str, int, int], None] | None = None,
+        log: Callable[[str], None] | None = None,
+        on_doubt: Callable[[str, Doubt], None] | None = None,
+    ) -> BuildReport:
+        """Build the library of ``sources`` (files, folders, motions in memory) into ``out``
+        (:meth:`build_streamed` on the clips :func:`quatmotion.collection.find_clips` finds,
+        each read by :func:`quatmotion.collection.read_clip`); the settings and the clips'
+        references are stored in the file.
+
+        Returns
+        -------
+        BuildReport
+            ``added`` the clips indexed, ``failures`` the others; ``details["library"]`` the
+            library written.
+
+        Raises
+        ------
+        ValueError
+            No clip could be read.
+        """
+        settings = settings or PoseSettings()
+        report = BuildReport(path=pathlib.Path(out), settings=settings)
+        errors: list[tuple[str, str]] = []
+        found = find_clips(sources, settings.read, on_error=errors)
+        report.failures += [Failure(i, p, reason) for i, (p, reason) in enumerate(errors)]
+        load = functools.partial(
+            load_pose_source, fps=settings.fps, height=settings.height, read=settings.read
+        )
+        library, failures = cls.build_streamed(
+            found,
+            load,
+            fit_poses=settings.fit_poses,
+            rank=settings.rank,
+            n_unlabeled=settings.n_unlabeled,
+            n_pairs=settings.n_pairs,
+            seed=settings.seed,
+            M=settings.M,
+            ef_construction=settings.ef_construction,
+            metric_name=settings.metric,
+            workers=workers,
+            scheduler=runner.scheduler if isinstance(runner, Runner) else runner,
+            chunk_size=settings.chunk_size,
+            flush_poses=settings.flush_poses,
+            index_threads=settings.index_threads,
+            progress=progress,
+            log=log,
+            on_doubt=on_doubt,
+        )
+        failed = {f.index for f in failures}
+        library.refs = [s.ref() for i, s in enumerate(found) if i not in failed]
+        library.settings = settings
+        library.save(out)
+        report.added = list(library.refs)
+        report.failures += failures
+        report.details["library"] = library
+        return report
 
     @classmethod
     def build(
+        cls,
+        sources: Sequence[Any],
+        out: str | os.PathLike[str] | None = None,
+        settings: PoseSettings | None = None,
+        **options: Any,
+    ) -> Any:
+        """Build a library: ``build(sources, out, settings, *, runner, workers, progress, log,
+        on_doubt) -> BuildReport`` writes the file (the collection surface); without ``out``,
+        ``build(clips, *, rank, ...)`` learns on prepared :class:`PoseClip` items in memory
+        and returns the :class:`PoseLibrary` (:meth:`build_in_memory`)."""
+        if out is None:
+            if settings is not None:
+                options = {
+                    "rank": settings.rank, "n_unlabeled": settings.n_unlabeled,
+                    "n_pairs": settings.n_pairs, "seed": settings.seed, "M": settings.M,
+                    "ef_construction": settings.ef_construction,
+                    "metric_name": settings.metric, **options,
+                }  # fmt: skip
+            return cls.build_in_memory(sources, **options)
+        return cls._build_file(sources, out, settings, **options)
+
+    @classmethod
+    def build_in_memory(
         cls,
         clips: Sequence[PoseClip],
         *,
@@ -575,6 +806,10 @@ class PoseLibrary:
         path = pathlib.Path(path)
         meta = dict(self.meta)
         meta.update(format=_FORMAT, version=_VERSION, dim=self.index.dim_)
+        if self.refs:  # a library built from files (a version-2 one's are derived on reading)
+            meta["clips"] = [r.to_dict() for r in self.refs]
+        if self.settings is not None:
+            meta["settings"] = self.settings.to_dict()
         payload = {
             "index": np.frombuffer(self.index.to_bytes(), dtype=np.uint8),
             "clip_names": np.asarray(self.clip_names, dtype=str),
@@ -600,15 +835,10 @@ class PoseLibrary:
                 meta = json.loads(str(data["meta"]))
                 if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
                     raise FormatError(_NOT_A_LIBRARY, path)
-                version = meta.get("version")
-                if version != _VERSION:
-                    newer = isinstance(version, int) and version > _VERSION
-                    raise FormatError(
-                        f"pose library format version {version!r} "
-                        f"{'is newer than' if newer else 'differs from'} the version this "
-                        f"quatmotion reads ({_VERSION}); rebuild it with 'quatmotion pose index'",
-                        path,
-                    )
+                version = FORMAT.check(meta.get("format"), meta.get("version"), path)
+                refs = [ClipRef.from_dict(r, path) for r in meta.pop("clips", [])]
+                stored = meta.pop("settings", None)
+                settings = None if stored is None else PoseSettings.from_dict(stored, path)
                 index = HNSWIndex.from_bytes(
                     data["index"].tobytes(), dim=int(meta["dim"]), ef_search=ef_search
                 )
@@ -620,6 +850,10 @@ class PoseLibrary:
                     frame_of=data["frame_of"].astype(np.int64),
                     model=model,
                     meta=meta,
+                    refs=refs,
+                    settings=settings,
+                    version=version,
+                    path=pathlib.Path(path),
                 )
         except FormatError:
             raise
@@ -822,6 +1056,22 @@ def projected_clip(source: Any, *, load: Callable[[Any], PoseClip], model: dict)
         clip.name, clip.fps, clip.step, clip.height, clip.file_frames, clip.skeleton_kind,
         vectors, clip.doubts,
     )  # fmt: skip
+
+
+def load_pose_source(
+    source: ClipSource, *, fps: float, height: float, read: ReadSettings
+) -> PoseClip:
+    """Read one clip of a collection (:func:`quatmotion.collection.read_clip`) and prepare it
+    for a pose library (the per-clip job of :meth:`PoseLibrary.build`: module level).
+
+    The clip is named by its file's path (its name for a clip made in memory); a clip beyond a
+    kilometre is refused (``read.strict``: its features would overflow).
+    """
+    motion, _, doubts = read_clip(source, dataclasses.replace(read, strict=True))
+    name = str(source.path) if source.path is not None else source.name
+    with np.errstate(all="ignore"):
+        clip = PoseClip.from_motion(motion, fps=fps, height=height, name=name)
+    return dataclasses.replace(clip, doubts=tuple(doubts))
 
 
 def load_pose_clip(

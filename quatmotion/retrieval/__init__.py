@@ -11,9 +11,11 @@ methods
     ``METHODS``: every retrieval method by name (the paper's, the DTW baseline, ours) and
     ``DEFAULT_METHOD``; ``Library``, clips' features packed in memory.
 index
-    ``ClipIndex``: the SQLite ``.qidx`` file (clips, labels, features; versioned).
+    ``ClipIndex`` (``build``/``open``/``add``/``search``): the SQLite ``.qidx`` file (clip
+    references, labels, features, settings; versioned), ``IndexSettings``.
 build
-    ``build_index``: a pure per-clip feature function mapped over all cores, one writer.
+    The build's steps: a pure per-clip feature function mapped over all cores, one writer
+    (``build_index``: the deprecated keyword form of ``ClipIndex.build``).
 search
     ``search`` and ``search_within`` (subsequence DTW inside long takes).
 
@@ -35,6 +37,7 @@ _EXPORTS = {
     "METHODS": "methods",
     "Library": "methods",
     "ClipIndex": "index",
+    "IndexSettings": "index",
     "build_index": "build",
     "search_within": "search",
     "query_features": "search",

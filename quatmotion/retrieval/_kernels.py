@@ -125,3 +125,48 @@ def subsequence_dtw(query, take):  # pragma: no cover - compiled
     if end < 0:
         return _INF, 0, 0
     return best, start[n - 1, end], end + 1
+
+
+@nb.njit(cache=True, fastmath=True, nogil=True)
+def dtw_euclidean(a, b, weights, cutoff):  # pragma: no cover - compiled
+    """Unbanded DTW of ``a`` (n, d) and ``b`` (m, d): local cost the Euclidean distance of the
+    two frames with column weights ``weights`` (d,) (``sqrt(sum w_k (a_k - b_k)^2)``), steps
+    (1,0), (0,1), (1,1), the path cost divided by ``n + m``. Abandons early, returning
+    ``inf``, once every cell of a row exceeds ``cutoff * (n + m)`` (``cutoff`` inf: never)."""
+    n, m, d = a.shape[0], b.shape[0], a.shape[1]
+    limit = cutoff * (n + m)
+    prev = np.full(m + 1, _INF, dtype=np.float64)
+    cur = np.full(m + 1, _INF, dtype=np.float64)
+    prev[0] = 0.0
+    for i in range(1, n + 1):
+        cur[0] = _INF
+        row_min = _INF
+        for j in range(1, m + 1):
+            s = 0.0
+            for k in range(d):
+                t = a[i - 1, k] - b[j - 1, k]
+                s += weights[k] * t * t
+            best = prev[j - 1]
+            if prev[j] < best:
+                best = prev[j]
+            if cur[j - 1] < best:
+                best = cur[j - 1]
+            v = np.sqrt(s) + best
+            cur[j] = v
+            if v < row_min:
+                row_min = v
+        if row_min > limit:
+            return np.inf
+        prev, cur = cur, prev
+    return prev[m] / (n + m)
+
+
+@nb.njit(cache=True, nogil=True)
+def dtw_euclidean_to_candidates(query, frames, offsets, candidates, weights):
+    """:func:`dtw_euclidean` from ``query`` to clips ``candidates`` of the concatenated
+    ``frames`` (no early abandoning)."""
+    out = np.empty(candidates.shape[0])
+    for t in range(candidates.shape[0]):
+        c = candidates[t]
+        out[t] = dtw_euclidean(query, frames[offsets[c] : offsets[c + 1]], weights, np.inf)
+    return out

@@ -1,32 +1,46 @@
 """Building and extending a clip index: one pure per-clip feature function mapped over the
 clips, one writer committing in batches.
 
-``index_clip`` reads a clip and computes its features; it depends on nothing but its
-arguments, so the execution layer (:mod:`quatmotion.parallel`) maps it over the clips: a local
-process pool over all cores by default, or a Dask cluster. Results come back in input order,
-and the writer, in the calling process, stores them in transactions of ``batch`` clips, so the
-index holds the same rows whatever ran the jobs, a killed build keeps every batch already
-committed, and the next build skips those clips (same path and content hash).
+The build is a few named steps (:func:`build`): find the sources
+(:func:`quatmotion.collection.find_clips`: unique names, ASF lookup, content hashes), open or
+resume the index, plan (clips already there skipped, names kept unique across old and new
+clips), compute the features of the others (:func:`index_clip`, mapped by
+:mod:`quatmotion.parallel` over a local process pool or a Dask cluster; results in input order),
+write them in transactions of ``settings.batch`` clips, and apply labels to every clip, new or
+already there. So the index holds the same rows whatever ran the jobs, a killed build keeps
+every batch already committed, and the next build skips those clips (same path and content
+hash) and says it resumed.
 """
 
 from __future__ import annotations
 
-import csv
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+import os
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from quatmotion.errors import FormatError
+from quatmotion.collection import (
+    BuildReport,
+    ClipSource,
+    ReadSettings,
+    find_clips,
+    label_sources,
+    match_keys,
+    read_clip,
+    unique_names,
+)
 from quatmotion.io import Doubt
-from quatmotion.parallel import Scheduler, imap_batch
+from quatmotion.io.labels import read_labels_csv
+from quatmotion.parallel import Failure, Runner, Scheduler
 from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
-from quatmotion.retrieval.index import ClipIndex, ClipRecord, content_hash
+from quatmotion.retrieval.index import ClipIndex, ClipRecord, IndexSettings
 
 __all__ = [
-    "BuildReport",
     "ClipJob",
+    "add",
+    "build",
     "build_index",
-    "catalogue_labels",
     "index_clip",
     "read_labels_csv",
     "skeleton_for",
@@ -35,24 +49,14 @@ __all__ = [
 
 @dataclass(frozen=True)
 class ClipJob:
-    """What :func:`index_clip` needs: the file, its ASF (AMC only), kinds, label, and the
-    length unit of a BVH (``None``: guessed)."""
+    """What :func:`index_clip` needs: the clip to read, how, and the feature kinds."""
 
-    path: str
-    skeleton: str | None
+    source: ClipSource
     kinds: tuple[str, ...]
-    label: str
-    sha256: str
-    units: str | float | None = None
+    read: ReadSettings = ReadSettings()
 
-
-@dataclass
-class BuildReport:
-    """What a build did: clips added, skipped (already indexed) and failed (path, reason)."""
-
-    added: int = 0
-    skipped: int = 0
-    failed: list[tuple[str, str]] = field(default_factory=list)
+    def __str__(self) -> str:  # how a batch failure names it
+        return str(self.source)
 
 
 @dataclass(frozen=True)
@@ -63,44 +67,13 @@ class _Indexed:
     doubts: tuple[Doubt, ...]
 
 
-def skeleton_for(path: Path, skeletons: Path | None) -> Path | None:
-    """The ASF of an AMC: ``skeletons`` if it is a file; from ``skeletons`` (a folder) when
-    given; else by the CMU / HDM05 layouts (:func:`quatmotion.io.find_asf_for_amc`); ``None``
-    for BVH files.
+def skeleton_for(path: Path, skeletons: str | Path | None) -> Path | None:
+    """The ASF of an AMC (:func:`quatmotion.collection.find_skeleton`), None for other files."""
+    from quatmotion.collection import find_skeleton
 
-    Raises
-    ------
-    FormatError
-        When no skeleton is found (naming where it looked).
-    """
-    from quatmotion.io import find_asf_for_amc
-
-    if path.suffix.lower() != ".amc":
+    if Path(path).suffix.lower() != ".amc":
         return None
-    if skeletons is not None and skeletons.is_file():
-        return skeletons
-    if skeletons is None:
-        try:
-            return find_asf_for_amc(path)
-        except FormatError as error:
-            reason = error.reason.replace("pass it (--skeleton)", "pass their folder (--skeletons)")
-            raise FormatError(reason, path) from None
-    stem = path.stem
-    candidates = [skeletons / (stem.split("_", 1)[0] + ".asf")]
-    parts = stem.split("_")
-    if len(parts) >= 2:
-        candidates.append(skeletons / f"{parts[0]}_{parts[1]}.asf")
-    for candidate in candidates:
-        if candidate.is_file():
-            return candidate
-    found = sorted(skeletons.glob("*.asf"))
-    if len(found) == 1:
-        return found[0]
-    raise FormatError(
-        f"no ASF for this AMC in {skeletons} (looked for "
-        f"{', '.join(c.name for c in candidates)}, and the folder holds {len(found)} ASF files)",
-        path,
-    )
+    return find_skeleton(Path(path), skeletons)
 
 
 def index_clip(job: ClipJob) -> ClipRecord:
@@ -109,76 +82,288 @@ def index_clip(job: ClipJob) -> ClipRecord:
 
 
 def _index_clip(job: ClipJob) -> _Indexed:
-    from quatmotion.io import implausible_values, read_motion
-
-    amc = Path(job.path).suffix.lower() == ".amc"
-    motion = read_motion(job.path, job.skeleton, units=None if amc else job.units)
+    motion, ref, doubts = read_clip(job.source, job.read)
     record = ClipRecord(
-        name=Path(job.path).stem,
-        path=job.path,
-        sha256=job.sha256,
-        label=job.label,
+        ref=ref,
+        label="",
         frames=motion.n_frames,
         fps=float(motion.fps),
-        skeleton=skeleton_fingerprint(motion.skeleton),
+        rotation_key=skeleton_fingerprint(motion.skeleton),
         arrays=clip_features(motion, job.kinds),
     )
-    return _Indexed(record, tuple(implausible_values(motion)))
+    return _Indexed(record, tuple(doubts))
 
 
-def _guarded(job: ClipJob) -> _Indexed | tuple[str, str]:
-    """:func:`index_clip` with the file's doubts, a bad file turned into ``(path, reason)``."""
-    try:
-        return _index_clip(job)
-    except (FormatError, ValueError, OSError) as error:
-        return (job.path, _reason(error))
+# -- the steps ------------------------------------------------------------------------------
+def _find(sources: Iterable[Any], read: ReadSettings, report: BuildReport) -> list[ClipSource]:
+    """Step 1: the clips named, each with its unique name, ASF and hash (files whose ASF is
+    not found, or that cannot be read to hash, become failures)."""
+    errors: list[tuple[str, str]] = []
+    found = find_clips(sources, read, on_error=errors)
+    report.failures += [Failure(i, path, reason) for i, (path, reason) in enumerate(errors)]
+    return found
 
 
-def _reason(error: Exception) -> str:
-    """The first line of ``error``'s message, without the file name a FormatError prepends
-    (the report names the file already)."""
-    text = getattr(error, "reason", None) or str(error) or type(error).__name__
-    return str(text).splitlines()[0]
+def _open(out: Path, settings: IndexSettings, report: BuildReport) -> ClipIndex:
+    """Step 2: a new index, or the existing one resumed (noted in the report)."""
+    if out.exists() and out.stat().st_size > 0:
+        index = ClipIndex.open(out, write=True)
+        report.details["resumed"] = True
+        report.details["clips_before"] = len(index)
+        index.write_settings(settings)
+        return index
+    report.details["resumed"] = False
+    return ClipIndex.create(out, settings)
 
 
-def read_labels_csv(path: str | Path) -> dict[str, str]:
-    """Labels from a CSV with columns ``clip`` (file name stem or path) and ``label``.
+def _plan(index: ClipIndex, found: list[ClipSource], report: BuildReport) -> list[ClipSource]:
+    """Step 3: the clips to compute. Those already indexed (same path and content hash) are
+    skipped; names are unique across the old clips and the new ones (a stem shared with an
+    indexed clip makes both names relative paths: the old clip is renamed)."""
+    rows = index.rows()
+    held = {(r.ref.path, r.sha256) for r in rows}
+    kept = {r.ref.path for r in rows if r.ref.path}
+    new = [s for s in found if (str(s.path) if s.path else None, s.sha256) not in held]
+    report.skipped += [s.ref() for s in found if s not in new]
+    old_paths = [Path(r.ref.path) for r in rows if r.ref.path]
+    new_files = [s for s in new if s.path is not None and str(s.path) not in kept]
+    names = unique_names(old_paths + [s.path for s in new_files])  # type: ignore[misc]
+    old_names = dict(zip((r.ref.path for r in rows if r.ref.path), names, strict=False))
+    index.rename(
+        {
+            r.name: old_names[r.ref.path]
+            for r in rows
+            if r.ref.path and old_names[r.ref.path] != r.name
+        }
+    )
+    new_names = dict(zip((str(s.path) for s in new_files), names[len(old_paths) :], strict=True))
+    out = []
+    for s in new:
+        name = s.name
+        if s.path is not None:  # a changed file keeps its clip's name
+            name = new_names.get(str(s.path)) or old_names.get(str(s.path)) or s.name
+        out.append(ClipSource(name, s.sha256, s.path, s.skeleton_path, s.motion))
+    return out
+
+
+def _compute_and_write(
+    index: ClipIndex,
+    jobs: list[ClipJob],
+    labels: Mapping[str, str],
+    report: BuildReport,
+    *,
+    runner: Runner | str | Scheduler | None,
+    workers: int | None,
+    progress: Callable[[int, int], None] | None,
+    on_doubt: Callable[[str, Doubt], None] | None,
+) -> None:
+    """Steps 4 and 5: features in the workers, records committed ``batch`` at a time."""
+    batch = index.settings.batch
+    pending: list[ClipRecord] = []
+
+    def flush() -> None:
+        index.store(pending)
+        report.added.extend(r.ref for r in pending)
+        pending.clear()
+
+    if not isinstance(runner, Runner):
+        runner = Runner.resolve(runner, workers=workers)
+    stream = runner.map(_index_clip, jobs, progress=progress)
+    with stream:
+        for outcome in stream:
+            if outcome.failure is not None:
+                report.failures.append(outcome.failure)
+                continue
+            result: _Indexed = outcome.value
+            record = result.record
+            label = labels.get(record.ref.name, "")
+            pending.append(
+                ClipRecord(
+                    record.ref, label, record.frames, record.fps, record.rotation_key, record.arrays
+                )
+            )
+            for doubt in result.doubts:
+                report.doubts.append((record.ref, doubt.message))
+                if on_doubt is not None:
+                    on_doubt(record.ref.path or record.ref.name, doubt)
+            if len(pending) >= batch:
+                flush()
+    if pending:
+        flush()
+    report.stats = stream.stats()
+
+
+def _key(s: ClipSource) -> tuple[str, str]:
+    return (str(s.path) if s.path is not None else s.name, s.sha256)
+
+
+def _relabel(
+    index: ClipIndex,
+    found: list[ClipSource],
+    todo: list[ClipSource],
+    given: Mapping[str, str] | None,
+) -> tuple[dict[str, str], list[str], int]:
+    """The labels of every clip found, by its name in the index (the new clips' names from
+    the plan, the others' as stored); the keys of ``given`` naming no clip; and how many
+    clips already indexed changed label (set here)."""
+    settings = index.settings
+    planned = {_key(s) for s in todo}
+    by_path = {r.ref.path: r.name for r in index.rows() if r.ref.path}
+    held = [
+        ClipSource(by_path.get(str(s.path), s.name), s.sha256, s.path, s.skeleton_path, s.motion)
+        for s in found
+        if _key(s) not in planned
+    ]
+    assignment = label_sources(
+        [*todo, *held], given, sidecars=settings.label_sidecars, folders=settings.label_folders
+    )
+    changed = index.set_labels(
+        {s.name: assignment.labels[s.name] for s in held if s.name in assignment.labels}
+    )
+    return assignment.labels, assignment.unmatched, changed
+
+
+def _run(
+    index: ClipIndex,
+    found: list[ClipSource],
+    report: BuildReport,
+    *,
+    labels: Mapping[str, str] | None,
+    runner: Runner | str | Scheduler | None,
+    workers: int | None,
+    progress: Callable[[int, int], None] | None,
+    on_doubt: Callable[[str, Doubt], None] | None,
+) -> BuildReport:
+    """Steps 3 to 6 on an open index."""
+    settings = index.settings
+    todo = _plan(index, found, report)
+    assigned, report.unmatched_labels, changed = _relabel(index, found, todo, labels)
+    jobs = [ClipJob(s, settings.kinds, settings.read) for s in todo]
+    _compute_and_write(
+        index,
+        jobs,
+        assigned,
+        report,
+        runner=runner,
+        workers=workers,
+        progress=progress,
+        on_doubt=on_doubt,
+    )
+    report.labels_changed = changed
+    if labels is not None:  # new clips labelled by the given mapping count as set
+        given = match_keys(labels, todo).labels
+        report.labels_changed += sum(1 for r in report.added if given.get(r.name))
+    report.settings = settings
+    return report
+
+
+def build(
+    sources: Iterable[Any],
+    out: str | Path,
+    settings: IndexSettings | None = None,
+    *,
+    runner: Runner | str | Scheduler | None = None,
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    labels: Mapping[str, str] | None = None,
+    on_doubt: Callable[[str, Doubt], None] | None = None,
+) -> BuildReport:
+    """Index every clip of ``sources`` into ``out`` (:meth:`ClipIndex.build`).
+
+    Parameters
+    ----------
+    sources : iterable
+        Files, folders (searched recursively), motions in memory or
+        :class:`~quatmotion.collection.ClipSource` items.
+    out : str or Path
+        The ``.qidx`` file: created, or resumed when it is there (``details["resumed"]``).
+    settings : IndexSettings, optional
+        Defaults when None; stored in the file.
+    runner : Runner, str or Scheduler, optional
+        Where the features are computed: a :class:`quatmotion.parallel.Runner`, or a
+        scheduler as :func:`quatmotion.parallel.resolve_scheduler` reads it (``None``:
+        ``$QUATMOTION_SCHEDULER``, else a local pool).
+    workers : int, optional
+        With a scheduler rather than a Runner: local processes (default: every core; 1
+        computes in this process).
+    progress : callable, optional
+        ``progress(done, total)`` as clips finish.
+    labels : mapping, optional
+        Clip (name, file name, stem or path) -> label: applied to new clips and to clips
+        already indexed; keys naming no clip are in ``report.unmatched_labels``. Clips it
+        does not name take their sidecar's, folder's (``settings.label_folders``) or the
+        catalogue's label.
+    on_doubt : callable, optional
+        ``on_doubt(path, doubt)`` for what is doubtful in a clip indexed, in this process.
+
+    Returns
+    -------
+    BuildReport
+        ``added``/``skipped`` as clip references, ``failures`` as
+        :class:`quatmotion.parallel.Failure`, ``labels_changed``.
+    """
+    settings = settings or IndexSettings()
+    out = Path(out)
+    report = BuildReport(path=out, settings=settings)
+    found = _find(sources, settings.read, report)
+    with _open(out, settings, report) as index:
+        return _run(
+            index,
+            found,
+            report,
+            labels=labels,
+            runner=runner,
+            workers=workers,
+            progress=progress,
+            on_doubt=on_doubt,
+        )
+
+
+def add(
+    path: str | Path,
+    sources: Iterable[Any],
+    *,
+    settings: IndexSettings | None = None,
+    runner: Runner | str | Scheduler | None = None,
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    labels: Mapping[str, str] | None = None,
+    on_doubt: Callable[[str, Doubt], None] | None = None,
+) -> BuildReport:
+    """Add ``sources`` to the index at ``path`` (:meth:`ClipIndex.add`): its stored settings
+    unless ``settings`` is given; ``labels`` as for :func:`build`, clips already there
+    relabelled.
 
     Raises
     ------
-    FormatError
-        When the header lacks those columns.
+    FileNotFoundError
+        No index at ``path``.
     """
     path = Path(path)
-    with open(path, newline="", encoding="utf-8") as f:
-        reader = csv.DictReader(f)
-        if not reader.fieldnames or not {"clip", "label"} <= set(reader.fieldnames):
-            raise FormatError("a labels CSV needs the columns 'clip' and 'label'", path, 1)
-        return {row["clip"].strip(): (row["label"] or "").strip() for row in reader}
-
-
-def catalogue_labels() -> dict[str, str]:
-    """Resolved path -> label of every clip of the data folder's catalogue (empty without one)."""
-    from quatmotion.datasets import DataNotFoundError, catalogue
-
-    try:
-        return {str(e.path.resolve()): e.label for e in catalogue()}
-    except DataNotFoundError:
-        return {}
-
-
-def _label(path: Path, labels: dict[str, str], known: dict[str, str]) -> str:
-    for key in (str(path), path.name, path.stem):
-        if key in labels:
-            return labels[key]
-    return known.get(str(path.resolve()), "")
+    with ClipIndex.open(path, write=True) as index:
+        settings = settings or index.settings
+        if settings != index.settings:
+            index.write_settings(settings)
+        report = BuildReport(path=path, settings=settings, details={"resumed": True})
+        report.details["clips_before"] = len(index)
+        found = _find(sources, settings.read, report)
+        return _run(
+            index,
+            found,
+            report,
+            labels=labels,
+            runner=runner,
+            workers=workers,
+            progress=progress,
+            on_doubt=on_doubt,
+        )
 
 
 def build_index(
     paths: Iterable[str | Path],
     out: str | Path,
     *,
-    kinds: Iterable[str] = ("motion", "qssd", "ksvd"),
+    kinds: Iterable[str] = ("motion",),
     labels: dict[str, str] | None = None,
     skeletons: str | Path | None = None,
     units: str | float | None = None,
@@ -188,81 +373,19 @@ def build_index(
     progress: Callable[[int, int], None] | None = None,
     on_doubt: Callable[[str, Doubt], None] | None = None,
 ) -> BuildReport:
-    """Index every motion file under ``paths`` into ``out`` (created, or extended: clips
-    already there with the same content hash are skipped).
-
-    Parameters
-    ----------
-    paths : iterable of str or Path
-        Files or folders (searched recursively, :func:`quatmotion.io.find_motion_files`).
-    out : str or Path
-        The ``.qidx`` file.
-    kinds : iterable of str
-        Feature kinds to compute (:data:`quatmotion.retrieval.methods.FEATURE_KINDS`).
-    labels : dict, optional
-        Clip (path, file name or stem) -> label; clips not in it take the catalogue's label.
-    skeletons : str or Path, optional
-        The ASF of every AMC clip, or a folder holding their ASF files (:func:`skeleton_for`).
-    units : str or float, optional
-        Length unit of the BVH clips (:data:`quatmotion.io.BVH_UNITS`); guessed when None.
-        The features are scale-free (every clip is put on one stature), so the unit changes
-        what ``on_doubt`` hears, not the index.
-    workers : int, optional
-        Processes (default: every core; 1 computes in this process).
-    scheduler : str or Scheduler, optional
-        Where the features are computed: :func:`quatmotion.parallel.resolve_scheduler` (a Dask
-        address ``tcp://HOST:PORT``; ``$QUATMOTION_SCHEDULER`` when None).
-    batch : int
-        Clips per committed transaction.
-    progress : callable, optional
-        Called with ``(done, total)`` as clips finish.
-    on_doubt : callable, optional
-        ``on_doubt(path, doubt)`` for what is doubtful in a clip indexed
-        (:func:`quatmotion.io.implausible_values`), in this process as its result comes back.
-
-    Returns
-    -------
-    BuildReport
-    """
-    from quatmotion.io import find_motion_files
-
-    files = find_motion_files(paths)
-    skeleton_dir = Path(skeletons) if skeletons is not None else None
-    labels = dict(labels or {})
-    known = catalogue_labels()
-    report = BuildReport()
-    jobs: list[ClipJob] = []
-    kinds = tuple(kinds)
-    with ClipIndex.create(out) as index:
-        for path in files:
-            try:
-                skeleton = skeleton_for(path, skeleton_dir)
-                sha = content_hash(path, skeleton)
-            except (FormatError, OSError) as error:
-                report.failed.append((str(path), _reason(error)))
-                continue
-            if index.contains(str(path), sha):
-                report.skipped += 1
-                continue
-            label = _label(path, labels, known)
-            asf = str(skeleton) if skeleton else None
-            jobs.append(ClipJob(str(path), asf, kinds, label, sha, units))
-        pending: list[ClipRecord] = []
-        stream = imap_batch(_guarded, jobs, workers=workers, scheduler=scheduler, progress=progress)
-        with stream:
-            for outcome in stream:
-                result = outcome.value
-                if outcome.failure is not None:  # its worker died, on every attempt
-                    report.failed.append((outcome.item.path, outcome.failure.message))
-                elif isinstance(result, _Indexed):
-                    pending.append(result.record)
-                    for doubt in result.doubts if on_doubt is not None else ():
-                        on_doubt(result.record.path, doubt)
-                else:
-                    report.failed.append(result)  # type: ignore[arg-type]
-                if len(pending) >= batch:
-                    report.added += index.add(pending)
-                    pending = []
-        if pending:
-            report.added += index.add(pending)
-    return report
+    """Deprecated: :meth:`ClipIndex.build` with an :class:`IndexSettings` made of the
+    keywords (kept while callers move)."""
+    read = ReadSettings(
+        units=units, skeleton=None if skeletons is None else os.fspath(skeletons), strict=False
+    )
+    settings = IndexSettings(kinds=tuple(kinds), batch=batch, read=read)
+    return build(
+        paths,
+        out,
+        settings,
+        runner=scheduler,
+        workers=workers,
+        progress=progress,
+        labels=labels,
+        on_doubt=on_doubt,
+    )

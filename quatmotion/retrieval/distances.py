@@ -25,6 +25,7 @@ from quatmotion.retrieval import _kernels
 __all__ = [
     "atom_matching_distances",
     "dtw",
+    "dtw_euclidean_to_library",
     "dtw_to_library",
     "embedding_distances",
     "find_within",
@@ -127,6 +128,41 @@ def dtw_to_library(
         raise ValueError(f"candidates must be clip numbers in 0..{n_clips - 1}")
     d = q.shape[1] if dims is None else int(dims)
     return _kernels.dtw_to_candidates(q, frames, offsets, cand, float(band), d, float(max_radius))
+
+
+def dtw_euclidean_to_library(
+    query: ArrayLike,
+    frames: NDArray[np.float32],
+    offsets: NDArray[np.int64],
+    candidates: ArrayLike | None = None,
+) -> FloatArray:
+    """Unbanded DTW with a Euclidean (not squared) frame cost, path cost divided by ``n + m``,
+    from ``query`` ``(n, d)`` to library clips.
+
+    Parameters
+    ----------
+    query : array_like, shape (n, d)
+    frames, offsets : library from :func:`pack_sequences`
+    candidates : array_like of int, optional
+        Clip numbers to compare (default all).
+
+    Returns
+    -------
+    ndarray, shape (len(candidates),)
+    """
+    q = _as_frames(query, "query")
+    if frames.ndim != 2 or frames.shape[1] != q.shape[1] or frames.dtype != np.float32:
+        raise ValueError(f"library frames {frames.shape} {frames.dtype} do not match the query")
+    n_clips = offsets.shape[0] - 1
+    cand = (
+        np.arange(n_clips, dtype=np.int64)
+        if candidates is None
+        else np.ascontiguousarray(candidates, dtype=np.int64)
+    )
+    if cand.size and (cand.min() < 0 or cand.max() >= n_clips):
+        raise ValueError(f"candidates must be clip numbers in 0..{n_clips - 1}")
+    weights = np.ones(q.shape[1], dtype=np.float32)
+    return _kernels.dtw_euclidean_to_candidates(q, frames, offsets, cand, weights)
 
 
 def embedding_distances(embeddings: NDArray[np.float32], query: ArrayLike) -> FloatArray:

@@ -18,6 +18,12 @@ Conventions
 * Everything is invariant to a rotation about the vertical axis and to a translation: the
   body frame comes from the hip line in each frame, the Hip velocity is expressed in that frame
   and the yaw enters only through its rate.
+* **Path frames** ``(T, 51)``, leg lengths: the 16 joints relative to the Hip and the Hip's
+  trajectory from its first-frame position, all rotated by the *first* frame's heading only
+  and divided by the actor's leg length (thigh plus shin). Invariant to the clip's start
+  heading and position and to the body's size; *not* invariant to a change of heading during
+  the clip (a turn left and a turn right differ in sign), nor to left against right, nor to
+  the order and rhythm of frames (compared by DTW).
 * **Embedding** ``(156,)``: the mean and standard deviation over time of the motion frames and
   the mean absolute value of their velocity counterpart (joint velocities in the body frame,
   Hip velocity and yaw rate, all times the horizon). Plain Euclidean distance in these units.
@@ -54,6 +60,7 @@ __all__ = [
     "feature_step",
     "motion_embedding",
     "motion_frames",
+    "path_frames",
     "skeleton_fingerprint",
 ]
 
@@ -144,6 +151,39 @@ def motion_frames(motion: Motion) -> tuple[NDArray[np.float32], NDArray[np.float
     return frames.astype(np.float32), motion_embedding(frames, velocities).astype(np.float32)
 
 
+def _leg_length(world16: FloatArray) -> float:
+    """Median over frames of thigh plus shin, averaged over both legs (same units)."""
+    legs = []
+    for hip, knee, foot in (("LHip", "LKnee", "LFoot"), ("RHip", "RKnee", "RFoot")):
+        h, k, f = (skeleton16.JOINTS_16.index(n) for n in (hip, knee, foot))
+        thigh = np.linalg.norm(world16[:, k] - world16[:, h], axis=-1)
+        shin = np.linalg.norm(world16[:, f] - world16[:, k], axis=-1)
+        legs.append(np.median(thigh + shin))
+    length = float(np.mean(legs))
+    if not length > 0:
+        raise ValueError("the clip's legs have zero length: no body-size normalisation")
+    return length
+
+
+def path_from_world(world16: FloatArray) -> FloatArray:
+    """Path frames ``(T, 51)`` (module docstring) from world positions ``(T, 16, 3)``."""
+    T = world16.shape[0]
+    yaw0 = float(skeleton16.facing_yaw(world16[:1])[0])
+    hip = world16[:, :1, :]
+    local = skeleton16.rotate_about_y(world16 - hip, -yaw0)
+    travel = skeleton16.rotate_about_y(world16[:, 0] - world16[:1, 0], -yaw0)
+    out = np.concatenate((local.reshape(T, -1), travel), axis=1)
+    return out / _leg_length(world16)
+
+
+def path_frames(motion: Motion) -> NDArray[np.float32]:
+    """Path frames ``(T', 51)`` of a clip (module docstring), every
+    ``feature_step(motion.fps)``-th frame."""
+    step = feature_step(motion.fps)
+    world = skeleton16.world_positions16(motion)[::step]
+    return path_from_world(world).astype(np.float32)
+
+
 def motion_embedding(frames: FloatArray, velocities: FloatArray) -> FloatArray:
     """Pooled embedding ``(156,)``: mean and std of ``frames`` ``(T, 52)``, mean |velocities|."""
     return np.concatenate((frames.mean(0), frames.std(0), np.abs(velocities).mean(0)))
@@ -220,6 +260,7 @@ def clip_features(motion: Motion, kinds: Iterable[str], seed: int = 0) -> dict[s
     for kind in kinds:
         if kind == "motion":
             out["frames"], out["embedding"] = motion_frames(motion)
+            out["path"] = path_frames(motion)
         elif kind in ("qssd", "ksvd"):
             out[kind] = clip_dictionary(motion, kind, seed)
         else:

@@ -2,43 +2,73 @@
 
 Conventions
 -----------
-* One SQLite database (the standard library's :mod:`sqlite3`). Table ``meta`` holds the format
-  name, its version and the feature parameters; ``clips`` one row per clip (name, path, content
-  hash, label, frames, fps, skeleton fingerprint); ``features`` one row per clip and feature
-  array, the array as ``.npy`` bytes (``numpy.save``, no pickles).
+* One SQLite database (the standard library's :mod:`sqlite3`); the schema of every version is
+  in docs/format.md. Table ``meta`` holds the format name, its version, the feature parameters
+  and the :class:`IndexSettings` the index was built with; ``clips`` one row per clip: its
+  :class:`~quatmotion.collection.ClipRef` (unique name, content hash, absolute paths, skeleton
+  fingerprint, units), label, frames, fps and the rotation key the dictionary methods compare
+  (:func:`~quatmotion.retrieval.features.skeleton_fingerprint`); ``features`` one row per clip
+  and feature array, the array as ``.npy`` bytes (``numpy.save``, no pickles); ``blobs`` what
+  the whole index shares (a learned model...), a key to bytes, so a method can store its own
+  without a new format version.
 * A clip and all its feature rows are written in one transaction, and transactions are
   committed in batches: a build that is killed leaves a readable index of the clips committed
-  so far, and :meth:`ClipIndex.contains` lets the next build skip them.
-* The content hash is SHA-256 of the motion file's bytes, followed for an AMC by its ASF's:
-  the same clip under another skeleton is another clip.
+  so far, and the next build skips them (same path and content hash).
+* Versions (:data:`FORMAT`): 2 writes the clip references and the settings; 1 (quatmotion
+  0.3.0, paths as given, names the file stems) is still read, its clips given references on
+  reading (names made unique, paths resolved against the index's folder), and is extended
+  only after a rebuild.
 * Opening checks the format and version (:class:`~quatmotion.errors.FormatError` for a file
-  that is not SQLite, a truncated database, another format, or a newer version) and that
-  the feature parameters are the ones this code computes (else: rebuild).
+  that is not SQLite, a truncated database, another format, or a version this code does not
+  read) and that the feature parameters are the ones this code computes (else: rebuild).
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import errno
-import hashlib
 import io
 import json
+import os
 import sqlite3
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from numbers import Integral
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
+from sklearn.utils._param_validation import Interval
 
-from quatmotion.errors import FormatError
+from quatmotion._format import FileFormat
+from quatmotion._settings import Settings
+from quatmotion.collection import ClipRef, ReadSettings, unique_names
+from quatmotion.collection.refs import content_hash
+from quatmotion.errors import ClipNameError, FormatError
 from quatmotion.io.names import match_clip
 from quatmotion.retrieval import features as feat
-from quatmotion.retrieval.methods import Library
+from quatmotion.retrieval.methods import FEATURE_KINDS, Library
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "ClipIndex", "ClipRecord", "ClipRow", "content_hash"]
+if TYPE_CHECKING:
+    from quatmotion.collection import BuildReport
+    from quatmotion.motion import Motion
+    from quatmotion.retrieval.search import SearchResult
 
-FORMAT_NAME = "quatmotion-retrieval-index"
-FORMAT_VERSION = 1
+__all__ = [
+    "FORMAT",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "ClipIndex",
+    "ClipRecord",
+    "ClipRow",
+    "IndexSettings",
+    "content_hash",
+]
+
+FORMAT = FileFormat("quatmotion-retrieval-index", 2, 1, "a quatmotion clip index")
+FORMAT_NAME = FORMAT.name
+FORMAT_VERSION = FORMAT.version
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
 FEATURE_PARAMETERS = {
@@ -53,65 +83,133 @@ FEATURE_PARAMETERS = {
 }
 """What the stored features depend on; an index built with other values must be rebuilt."""
 
+
+@dataclass(frozen=True)
+class IndexSettings(Settings):
+    """How a clip index is built (stored in its ``meta`` table, shown by ``index ls``).
+
+    Attributes
+    ----------
+    kinds : tuple of str
+        Feature kinds computed (:data:`~quatmotion.retrieval.methods.FEATURE_KINDS`): ``motion``
+        serves the default method and ``--within``; ``qssd``/``ksvd`` the paper's dictionaries,
+        computed only when asked for (they cost several times ``motion`` and only the
+        ``paper-*`` methods read them).
+    batch : int
+        Clips per committed transaction (what a killed build keeps).
+    label_folders : bool
+        Label a clip without another label by its folder's name (HDM05's ``CLASS/file.amc``).
+    label_sidecars : bool
+        Read labels from the clips' sidecars (bandai's JSON, ``K_label.txt``).
+    read : ReadSettings
+        How the clips are read (BVH unit, the AMC skeletons...).
+    """
+
+    kinds: tuple[str, ...] = ("motion",)
+    batch: int = 16
+    label_folders: bool = False
+    label_sidecars: bool = True
+    read: ReadSettings = dataclasses.field(default_factory=ReadSettings)
+
+    _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
+        "kinds": [tuple],
+        "batch": [Interval(Integral, 1, None, closed="left")],
+        "label_folders": ["boolean"],
+        "label_sidecars": ["boolean"],
+        "read": [ReadSettings],
+    }
+
+    def _check(self) -> None:
+        unknown = [k for k in self.kinds if k not in FEATURE_KINDS]
+        if unknown or not self.kinds:
+            raise ValueError(
+                f"unknown feature kinds {list(unknown)}; choose from {', '.join(FEATURE_KINDS)}"
+            )
+
+
 _SCHEMA = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE clips (
     id INTEGER PRIMARY KEY,
-    name TEXT NOT NULL,
-    path TEXT NOT NULL UNIQUE,
+    name TEXT NOT NULL UNIQUE,
     sha256 TEXT NOT NULL,
+    path TEXT,
+    skeleton_path TEXT,
+    skeleton TEXT NOT NULL DEFAULT '',
+    units TEXT NOT NULL DEFAULT '',
+    units_guessed INTEGER NOT NULL DEFAULT 0,
     label TEXT NOT NULL DEFAULT '',
     frames INTEGER NOT NULL,
     fps REAL NOT NULL,
-    skeleton TEXT NOT NULL
+    rotation_key TEXT NOT NULL
 );
-CREATE INDEX clips_name ON clips (name);
+CREATE INDEX clips_sha256 ON clips (sha256);
+CREATE INDEX clips_path ON clips (path);
 CREATE TABLE features (
     clip INTEGER NOT NULL REFERENCES clips (id) ON DELETE CASCADE,
     key TEXT NOT NULL,
     data BLOB NOT NULL,
     PRIMARY KEY (clip, key)
 );
+CREATE TABLE blobs (key TEXT PRIMARY KEY, data BLOB NOT NULL);
 """
-
-
-def content_hash(path: str | Path, skeleton: str | Path | None = None) -> str:
-    """SHA-256 (hex) of a motion file's bytes, then of its skeleton file's if given."""
-    h = hashlib.sha256()
-    for p in (path, skeleton):
-        if p is not None:
-            with open(p, "rb") as f:
-                for chunk in iter(lambda: f.read(1 << 20), b""):
-                    h.update(chunk)
-    return h.hexdigest()
 
 
 @dataclass(frozen=True)
 class ClipRecord:
-    """A clip ready to be stored: what :meth:`ClipIndex.add` writes."""
+    """A clip ready to be stored: what :meth:`ClipIndex.store` writes.
 
-    name: str
-    path: str
-    sha256: str
+    ``rotation_key`` is :func:`~quatmotion.retrieval.features.skeleton_fingerprint` (the
+    rotating joints, what the dictionary methods compare); ``ref.skeleton`` the skeleton's
+    full fingerprint.
+    """
+
+    ref: ClipRef
     label: str
     frames: int
     fps: float
-    skeleton: str
+    rotation_key: str
     arrays: dict[str, np.ndarray]
 
 
 @dataclass(frozen=True)
 class ClipRow:
-    """One indexed clip (without its features)."""
+    """One indexed clip (without its features).
+
+    ``path`` is where the clip's file is now (:meth:`ClipRef.locate` against the index's
+    folder), else the stored path; ``skeleton`` the rotation key the methods compare.
+    """
 
     id: int
-    name: str
-    path: str
-    sha256: str
+    ref: ClipRef
     label: str
     frames: int
     fps: float
-    skeleton: str
+    rotation_key: str
+    path: str
+
+    @property
+    def name(self) -> str:
+        return self.ref.name
+
+    @property
+    def sha256(self) -> str:
+        return self.ref.sha256
+
+    @property
+    def skeleton(self) -> str:
+        return self.rotation_key
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready: the reference's fields, then the row's."""
+        return {
+            **self.ref.to_dict(),
+            "path": self.path,
+            "label": self.label,
+            "frames": self.frames,
+            "fps": self.fps,
+            "rotation_key": self.rotation_key,
+        }
 
 
 def _to_blob(a: np.ndarray) -> bytes:
@@ -137,21 +235,73 @@ def _writing(path: Path) -> Iterator[None]:
 class ClipIndex:
     """An open clip index (use as a context manager, or call :meth:`close`).
 
-    Use :meth:`create` for a new file and :meth:`open` for an existing one.
+    :meth:`build` writes one (or resumes one, saying so), :meth:`add` extends one,
+    :meth:`open` reads one.
     """
 
-    def __init__(self, connection: sqlite3.Connection, path: Path) -> None:
+    def __init__(
+        self,
+        connection: sqlite3.Connection,
+        path: Path,
+        version: int = FORMAT_VERSION,
+        settings: IndexSettings | None = None,
+    ) -> None:
         self._db = connection
         self.path = path
+        self.version = version
+        self.settings = settings or IndexSettings()
 
-    # -- opening -------------------------------------------------------------------------
+    @property
+    def format(self) -> FileFormat:
+        """The format, with the version this file was written in."""
+        return dataclasses.replace(FORMAT, version=self.version)
+
+    # -- the collection surface -------------------------------------------------------------
     @classmethod
-    def create(cls, path: str | Path) -> ClipIndex:
-        """A new, empty index at ``path``; an existing index there is opened for writing
-        instead (so that a build resumes), after the checks of :meth:`open`."""
+    def build(
+        cls,
+        sources: Iterable[Any],
+        out: str | Path,
+        settings: IndexSettings | None = None,
+        **options: Any,
+    ) -> BuildReport:
+        """Index ``sources`` into ``out``: a new file, or an existing index resumed (its clips
+        with the same path and content hash skipped; ``report.details["resumed"]`` says so).
+
+        See :func:`quatmotion.retrieval.build.build` for the options (``runner``,
+        ``progress``, ``labels``, ``on_doubt``...).
+        """
+        from quatmotion.retrieval.build import build
+
+        return build(sources, out, settings, **options)
+
+    @classmethod
+    def add(cls, path: str | Path, sources: Iterable[Any], **options: Any) -> BuildReport:
+        """Add ``sources`` to the existing index ``path`` (with its stored settings unless
+        ``settings=`` is given); ``labels=`` also relabels clips already there.
+
+        Raises
+        ------
+        FileNotFoundError
+            No index at ``path``.
+        """
+        from quatmotion.retrieval.build import add
+
+        return add(path, sources, **options)
+
+    @classmethod
+    def create(cls, path: str | Path, settings: IndexSettings | None = None) -> ClipIndex:
+        """A new, empty index at ``path``, open for writing.
+
+        Raises
+        ------
+        FileExistsError
+            A non-empty file is there (resume it with :meth:`build` or :meth:`add`).
+        """
         path = Path(path)
         if path.exists() and path.stat().st_size > 0:
-            return cls.open(path, write=True)
+            raise FileExistsError(errno.EEXIST, "an index is already there", str(path))
+        settings = settings or IndexSettings()
         path.parent.mkdir(parents=True, exist_ok=True)
         db = sqlite3.connect(path)
         try:
@@ -163,25 +313,27 @@ class ClipIndex:
                         ("format", FORMAT_NAME),
                         ("version", str(FORMAT_VERSION)),
                         ("features", json.dumps(FEATURE_PARAMETERS, sort_keys=True)),
+                        ("settings", json.dumps(settings.to_dict(), sort_keys=True)),
                     ],
                 )
         except BaseException:
             db.close()
             raise
         db.execute("PRAGMA foreign_keys = ON")
-        return cls(db, path)
+        return cls(db, path, FORMAT_VERSION, settings)
 
     @classmethod
     def open(cls, path: str | Path, write: bool = False) -> ClipIndex:
-        """Open an index, checking its format, version and feature parameters.
+        """Open an index (read-only unless ``write``), checking its format, version and
+        feature parameters.
 
         Raises
         ------
         FileNotFoundError
             No such file.
         FormatError
-            Not a SQLite file, a damaged one, another format, a newer version, or features
-            computed with other parameters.
+            Not a SQLite file, a damaged one, another format, a version this code does not
+            read, features computed with other parameters, or ``write`` on a version-1 index.
         """
         path = Path(path)
         if not path.is_file():
@@ -200,31 +352,29 @@ class ClipIndex:
         except sqlite3.DatabaseError as error:
             db.close()
             raise FormatError(f"not a readable quatmotion index ({error})", path) from None
-        if meta.get("format") != FORMAT_NAME:
-            db.close()
-            raise FormatError(f"not a quatmotion index (format {meta.get('format')!r})", path)
         try:
-            version = int(meta.get("version", ""))
-        except ValueError:
-            version = -1
-        if version != FORMAT_VERSION:
+            version = FORMAT.check(meta.get("format"), meta.get("version"), path)
+            if json.loads(meta.get("features", "{}")) != FEATURE_PARAMETERS:
+                raise FormatError(
+                    "index built with other feature parameters; rebuild it "
+                    "(quatmotion index build)",
+                    path,
+                )
+            if version == 1 and write:
+                raise FormatError(
+                    "a version-1 index (quatmotion 0.3.0) is read-only: rebuild it with "
+                    "quatmotion index build to extend it",
+                    path,
+                )
+            settings = _stored_settings(meta, version, path)
+        except (FormatError, ValueError) as error:
             db.close()
-            newer = version > FORMAT_VERSION
-            raise FormatError(
-                f"index format version {meta.get('version')!r} "
-                + ("is newer than this quatmotion reads" if newer else "is not supported")
-                + f" (reads version {FORMAT_VERSION})",
-                path,
-            )
-        if json.loads(meta.get("features", "{}")) != FEATURE_PARAMETERS:
-            db.close()
-            raise FormatError(
-                "index built with other feature parameters; rebuild it (quatmotion index build)",
-                path,
-            )
+            if isinstance(error, FormatError):
+                raise
+            raise FormatError(f"malformed index meta table ({error})", path) from None
         if write:
             db.execute("PRAGMA foreign_keys = ON")
-        return cls(db, path)
+        return cls(db, path, version, settings)
 
     def close(self) -> None:
         self._db.close()
@@ -236,20 +386,26 @@ class ClipIndex:
         self.close()
 
     # -- reading -------------------------------------------------------------------------
-    def clips(self) -> list[ClipRow]:
-        """Every clip, in insertion order."""
-        rows = self._db.execute(
-            "SELECT id, name, path, sha256, label, frames, fps, skeleton FROM clips ORDER BY id"
-        ).fetchall()
-        return [ClipRow(*r) for r in rows]
+    def rows(self) -> list[ClipRow]:
+        """Every clip with its label, frames and fps, in insertion order."""
+        return (_rows_v1 if self.version == 1 else _rows_v2)(self._db, self.path)
+
+    def clips(self) -> tuple[ClipRef, ...]:
+        """Every clip's reference, in insertion order (what the collection kinds share)."""
+        return tuple(r.ref for r in self.rows())
+
+    def labels(self) -> dict[str, str]:
+        """Clip name -> label ("" for none)."""
+        return {r.name: r.label for r in self.rows()}
 
     def __len__(self) -> int:
         return int(self._db.execute("SELECT count(*) FROM clips").fetchone()[0])
 
     def contains(self, path: str | Path, sha256: str) -> bool:
         """Whether ``path`` is indexed with this content hash."""
+        stored = str(path) if self.version == 1 else os.path.abspath(path)
         row = self._db.execute(
-            "SELECT 1 FROM clips WHERE path = ? AND sha256 = ?", (str(path), sha256)
+            "SELECT 1 FROM clips WHERE path = ? AND sha256 = ?", (stored, sha256)
         ).fetchone()
         return row is not None
 
@@ -261,21 +417,21 @@ class ClipIndex:
         return out
 
     def find(self, name: str) -> ClipRow:
-        """The clip ``name`` names: its path, a unique end of it (file name, stem, trailing
-        folders) or its number (:func:`quatmotion.io.names.match_clip`, every command's rule).
+        """The clip ``name`` names: its name, a unique end of it (stem, trailing folders), its
+        number (:func:`quatmotion.io.names.match_clip`, every command's rule) or its path.
 
         Raises
         ------
         ValueError
-            (:class:`~quatmotion.errors.ClipNameError`) No such clip, or several.
+            (:class:`~quatmotion.errors.ClipNameError`) No such clip, or several (naming them).
         """
-        rows = self.clips()
-        return rows[match_clip(name, [r.path for r in rows], str(self.path))]
+        rows = self.rows()
+        return rows[_match(name, rows, str(self.path))]
 
     def load(self, keys: Iterable[str]) -> tuple[list[ClipRow], Library]:
         """The clips that have every feature array in ``keys``, and a :class:`Library` of them."""
         keys = tuple(keys)
-        rows = self.clips()
+        rows = self.rows()
         arrays: dict[int, dict[str, np.ndarray]] = {r.id: {} for r in rows}
         if keys:
             marks = ",".join("?" * len(keys))
@@ -284,12 +440,30 @@ class ClipIndex:
             ):
                 arrays[int(clip)][key] = _from_blob(data)
         rows = [r for r in rows if all(k in arrays[r.id] for k in keys)]
-        library = Library([arrays[r.id] for r in rows], [r.skeleton for r in rows])
+        library = Library([arrays[r.id] for r in rows], [r.rotation_key for r in rows])
         return rows, library
 
-    # -- writing -------------------------------------------------------------------------
-    def add(self, records: Iterable[ClipRecord]) -> int:
-        """Store clips in one transaction (a clip already at the same path is replaced).
+    def blob(self, key: str) -> bytes | None:
+        """What :meth:`set_blob` stored under ``key`` (None: nothing; a version-1 index has
+        none)."""
+        if self.version == 1:
+            return None
+        row = self._db.execute("SELECT data FROM blobs WHERE key = ?", (key,)).fetchone()
+        return None if row is None else bytes(row[0])
+
+    def search(
+        self, query: Motion | str, k: int = 10, *, method: str | None = None
+    ) -> list[SearchResult]:
+        """The ``k`` clips most like ``query`` (:func:`quatmotion.retrieval.search.search`)."""
+        from quatmotion.retrieval.methods import DEFAULT_METHOD
+        from quatmotion.retrieval.search import search
+
+        return search(self, query, method=method or DEFAULT_METHOD, k=k)
+
+    # -- writing (an index opened with write=True, or made by create) ----------------------
+    def store(self, records: Iterable[ClipRecord]) -> int:
+        """Store clips in one transaction (a clip already at the same path, or of the same
+        name, is replaced).
 
         Returns
         -------
@@ -299,11 +473,27 @@ class ClipIndex:
         n = 0
         with _writing(self.path), self._db:
             for r in records:
-                self._db.execute("DELETE FROM clips WHERE path = ?", (r.path,))
+                ref = r.ref
+                if ref.path is not None:
+                    self._db.execute("DELETE FROM clips WHERE path = ?", (ref.path,))
+                self._db.execute("DELETE FROM clips WHERE name = ?", (ref.name,))
                 cur = self._db.execute(
-                    "INSERT INTO clips (name, path, sha256, label, frames, fps, skeleton) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?)",
-                    (r.name, r.path, r.sha256, r.label, r.frames, r.fps, r.skeleton),
+                    "INSERT INTO clips (name, sha256, path, skeleton_path, skeleton, units, "
+                    "units_guessed, label, frames, fps, rotation_key) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        ref.name,
+                        ref.sha256,
+                        ref.path,
+                        ref.skeleton_path,
+                        ref.skeleton,
+                        ref.units,
+                        int(ref.units_guessed),
+                        r.label,
+                        r.frames,
+                        r.fps,
+                        r.rotation_key,
+                    ),
                 )
                 self._db.executemany(
                     "INSERT INTO features (clip, key, data) VALUES (?, ?, ?)",
@@ -312,22 +502,109 @@ class ClipIndex:
                 n += 1
         return n
 
+    def rename(self, names: dict[str, str]) -> None:
+        """Rename clips (old name -> new), in one transaction (names stay unique)."""
+        if not names:
+            return
+        with _writing(self.path), self._db:
+            for old in names:  # through temporary names: a new name may be another's old one
+                self._db.execute("UPDATE clips SET name = ? WHERE name = ?", (f"\0{old}", old))
+            for old, new in names.items():
+                self._db.execute("UPDATE clips SET name = ? WHERE name = ?", (new, f"\0{old}"))
+
+    def write_settings(self, settings: IndexSettings) -> None:
+        """Store the settings of the latest build (what ``index ls`` shows)."""
+        with _writing(self.path), self._db:
+            self._db.execute(
+                "INSERT OR REPLACE INTO meta VALUES ('settings', ?)",
+                (json.dumps(settings.to_dict(), sort_keys=True),),
+            )
+        self.settings = settings
+
+    def set_blob(self, key: str, data: bytes) -> None:
+        """Store bytes the whole index shares under ``key`` (a learned model...)."""
+        with _writing(self.path), self._db:
+            self._db.execute("INSERT OR REPLACE INTO blobs VALUES (?, ?)", (key, data))
+
     def remove(self, names: Iterable[str]) -> list[str]:
         """Remove the clips named (as :meth:`find` reads a name; nothing is removed when one
-        of them names no clip or several); returns the paths removed."""
+        of them names no clip or several); returns the names removed."""
         rows = [self.find(name) for name in names]
         with _writing(self.path), self._db:
             for row in rows:
                 self._db.execute("DELETE FROM clips WHERE id = ?", (row.id,))
-        return list(dict.fromkeys(row.path for row in rows))
+        return list(dict.fromkeys(row.name for row in rows))
 
     def set_labels(self, labels: dict[str, str]) -> int:
-        """Set the label of clips named in ``labels`` (by name or path); returns the count."""
+        """Set the label of the clips named in ``labels`` (by name); returns how many
+        changed."""
         n = 0
         with _writing(self.path), self._db:
-            for row in self.clips():
-                label = labels.get(row.path, labels.get(row.name))
+            for row in self.rows():
+                label = labels.get(row.name)
                 if label is not None and label != row.label:
                     self._db.execute("UPDATE clips SET label = ? WHERE id = ?", (label, row.id))
                     n += 1
         return n
+
+
+# -- the decoders, one per version ---------------------------------------------------------
+def _stored_settings(meta: dict[str, str], version: int, path: Path) -> IndexSettings:
+    if version == 1 or "settings" not in meta:
+        return IndexSettings()  # 0.3.0 stored none: the defaults of that release
+    return IndexSettings.from_dict(json.loads(meta["settings"]), path)
+
+
+def _rows_v2(db: sqlite3.Connection, path: Path) -> list[ClipRow]:
+    base = path.resolve().parent
+    out = []
+    for row in db.execute(
+        "SELECT id, name, sha256, path, skeleton_path, skeleton, units, units_guessed, label, "
+        "frames, fps, rotation_key FROM clips ORDER BY id"
+    ):
+        (clip, name, sha, stored, asf, skeleton, units, guessed, label, frames, fps, key) = row
+        ref = ClipRef(name, sha, stored, asf, skeleton, units, bool(guessed))
+        found = ref.locate(base)[0]
+        where = str(found) if found is not None else (stored or "")
+        out.append(ClipRow(int(clip), ref, label, int(frames), float(fps), key, where))
+    return out
+
+
+def _rows_v1(db: sqlite3.Connection, path: Path) -> list[ClipRow]:
+    """Version 1 (0.3.0): paths as given at build time (relative to where it ran), names the
+    stems (not unique), no settings. Paths resolve against the index's folder when they are
+    found there; names are made unique as a v2 build would make them."""
+    base = path.resolve().parent
+    raw = db.execute(
+        "SELECT id, name, path, sha256, label, frames, fps, skeleton FROM clips ORDER BY id"
+    ).fetchall()
+    paths = []
+    for _, _, stored, *_ in raw:
+        p = Path(stored)
+        if not p.is_absolute() and (base / p).is_file():
+            p = base / p
+        paths.append(Path(os.path.abspath(p)))
+    names = unique_names(paths)
+    out = []
+    for (clip, _, _, sha, label, frames, fps, key), p, name in zip(raw, paths, names, strict=True):
+        ref = ClipRef(name, sha, str(p))
+        out.append(ClipRow(int(clip), ref, label, int(frames), float(fps), key, str(p)))
+    return out
+
+
+def _match(query: str, rows: list[ClipRow], where: str) -> int:
+    """The row ``query`` names: by name (the unique names), else by a path's end, else by
+    the absolute path."""
+    try:
+        return match_clip(query, [r.name for r in rows], where)
+    except ClipNameError as by_name:
+        if "ambiguous" in str(by_name):
+            raise
+        try:
+            return match_clip(query, [r.path for r in rows], where)
+        except ClipNameError:
+            absolute = os.path.abspath(query)
+            for i, r in enumerate(rows):
+                if r.path == absolute or r.ref.path == absolute:
+                    return i
+            raise by_name from None

@@ -1,7 +1,9 @@
 """Searching an index: a query clip's features, the ranked clips, and search inside takes.
 
 The query is a :class:`~quatmotion.motion.Motion` (read from an AMC/BVH file) or a clip of the
-index itself (its stored features). Results carry the clip's name, path, label and distance;
+index itself (its stored features; a name two clips share is an error listing both). Results
+carry the clip's unique name, its path (absolute, where the file is found now), label and
+distance;
 :func:`search_within` also the frame range of the match, in frames of the clip's file counted
 from 0 (``stop`` exclusive), as the rest of quatmotion counts frames.
 """
@@ -12,11 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion
 from quatmotion.retrieval import distances as dist
 from quatmotion.retrieval.features import clip_features, feature_step, skeleton_fingerprint
-from quatmotion.retrieval.index import ClipIndex, ClipRow
+from quatmotion.retrieval.index import ClipIndex, ClipRow, _match
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, QueryFeatures
 
 __all__ = ["SearchResult", "method_keys", "query_features", "search", "search_within"]
@@ -52,6 +53,9 @@ def method_keys(method: str) -> tuple[str, ...]:
     """The stored feature arrays a method reads."""
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    explicit = getattr(METHODS[method], "keys", None)
+    if explicit is not None:
+        return tuple(explicit)
     keys: list[str] = []
     for kind in METHODS[method].kinds:
         keys += ["frames", "embedding"] if kind == "motion" else [kind]
@@ -80,14 +84,14 @@ def _query(
     if isinstance(query, Motion):
         return rows, library, query_features(query, method), -1
     where = f"{index.path} (the clips with {method} features)"
-    i = match_clip(query, [r.path for r in rows], where)
+    i = _match(query, rows, where)
     return rows, library, QueryFeatures(library.features[i], rows[i].skeleton), i
 
 
 def search(
-    index: ClipIndex, query: Motion | str, *, method: str = DEFAULT_METHOD, top: int = 20
+    index: ClipIndex, query: Motion | str, *, method: str = DEFAULT_METHOD, k: int = 20
 ) -> list[SearchResult]:
-    """The ``top`` clips most like ``query`` under ``method``.
+    """The ``k`` clips most like ``query`` under ``method``.
 
     Parameters
     ----------
@@ -97,7 +101,7 @@ def search(
         (:func:`quatmotion.io.names.match_clip`; left out of its own results).
     method : str
         A key of :data:`~quatmotion.retrieval.methods.METHODS`.
-    top : int
+    k : int
         Results wanted (fewer when the index has fewer comparable clips).
 
     Returns
@@ -110,8 +114,8 @@ def search(
         Unknown method or clip name; a query skeleton without the 16 pose joints; for the
         dictionary methods, no indexed clip of the query's skeleton.
     """
-    if top < 1:
-        raise ValueError(f"top must be at least 1, got {top}")
+    if k < 1:
+        raise ValueError(f"k must be at least 1, got {k}")
     rows, library, features, own = _query(index, query, method)
     ranking = METHODS[method].rank(library, features, exclude=own)  # type: ignore[arg-type]
     if ranking.clips.size == 0 and len(rows):
@@ -121,13 +125,14 @@ def search(
             f"as {DEFAULT_METHOD}, which retargets through the 16-joint pose skeleton)"
         )
     out = []
-    for r, (c, d) in enumerate(zip(ranking.clips[:top], ranking.distances[:top], strict=True)):
+    pairs = zip(ranking.clips[:k], ranking.distances[:k], strict=True)
+    for r, (c, d) in enumerate(pairs):
         row = rows[int(c)]
         out.append(SearchResult(r + 1, row.name, row.path, row.label, float(d)))
     return out
 
 
-def search_within(index: ClipIndex, query: Motion | str, *, top: int = 20) -> list[SearchResult]:
+def search_within(index: ClipIndex, query: Motion | str, *, k: int = 20) -> list[SearchResult]:
     """Where ``query`` matches best inside each indexed clip (subsequence DTW over the motion
     frames), clips ranked by that match's cost.
 
@@ -137,8 +142,8 @@ def search_within(index: ClipIndex, query: Motion | str, *, top: int = 20) -> li
         With ``start_frame`` / ``stop_frame`` in frames of each clip's file (from 0, stop
         exclusive, to the resolution of the feature step).
     """
-    if top < 1:
-        raise ValueError(f"top must be at least 1, got {top}")
+    if k < 1:
+        raise ValueError(f"k must be at least 1, got {k}")
     rows, library, features, own = _query(index, query, DEFAULT_METHOD)
     q = features.arrays["frames"]
     hits = []
@@ -151,5 +156,5 @@ def search_within(index: ClipIndex, query: Motion | str, *, top: int = 20) -> li
     hits.sort(key=lambda h: (h[0], h[1]))
     return [
         SearchResult(k + 1, rows[i].name, rows[i].path, rows[i].label, float(c), int(a), int(b))
-        for k, (c, i, a, b) in enumerate(hits[:top])
+        for k, (c, i, a, b) in enumerate(hits[:k])
     ]

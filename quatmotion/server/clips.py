@@ -228,7 +228,7 @@ class ClipCatalogue:
             methods: list[str] = []
             if index is not None:
                 with ClipIndex.open(index) as idx:
-                    rows = idx.clips()
+                    rows = idx.rows()
                     stored = set().union(*idx.feature_keys().values())
                 methods = [m for m in METHODS if set(method_keys(m)) <= stored]
                 methods.sort(key=lambda m: m != DEFAULT_METHOD)
@@ -482,8 +482,8 @@ class ClipCatalogue:
                 raise UnavailableError(f"clip {entry.info.name!r} is not in the index (.qidx)")
             target = entry.row.path  # unique in the index, unlike a name
         with ClipIndex.open(self.index_path) as index:
-            by_path = {r.path: r.id for r in index.clips()}
-            results = search(index, target, method=name, top=top)
+            by_path = {r.path: r.id for r in index.rows()}
+            results = search(index, target, method=name, k=top)
         hits = [
             SearchHit(
                 rank=r.rank,

@@ -193,13 +193,11 @@ class ClipPlan:
             raise FormatError("clip: segment breaks out of range")
         inserted = {}
         for s in range(len(breaks) + 1):
-            knots = []
-            pos = 0
-            for _ in range(r.uvarint(n_frames)):
-                pos += r.uvarint(n_frames)
-                knots.append(pos)
-            if knots:
-                inserted[s] = tuple(knots)
+            deltas = r.uvarints(r.uvarint(n_frames))
+            if len(deltas):
+                if deltas.max() > n_frames:
+                    raise FormatError(f"clip: an inserted knot exceeds {n_frames}")
+                inserted[s] = tuple(int(k) for k in np.cumsum(deltas.astype(np.int64)))
         return cls(spacing, step, tuple(breaks), inserted)
 
 
@@ -515,7 +513,12 @@ class SplineMethod(Method):
     def load_model(self, data: bytes, layout: LayoutInfo) -> Any:
         return SplineModel.from_bytes(data, layout.layout.n_channels)
 
-    def decode(self, model: Any, payload: bytes, context: ClipContext) -> NDArray[np.float64]:
+    def decode_segments(
+        self, model: Any, payload: bytes, context: ClipContext
+    ) -> tuple[ClipPlan, list[NDArray[np.float64]], NDArray[np.int64], NDArray[np.float64]]:
+        """A clip's plan, each segment's coefficient rows ``(n_s, c)`` in weighted units, the
+        ``c`` active channel indices and their scales (channel = weighted / scale): the spline
+        itself, for sampling between frames."""
         r = Reader(payload, what=f"{self.name} clip")
         T = context.n_frames
         plan = ClipPlan.read(r, T)
@@ -536,12 +539,14 @@ class SplineMethod(Method):
         rows = []
         pos = 0
         for s, (a, b) in enumerate(segment_bounds(T, plan.breaks)):
-            L = b - a
-            n = n_rows(L, plan.spacing, plan.inserted.get(s, ()))
+            n = n_rows(b - a, plan.spacing, plan.inserted.get(s, ()))
             rows.append(Q[pos : pos + n] * step)
             pos += n
+        return plan, rows, cols, model.scale[cols]
+
+    def decode(self, model: Any, payload: bytes, context: ClipContext) -> NDArray[np.float64]:
+        T = context.n_frames
+        plan, rows, cols, scale = self.decode_segments(model, payload, context)
         X = np.zeros((T, context.layout.layout.n_channels))
-        X[:, cols] = (
-            evaluate_segments(rows, T, plan.breaks, plan.spacing, plan.inserted) / model.scale[cols]
-        )
+        X[:, cols] = evaluate_segments(rows, T, plan.breaks, plan.spacing, plan.inserted) / scale
         return X

@@ -1,0 +1,67 @@
+"""The pose library as a collection: PoseSettings in the file, clip references, the 0.3.0 file
+still read under the one version policy (issue 18)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from quatmotion.cli import app
+from quatmotion.collection import ClipRef, content_hash
+from quatmotion.io import write_motion
+from quatmotion.pose.library import FORMAT, PoseLibrary, PoseSettings
+from quatmotion.synthetic import generate_clip
+
+runner = CliRunner()
+V030 = Path(__file__).parent / "data" / "v0.3.0"
+SMALL = {"metric": "GPD+RDSR", "rank": 2, "n_unlabeled": 100, "n_pairs": 20, "fit_poses": 200}
+
+
+def test_the_0_3_0_pose_library_opens_and_answers_as_it_did():
+    expected = json.loads((V030 / "index_pose_v030.json").read_text())["pose"]
+    library = PoseLibrary.open(V030 / "pose_v030.npz")
+    assert library.version == 2 and library.format.version == 2 and FORMAT.version == 3
+    assert library.clip_names == expected["clip_names"]
+    assert library.frame_of.tolist() == expected["frame_of"]
+    matches = library.nearest(library.pose_query(0, 10)[0], k=3)
+    got = [[m.clip, m.frame, round(m.distance, 6)] for m in matches]
+    assert got == expected["first_match"]
+    refs = library.clips()  # 0.3.0 stored none: from the paths, found beside the file
+    assert [r.name for r in refs] == ["punch", "s1/take_001", "s2/take_001"]
+    clip_files = V030 / "index_clips"
+    assert refs[0].sha256 == content_hash(clip_files / "s1" / "punch.bvh")
+    assert library.settings is None
+
+
+def test_a_library_built_from_files_stores_its_settings_and_references(tmp_path):
+    for folder, kind, seed in (("s1", "walk", 0), ("s2", "squat", 1)):
+        (tmp_path / "clips" / folder).mkdir(parents=True)
+        write_motion(generate_clip(kind, seed, n_frames=40, fps=30.0),
+                     tmp_path / "clips" / folder / "take_001.bvh")  # fmt: skip
+    settings = PoseSettings(**SMALL)
+    out = tmp_path / "p.npz"
+    report = PoseLibrary.build([tmp_path / "clips"], out, settings, workers=1)
+    assert [r.name for r in report.added] == ["s1/take_001", "s2/take_001"]
+    assert not report.failures
+    back = PoseLibrary.open(out)
+    assert back.version == 3 and back.settings == settings
+    assert back.clips() == tuple(report.added) and isinstance(back.clips()[0], ClipRef)
+    assert all(Path(r.path).is_absolute() for r in back.clips())
+    listed = runner.invoke(app, ["pose", "ls", str(out), "--json"])
+    assert listed.exit_code == 0, listed.output
+    doc = json.loads(listed.output)
+    assert doc["settings"]["rank"] == 2 and [c["poses"] for c in doc["clips"]] == [40, 40]
+    built = report.details["library"]
+    np.testing.assert_array_equal(back.frame_of, built.frame_of)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("fps", 0.0), ("height", -1.0), ("rank", 0), ("seed", -1)]
+)
+def test_pose_settings_refuse_values_out_of_range(field, value):
+    with pytest.raises(ValueError, match=field):
+        PoseSettings(**{field: value})
