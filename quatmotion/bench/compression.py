@@ -27,10 +27,13 @@
 ``quick`` uses four clips per set (not ``walk``), two bounds, three dictionary iterations and
 one decoding run: a smoke run of every code path in a few minutes, not numbers to quote.
 
-Compression runs where :func:`quatmotion.codec.compress` runs by default (the local process
-pool, or ``QUATMOTION_SCHEDULER``); its times are per frame of wall time, so a single-process
-figure comparable between codecs needs ``QUATMOTION_SCHEDULER=inline``. The bytes are the same
-either way.
+The data sets (and the collection-size curves) are the items of a
+:class:`quatmotion.parallel.Runner` (by default a local pool on the available cores, or
+``QUATMOTION_SCHEDULER``); each item's compressions run inline in its worker, so compression
+times are single-process per frame on every runner, and the bytes are the same on every one.
+The ARMS search tries the x0.7 steps of the knob in the order :func:`search_quality_step` picks
+(the same step as trying them in turn, in fewer encodes), and the sparse codecs learn each
+layout's dictionary once per data set (the codec's fit cache), reused by every later try.
 """
 
 from __future__ import annotations
