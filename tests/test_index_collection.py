@@ -64,7 +64,7 @@ def test_the_0_3_0_index_searches_from_any_folder(tmp_path, monkeypatch):
     index = str(V030 / "index_v030.qidx")
     result = runner.invoke(app, ["search", "punch", "--index", index, "--json", "--top", "2"])
     assert result.exit_code == 0, result.output
-    paths = [r["path"] for r in json.loads(result.output)["results"]]
+    paths = [r["path"] for r in json.loads(result.stdout)["results"]]
     assert all(Path(p).is_absolute() and Path(p).is_file() for p in paths)
 
 
@@ -98,7 +98,7 @@ def test_a_relative_build_stores_absolute_paths_found_after_a_move(
     monkeypatch.chdir(tmp_path)
     result = runner.invoke(app, ["search", "punch", "--index", str(moved / "lib.qidx"), "--json"])
     assert result.exit_code == 0, result.output
-    for hit in json.loads(result.output)["results"]:
+    for hit in json.loads(result.stdout)["results"]:
         assert Path(hit["path"]).is_file() and str(moved) in hit["path"]
 
 

@@ -68,7 +68,7 @@ def test_build_search_json_and_twice_indexed_clip(clip_folder, tmp_path):
         ["search", str(clip_folder / "walk_0.bvh"), "--index", str(out), "--top", "4", "--json"],
     )
     assert result.exit_code == 0, result.output
-    doc = json.loads(result.output)
+    doc = json.loads(result.stdout)
     assert doc["method"] == DEFAULT_METHOD
     names = [r["clip"] for r in doc["results"]]
     assert set(names[:2]) == {"walk_0", "walk_0_again"}

@@ -323,7 +323,7 @@ def search_command(
     from quatmotion.io import MOTION_SUFFIXES
     from quatmotion.retrieval.index import ClipIndex
     from quatmotion.retrieval.methods import DEFAULT_METHOD
-    from quatmotion.retrieval.search import search, search_within
+    from quatmotion.retrieval.search import default_method, search, search_within
 
     with user_errors():
         name = method or DEFAULT_METHOD
@@ -351,6 +351,8 @@ def search_command(
             texts = [str(query)]
         answers = []
         with ClipIndex.open(index) as idx:
+            if method is None and not within:
+                name = default_method(idx)  # an index of 0.3.0 has no dtw-fused features
             for text in texts:
                 path = Path(text)
                 # A motion file if there is one; else an indexed clip's name (walk.bvh too).

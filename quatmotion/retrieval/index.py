@@ -455,10 +455,9 @@ class ClipIndex:
         self, query: Motion | str, k: int = 10, *, method: str | None = None
     ) -> list[SearchResult]:
         """The ``k`` clips most like ``query`` (:func:`quatmotion.retrieval.search.search`)."""
-        from quatmotion.retrieval.methods import DEFAULT_METHOD
         from quatmotion.retrieval.search import search
 
-        return search(self, query, method=method or DEFAULT_METHOD, k=k)
+        return search(self, query, method=method, k=k)
 
     # -- writing (an index opened with write=True, or made by create) ----------------------
     def store(self, records: Iterable[ClipRecord]) -> int:

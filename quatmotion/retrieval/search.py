@@ -20,7 +20,14 @@ from quatmotion.retrieval.features import clip_features, feature_step, skeleton_
 from quatmotion.retrieval.index import ClipIndex, ClipRow, _match
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, QueryFeatures
 
-__all__ = ["SearchResult", "method_keys", "query_features", "search", "search_within"]
+__all__ = [
+    "SearchResult",
+    "default_method",
+    "method_keys",
+    "query_features",
+    "search",
+    "search_within",
+]
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,23 @@ def query_features(motion: Motion, method: str = DEFAULT_METHOD) -> QueryFeature
     )
 
 
+# What an index written before the default's features existed is searched with, in order: the
+# default, then 0.3.0's default (its files hold motion frames and the embedding, not the path).
+_FALLBACK_METHODS = ("pooled+dtw",)
+# --within reads the motion frames only (any index with the motion kind has them).
+_WITHIN_METHOD = "dtw-motion"
+
+
+def default_method(index: ClipIndex) -> str:
+    """The method a search uses when none is named: :data:`DEFAULT_METHOD`, or for an index
+    built before its features existed, the first of the earlier defaults the index serves."""
+    stored: set[str] = set().union(*index.feature_keys().values()) if len(index) else set()
+    for method in (DEFAULT_METHOD, *_FALLBACK_METHODS):
+        if set(method_keys(method)) <= stored:
+            return method
+    return DEFAULT_METHOD
+
+
 def _query(
     index: ClipIndex, query: Motion | str, method: str
 ) -> tuple[list[ClipRow], object, QueryFeatures, int]:
@@ -89,7 +113,7 @@ def _query(
 
 
 def search(
-    index: ClipIndex, query: Motion | str, *, method: str = DEFAULT_METHOD, k: int = 20
+    index: ClipIndex, query: Motion | str, *, method: str | None = None, k: int = 20
 ) -> list[SearchResult]:
     """The ``k`` clips most like ``query`` under ``method``.
 
@@ -99,8 +123,8 @@ def search(
     query : Motion or str
         A clip, or an indexed clip as a name, path, file name or number reads it
         (:func:`quatmotion.io.names.match_clip`; left out of its own results).
-    method : str
-        A key of :data:`~quatmotion.retrieval.methods.METHODS`.
+    method : str or None
+        A key of :data:`~quatmotion.retrieval.methods.METHODS`; None: :func:`default_method`.
     k : int
         Results wanted (fewer when the index has fewer comparable clips).
 
@@ -116,6 +140,8 @@ def search(
     """
     if k < 1:
         raise ValueError(f"k must be at least 1, got {k}")
+    if method is None:
+        method = default_method(index)
     rows, library, features, own = _query(index, query, method)
     ranking = METHODS[method].rank(library, features, exclude=own)  # type: ignore[arg-type]
     if ranking.clips.size == 0 and len(rows):
@@ -144,7 +170,7 @@ def search_within(index: ClipIndex, query: Motion | str, *, k: int = 20) -> list
     """
     if k < 1:
         raise ValueError(f"k must be at least 1, got {k}")
-    rows, library, features, own = _query(index, query, DEFAULT_METHOD)
+    rows, library, features, own = _query(index, query, _WITHIN_METHOD)
     q = features.arrays["frames"]
     hits = []
     for i, row in enumerate(rows):
