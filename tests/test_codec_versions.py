@@ -16,7 +16,7 @@ FIXTURES = Path(__file__).parent / "data" / "v0.3.0"
 @pytest.mark.parametrize("name", ["amc.qmz", "bvh.qmz"])
 def test_v030_library_reads_the_same_rotations(name):
     expected = np.load(FIXTURES / "expected.npz")
-    with codec.open(FIXTURES / name) as archive:
+    with codec.Archive.open(FIXTURES / name) as archive:
         assert len(archive) == 2
         for i, clip in enumerate(archive.names()):
             translation, rotations = archive.read_rotations(i)

@@ -1,26 +1,32 @@
-"""Reading ``.qmz`` files: lazy, random access to clips (decompression).
+"""Reading ``.qmz`` files: lazy, random access to clips (decompression), and the file kind's
+surface (:meth:`Archive.build`, :meth:`Archive.open`, :meth:`Archive.add`).
 
-:func:`open_archive` (``quatmotion.codec.open``) reads the preamble, walks the chunk framing
-and parses the header; nothing else. :meth:`Archive.read` decodes one clip from its own chunk
-plus the skeleton record and library model it needs (each parsed once and cached), so one clip
-decodes without decoding any other.
+:meth:`Archive.open` reads the preamble, walks the chunk framing and parses the header (the
+decoder of the file's format version); nothing else. :meth:`Archive.read` decodes one clip
+from its own chunk plus the skeleton record and library model it needs (each parsed once and
+cached), so one clip decodes without decoding any other.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
+import json
 import os
 import zlib
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
 
+from quatmotion._format import FileFormat
 from quatmotion.codec.binary import Reader
 from quatmotion.codec.channels import channel_rotations, from_channels
 from quatmotion.codec.container import (
+    QMZ_FORMAT,
     ChunkRef,
     ClipEntry,
     Header,
@@ -37,9 +43,14 @@ from quatmotion.codec.skeletons import (
     inflate_text,
     skeleton_from_record,
 )
+from quatmotion.collection import ClipRef
 from quatmotion.errors import FormatError
 from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion, Skeleton
+
+if TYPE_CHECKING:
+    from quatmotion.codec.settings import CompressSettings
+    from quatmotion.collection import BuildReport
 
 __all__ = ["Archive", "DecodedChannels", "open_archive"]
 
@@ -62,9 +73,64 @@ class Archive:
     ----------
     path : Path or None
     header : Header
-    clips : tuple of ClipEntry
+    entries : tuple of ClipEntry
         The index, in file order.
+    format : FileFormat
+        The ``.qmz`` format; :attr:`version` is the version this file was read in.
     """
+
+    format: FileFormat = QMZ_FORMAT
+
+    # ------------------------------------------------------------------ the file kind
+    @classmethod
+    def build(
+        cls,
+        sources: Iterable[Any],
+        out: str | Path | None,
+        settings: CompressSettings | None = None,
+        *,
+        runner: Any = None,
+        progress: Callable[[str, int, int], None] | None = None,
+    ) -> BuildReport:
+        """Compress clips (files, folders, motions, :class:`~quatmotion.collection.ClipSource`)
+        into one ``.qmz`` library at ``out`` (atomically; None: bytes only, in
+        ``report.details["data"]``). See :func:`quatmotion.codec.compress.build_library`."""
+        from quatmotion.codec.compress import build_library
+
+        return build_library(sources, out, settings, runner=runner, progress=progress)
+
+    @classmethod
+    def open(cls, path: str | Path | bytes) -> Archive:
+        """Open a ``.qmz`` file (a path, or its bytes) for lazy clip access.
+
+        Raises
+        ------
+        FormatError
+            Wrong magic, a format version this code does not read, truncation, a checksum
+            failure in the header, or tables that do not match the chunks (naming the file).
+        FileNotFoundError
+            If the path does not exist.
+        """
+        return cls(path)
+
+    @classmethod
+    def add(
+        cls,
+        path: str | Path,
+        sources: Iterable[Any],
+        settings: CompressSettings | None = None,
+        *,
+        runner: Any = None,
+        progress: Callable[[str, int, int], None] | None = None,
+        labels: Any = None,
+    ) -> BuildReport:
+        """Add clips to an existing ``.qmz`` file (rewritten atomically), the clips already in
+        it kept byte for byte (:func:`quatmotion.codec.compress.add_to_library`)."""
+        if labels is not None:
+            raise ValueError("a .qmz library stores no labels (give them to the clip index)")
+        from quatmotion.codec.compress import add_to_library
+
+        return add_to_library(path, sources, settings, runner=runner, progress=progress)
 
     def __init__(self, source: str | Path | bytes):
         if isinstance(source, bytes | bytearray):
@@ -79,12 +145,12 @@ class Archive:
             size = os.fstat(self._file.fileno()).st_size
         try:
             self.size = size
-            read_preamble(self._file, self._name)
+            self.version = read_preamble(self._file, self._name)
             chunks = list(scan_chunks(self._file, self._name, size))
             if not chunks or chunks[0].tag != b"H":
                 raise FormatError("the first chunk is not the header", self._name)
             self.header = Header.from_bytes(
-                read_chunk(self._file, chunks[0], self._name), self._name
+                read_chunk(self._file, chunks[0], self._name), self._name, self.version
             )
             self._split(chunks[1:])
         except BaseException:
@@ -126,8 +192,38 @@ class Archive:
 
     # ------------------------------------------------------------------ index
     @property
-    def clips(self) -> tuple[ClipEntry, ...]:
+    def entries(self) -> tuple[ClipEntry, ...]:
+        """The clip index, in file order."""
         return self.header.clips
+
+    def clips(self) -> tuple[ClipRef, ...]:
+        """Every clip's reference, in file order. A version 1 file stored none: its clips'
+        references hash the clip's stored chunk (an identity within this file only) and name
+        no source."""
+        return tuple(
+            entry.ref if entry.ref is not None else self._v1_ref(i)
+            for i, entry in enumerate(self.header.clips)
+        )
+
+    def _v1_ref(self, i: int) -> ClipRef:
+        digest = hashlib.sha256(b"quatmotion-qmz-v1-clip\0")
+        digest.update(read_chunk(self._file, self._clip_chunks[i], self._name))
+        return ClipRef(self.header.clips[i].name, digest.hexdigest())
+
+    @property
+    def settings(self) -> CompressSettings | None:
+        """How the file was made (version 2 on); None for a version 1 file."""
+        from quatmotion.codec.settings import CompressSettings
+
+        if not self.header.settings:
+            return None
+        try:
+            values = json.loads(self.header.settings.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as error:
+            raise FormatError(
+                f"header: settings are not valid JSON ({error})", self._name
+            ) from None
+        return CompressSettings.from_dict(values, self._name)
 
     def __len__(self) -> int:
         return len(self.header.clips)
@@ -287,14 +383,5 @@ def _known() -> set[str]:
 
 
 def open_archive(source: str | Path | bytes) -> Archive:
-    """Open a ``.qmz`` file (a path, or its bytes) for lazy clip access.
-
-    Raises
-    ------
-    FormatError
-        Wrong magic, a newer format version, truncation, a checksum failure in the header, or
-        tables that do not match the chunks (naming the file).
-    FileNotFoundError
-        If the path does not exist.
-    """
+    """:meth:`Archive.open` (the name before 0.4.0)."""
     return Archive(source)
