@@ -16,11 +16,11 @@ from quatmotion.codec import Archive, CompressSettings
 from quatmotion.collection import ReadSettings, content_hash
 from quatmotion.errors import FormatError
 from quatmotion.io import read_motion, write_bvh
-from quatmotion.parallel import Failure
+from quatmotion.parallel import Failure, Runner
 from quatmotion.synthetic import generate_clip
 
 FIXTURES = Path(__file__).parent / "data" / "v0.3.0"
-INLINE = "inline"
+INLINE = Runner.inline()
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +125,7 @@ def test_ls_says_how_the_file_was_made_and_json_lists_refs(takes, tmp_path):
     out = tmp_path / "lib.qmz"
     cli = CliRunner()
     args = ["-o", str(out), "--max-error", "1.5", "--method", "naive", "--seed", "4"]
-    made = cli.invoke(app, ["compress", str(takes), *args, "--scheduler", "inline"])
+    made = cli.invoke(app, ["compress", str(takes), *args, "--workers", "1"])
     assert made.exit_code == 0, made.output
     shown = cli.invoke(app, ["ls", str(out)])
     assert "method naive, max error 1.5 cm on joints" in shown.output and "seed 4" in shown.output

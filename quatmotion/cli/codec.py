@@ -175,8 +175,8 @@ def compress(
     scheduler; a file that cannot be read is reported and left out, and the command then ends
     with exit code 1.
     """
-    from quatmotion.codec import Archive, CompressSettings, Placement
-    from quatmotion.codec.compress import build_library
+    from quatmotion.codec import Archive, CompressSettings
+    from quatmotion.codec.compress import build_library, runner_of
     from quatmotion.collection import ReadSettings
 
     with user_errors():
@@ -200,7 +200,7 @@ def compress(
         ensure_kernels(*groups, workers=workers, scheduler=scheduler)
         with progress_bar(error_console if as_json else console) as progress:
             report = build_library(
-                inputs, out, settings, runner=Placement(workers, scheduler),
+                inputs, out, settings, runner=runner_of(workers, scheduler),
                 progress=_reporter(progress), on_doubt=doubt_reporter(progress),
             )  # fmt: skip
         with Archive.open(report.details["data"]) as archive:
@@ -324,8 +324,8 @@ def append(
     scheduler: SchedulerOption = None,
 ) -> None:
     """Add clips to a .qmz file without re-encoding the clips already in it."""
-    from quatmotion.codec import Archive, Placement
-    from quatmotion.codec.compress import add_to_library
+    from quatmotion.codec import Archive
+    from quatmotion.codec.compress import add_to_library, runner_of
 
     with user_errors():
         require_file(library)
@@ -344,7 +344,7 @@ def append(
         ensure_kernels("read", "codec", workers=workers, scheduler=scheduler)
         with progress_bar() as progress:
             report = add_to_library(
-                library, inputs, settings, runner=Placement(workers, scheduler),
+                library, inputs, settings, runner=runner_of(workers, scheduler),
                 progress=_reporter(progress), on_doubt=doubt_reporter(progress),
             )  # fmt: skip
         if not report.added:

@@ -26,7 +26,7 @@ wrappers of the above).
 """
 
 from quatmotion.codec.archive import Archive, open_archive
-from quatmotion.codec.compress import CompressionResult, Placement, append, compress
+from quatmotion.codec.compress import CompressionResult, append, compress
 from quatmotion.codec.methods import METHODS
 from quatmotion.codec.settings import DEFAULT_MAX_ERROR_CM, CompressSettings
 
@@ -38,7 +38,6 @@ __all__ = [
     "Archive",
     "CompressSettings",
     "CompressionResult",
-    "Placement",
     "append",
     "compress",
     "open",

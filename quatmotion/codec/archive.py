@@ -51,6 +51,7 @@ from quatmotion.motion import Motion, Skeleton
 if TYPE_CHECKING:
     from quatmotion.codec.settings import CompressSettings
     from quatmotion.collection import BuildReport
+    from quatmotion.parallel import Runner
 
 __all__ = ["Archive", "DecodedChannels", "open_archive"]
 
@@ -89,7 +90,7 @@ class Archive:
         out: str | Path | None,
         settings: CompressSettings | None = None,
         *,
-        runner: Any = None,
+        runner: Runner | None = None,
         progress: Callable[[str, int, int], None] | None = None,
     ) -> BuildReport:
         """Compress clips (files, folders, motions, :class:`~quatmotion.collection.ClipSource`)
@@ -120,7 +121,7 @@ class Archive:
         sources: Iterable[Any],
         settings: CompressSettings | None = None,
         *,
-        runner: Any = None,
+        runner: Runner | None = None,
         progress: Callable[[str, int, int], None] | None = None,
         labels: Any = None,
     ) -> BuildReport:

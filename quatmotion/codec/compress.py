@@ -56,7 +56,7 @@ from quatmotion.collection import (
 from quatmotion.errors import FormatError
 from quatmotion.io import Doubt
 from quatmotion.motion import Motion, Skeleton
-from quatmotion.parallel import Failure, Scheduler, run_batch
+from quatmotion.parallel import Failure, Runner, Scheduler
 
 __all__ = [
     "DEFAULT_MAX_ERROR_CM",
@@ -70,6 +70,7 @@ __all__ = [
     "code_clip",
     "compress",
     "plan_clip_jobs",
+    "runner_of",
 ]
 
 Progress = Callable[[str, int, int], None]
@@ -373,35 +374,23 @@ def _fit_members(library: PreparedLibrary, seed: int, sample: int) -> list[list[
     return out
 
 
-@dataclass(frozen=True)
-class Placement:
-    """Where per-clip jobs run: ``workers`` and ``scheduler`` as for
-    :func:`quatmotion.parallel.run_batch` (by default a local process pool on every core, or
-    ``QUATMOTION_SCHEDULER``; ``"inline"`` in this process; ``tcp://HOST:PORT`` a Dask
-    cluster). The ``runner`` of :meth:`Archive.build` until :mod:`quatmotion.parallel` has
-    its ``Runner``."""
-
-    workers: int | None = None
-    scheduler: str | Scheduler | None = None
-
-    @classmethod
-    def of(cls, runner: Any) -> Placement:
-        """A placement from ``runner``: None (the default), a scheduler, or a placement."""
-        if runner is None:
-            return cls()
-        if isinstance(runner, Placement):
-            return runner
-        if isinstance(runner, str | Scheduler):
-            return cls(None, runner)
-        raise TypeError(f"runner must be a Placement or a scheduler, got {runner!r}")
+def runner_of(
+    workers: int | None = None, scheduler: str | Scheduler | None = None
+) -> Runner | None:
+    """The :class:`~quatmotion.parallel.Runner` of the command line's ``--workers`` and
+    ``--scheduler`` (None for neither: the default, :meth:`Runner.resolve`)."""
+    if workers is None and scheduler is None:
+        return None
+    if isinstance(scheduler, Scheduler):
+        return Runner(scheduler)
+    return Runner.resolve(scheduler, workers=workers)
 
 
 @dataclass(frozen=True)
 class _Runner:
     """Where per-clip jobs run (:mod:`quatmotion.parallel`) and how progress is reported."""
 
-    workers: int | None
-    scheduler: str | Scheduler | None
+    runner: Runner | None
     report: Progress
     fit_sample: int = FIT_SAMPLE_CLIPS
 
@@ -413,16 +402,13 @@ class _Runner:
         ValueError
             Naming the first clip whose job failed (nothing is written then).
         """
-        scheduler = self.scheduler
-        if scheduler is None and self.workers is None and len(jobs) < 2:
-            scheduler = "inline"  # one clip: a process pool would only add its start-up
+        runner = self.runner
+        if runner is None:
+            # one clip: a process pool would only add its start-up
+            runner = Runner.inline() if len(jobs) < 2 else Runner.resolve(None)
         self.report(step, 0, len(jobs))
-        result = run_batch(
-            code_clip,
-            jobs,
-            workers=self.workers,
-            scheduler=scheduler,
-            progress=lambda done, total: self.report(step, done, total),
+        result = runner.run(
+            code_clip, jobs, progress=lambda done, total: self.report(step, done, total)
         )
         if result.failures:
             raise ValueError(str(result.failures[0]))
@@ -714,7 +700,7 @@ def build_library(
     out: str | Path | None,
     settings: CompressSettings | None = None,
     *,
-    runner: Any = None,
+    runner: Runner | None = None,
     progress: Progress | None = None,
     on_doubt: OnDoubt | None = None,
     source_sizes: Sequence[tuple[int, str]] | None = None,
@@ -733,10 +719,12 @@ def build_library(
         ``report.details["data"]``.
     settings : CompressSettings, optional
         How (stored in the file). Default: every joint within 1 cm with ``best``.
-    runner : Placement or scheduler, optional
-        Where the per-clip jobs (encode, decode, repair) run. The shared models are learned
-        here first (on at most ``settings.fit_sample`` clips of each skeleton structure) and
-        the file is assembled here: every scheduler and number of workers gives the same bytes.
+    runner : Runner, optional
+        Where the per-clip jobs (encode, decode, repair) run (default
+        :meth:`Runner.resolve`: a local pool, or ``QUATMOTION_SCHEDULER``). The shared models
+        are learned here first (on at most ``settings.fit_sample`` clips of each skeleton
+        structure) and the file is assembled here: every scheduler and number of workers gives
+        the same bytes.
     progress : callable, optional
         ``progress(step_name, done, total)``.
     on_doubt : callable, optional
@@ -765,7 +753,6 @@ def build_library(
     report = progress or (lambda *_: None)
     codec = get_method(settings.method)
     skip = settings.on_error == "skip"
-    placement = Placement.of(runner)
     # 1. read
     inputs = _read_step(sources, settings.read, skip, source_sizes, on_doubt)
     # 2. store the skeletons
@@ -789,7 +776,7 @@ def build_library(
         )  # fmt: skip
 
     # 4. fit the shared models, encode, verify and repair
-    runner_ = _Runner(placement.workers, placement.scheduler, report, settings.fit_sample)
+    runner_ = _Runner(runner, report, settings.fit_sample)
     q, coded = _encode_step(
         codec, library, settings, runner_, lambda enc, fix=None: len(assemble(enc, fix))
     )
@@ -814,7 +801,7 @@ def add_to_library(
     sources: Iterable[Any],
     settings: CompressSettings | None = None,
     *,
-    runner: Any = None,
+    runner: Runner | None = None,
     progress: Progress | None = None,
     on_doubt: OnDoubt | None = None,
 ) -> BuildReport:
@@ -866,11 +853,7 @@ def add_to_library(
         table.index(info.skeleton) for info in library.layouts[n_old:]
     ]
     q = settings.quality if settings.quality is not None else codec.default_quality
-    placement = Placement.of(runner)
-    runner_ = _Runner(
-        placement.workers, placement.scheduler, progress or (lambda *_: None),
-        settings.fit_sample,
-    )  # fmt: skip
+    runner_ = _Runner(runner, progress or (lambda *_: None), settings.fit_sample)
     coded = _encode_once(
         codec, library, q, settings.max_error, settings.seed, given, runner_, verify=True
     )
@@ -954,7 +937,7 @@ def compress(
         read=ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton)),
     )  # fmt: skip
     report = build_library(
-        clips, out, settings, runner=Placement(workers, scheduler), progress=progress,
+        clips, out, settings, runner=runner_of(workers, scheduler), progress=progress,
         on_doubt=on_doubt, source_sizes=sources,
     )  # fmt: skip
     return CompressionResult.from_report(report)
@@ -982,7 +965,7 @@ def append(
         read=ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton)),
     )  # fmt: skip
     report = add_to_library(
-        path, clips, settings, runner=Placement(workers, scheduler), progress=progress,
+        path, clips, settings, runner=runner_of(workers, scheduler), progress=progress,
         on_doubt=on_doubt,
     )  # fmt: skip
     if not report.added:
