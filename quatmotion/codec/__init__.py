@@ -25,7 +25,7 @@ wrappers of the above).
 ``docs/format.md`` specifies the file byte by byte.
 """
 
-from quatmotion.codec.archive import Archive, open_archive
+from quatmotion.codec.archive import Archive, DamagedClip, open_archive
 from quatmotion.codec.compress import CompressionResult, append, compress
 from quatmotion.codec.methods import METHODS
 from quatmotion.codec.settings import DEFAULT_MAX_ERROR_CM, CompressSettings
@@ -38,6 +38,7 @@ __all__ = [
     "Archive",
     "CompressSettings",
     "CompressionResult",
+    "DamagedClip",
     "append",
     "compress",
     "open",

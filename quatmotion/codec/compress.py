@@ -158,10 +158,12 @@ def _read_step(
     skip: bool,
     known: Sequence[tuple[int, str]] | None,
     on_doubt: OnDoubt | None,
+    report: Progress | None = None,
 ) -> _Inputs:
     """Every clip of ``sources`` read by :func:`quatmotion.collection.read_clip`, named by the
     collection's rules. With ``skip``, a file that cannot be found, hashed or read is noted in
-    the failures and left out instead of raising."""
+    the failures and left out instead of raising; ``report`` hears ``("read", done, total)``
+    as clips are read."""
     out = _Inputs()
     found_errors: list[tuple[str, str]] = []
     items = [Path(s) if isinstance(s, str) else s for s in sources]
@@ -172,7 +174,11 @@ def _read_step(
     if known is not None and len(known) != len(in_memory):
         raise ValueError(f"sources gives {len(known)} sizes for {len(in_memory)} clips")
     sizes = iter(known or ())
-    for source in found:
+    if report is not None and found:
+        report("read", 0, len(found))
+    for n_read, source in enumerate(found, 1):
+        if report is not None and (n_read == len(found) or n_read % 16 == 0):
+            report("read", n_read, len(found))
         try:
             motion, ref, doubts = read_clip(source, read)
             size = (0, "") if source.path is None else _source_size(source.path)
@@ -221,33 +227,60 @@ def _admit(inputs: _Inputs, table: _SkeletonTable, skip: bool) -> None:
 # ---------------------------------------------------------------------------------- skeletons
 @dataclass
 class _SkeletonTable:
+    """The archive's skeleton records and entries, found again by dictionary lookups.
+
+    A skeleton is keyed by :meth:`Skeleton.fingerprint`; exact equality (``same_skeleton``)
+    still decides within a fingerprint's bucket, so a digest collision can never merge two
+    skeletons. A record is keyed by its (kind, scale, text). Each lookup is O(1) in the number
+    of skeletons already held (a library of one skeleton per clip stays linear)."""
+
     records: list[RecordEntry] = field(default_factory=list)
     texts: list[str] = field(default_factory=list)
     skeletons: list[SkeletonEntry] = field(default_factory=list)
     objects: list[Skeleton] = field(default_factory=list)
     new_records: list[bytes] = field(default_factory=list)
+    comparisons: int = 0
+    """How many exact skeleton comparisons were made (the lookups' cost, for the tests)."""
+
+    def __post_init__(self) -> None:
+        self._by_object: dict[int, int] = {}  # id() of a held object (kept alive by objects)
+        self._by_fingerprint: dict[str, list[int]] = {}
+        self._record_of: dict[tuple[int, float, str], int] = {}
+        self._first_text: dict[int, str] = {}
+        for k, s in enumerate(self.objects):
+            self._by_object.setdefault(id(s), k)
+            self._by_fingerprint.setdefault(s.fingerprint(), []).append(k)
+        for k, (r, t) in enumerate(zip(self.records, self.texts, strict=True)):
+            self._record_of.setdefault((r.kind, r.scale, t), k)
+            self._first_text.setdefault(r.kind, t)
 
     def index(self, skeleton: Skeleton) -> int:
         """The skeleton's entry, adding it (and its record, if its text is new)."""
-        for k, s in enumerate(self.objects):
-            if s is skeleton or same_skeleton(s, skeleton):
+        k = self._by_object.get(id(skeleton))
+        if k is not None and self.objects[k] is skeleton:
+            return k
+        fingerprint = skeleton.fingerprint()
+        bucket = self._by_fingerprint.setdefault(fingerprint, [])
+        for k in bucket:
+            self.comparisons += 1
+            if same_skeleton(self.objects[k], skeleton):
                 return k
         kind, text, scale = skeleton_record(skeleton)
         key = (kind, scale, text)
-        known = [(r.kind, r.scale, t) for r, t in zip(self.records, self.texts, strict=True)]
-        if key in known:
-            record = known.index(key)
-        else:
-            first = next(
-                (t for r, t in zip(self.records, self.texts, strict=True) if r.kind == kind), ""
-            )
-            self.new_records.append(deflate_text(text, first))
+        record = self._record_of.get(key)
+        if record is None:
+            self.new_records.append(deflate_text(text, self._first_text.get(kind, "")))
             self.records.append(RecordEntry(kind, scale))
             self.texts.append(text)
             record = len(self.records) - 1
+            self._record_of[key] = record
+            self._first_text.setdefault(kind, text)
         self.skeletons.append(SkeletonEntry(record, skeleton.name))
         self.objects.append(skeleton)
-        return len(self.objects) - 1
+        k = len(self.objects) - 1
+        bucket.append(k)
+        self._by_object[id(skeleton)] = k
+        return k
 
 
 # ---------------------------------------------------------------------------------- encoding
@@ -754,7 +787,7 @@ def build_library(
     codec = get_method(settings.method)
     skip = settings.on_error == "skip"
     # 1. read
-    inputs = _read_step(sources, settings.read, skip, source_sizes, on_doubt)
+    inputs = _read_step(sources, settings.read, skip, source_sizes, on_doubt, report)
     # 2. store the skeletons
     table = _SkeletonTable()
     _admit(inputs, table, skip)
@@ -762,7 +795,10 @@ def build_library(
     # 3. prepare (layouts, channels, weights)
     report("prepare", 0, len(inputs.motions))
     library = prepare_library(
-        inputs.motions, inputs.sources, vertices=settings.bound_on == "vertices"
+        inputs.motions,
+        inputs.sources,
+        vertices=settings.bound_on == "vertices",
+        progress=lambda done, total: report("prepare", done, total),
     )
     layout_skeletons = [table.index(info.skeleton) for info in library.layouts]
 
