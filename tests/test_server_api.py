@@ -45,8 +45,8 @@ def test_browse_lists_every_clip_with_the_library_and_index_facts(client, motion
         [f"{k}_{s}" for k in ("walk", "squat", "jumping_jack") for s in range(2)] + ["kick_0"]
     )
     assert data["labels"] == ["jumping_jack", "kick", "squat", "walk"]
-    with codec.open(motion_library["library"]) as archive:
-        for position, entry in enumerate(archive.clips):
+    with codec.Archive.open(motion_library["library"]) as archive:
+        for position, entry in enumerate(archive.entries):
             clip = by_name[entry.name]
             assert clip["id"] == entry.name
             assert clip["label"] == entry.name.rsplit("_", 1)[0]
@@ -97,7 +97,7 @@ def test_info_names_files_not_paths(client, motion_library):
 # ------------------------------------------------------------------------------ play data
 def test_frames_are_the_decoded_library_clip(client, motion_library):
     payload = client.get("/api/clips/walk_0/frames").json()
-    with codec.open(motion_library["library"]) as archive:
+    with codec.Archive.open(motion_library["library"]) as archive:
         decoded = archive.read("walk_0")
     expected = forward_kinematics(decoded).all_positions()
     shown = frame_data.decode_clip(payload)

@@ -41,7 +41,7 @@ import time
 from typing import Any
 
 from quatmotion._atomic import atomic_write_json
-from quatmotion.codec import compress, open_archive
+from quatmotion.codec import Archive, compress
 from quatmotion.codec.methods import METHODS, SparseMethod
 from quatmotion.codec.methods.sparse import clear_fit_cache
 from quatmotion.codec.metrics import collection_errors
@@ -81,7 +81,7 @@ def _row(result, source_bytes: int, decode_runs: int) -> dict[str, Any]:
     errors = collection_errors(result.clip_errors)
     frames = errors.frames
     to_rotations, to_positions = [], []
-    with open_archive(result.data) as archive:
+    with Archive.open(result.data) as archive:
         for _ in range(decode_runs):
             t = time.perf_counter()
             for i in range(len(archive)):

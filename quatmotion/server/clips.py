@@ -222,7 +222,7 @@ class ClipCatalogue:
         """
         if library is None and index is None:
             raise ValueError("nothing to serve: give a library (.qmz), an index (.qidx) or both")
-        archive = codec.open(Path(library)) if library is not None else None
+        archive = codec.Archive.open(Path(library)) if library is not None else None
         try:
             rows: list[ClipRow] = []
             methods: list[str] = []
@@ -269,7 +269,7 @@ class ClipCatalogue:
         used: set[str] = set()
         pose_of = self._pose_clips(rows)
         if archive is not None:
-            for position, clip in enumerate(archive.clips):
+            for position, clip in enumerate(archive.entries):
                 row = joined.get(clip.name)
                 info = ClipInfo(
                     id=_unique_id(clip.name, used),
