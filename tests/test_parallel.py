@@ -25,8 +25,8 @@ import pytest
 from quatmotion.errors import FormatError
 from quatmotion.parallel import (
     SCHEDULER_ENV,
-    Scheduler,
     Runner,
+    Scheduler,
     SchedulerError,
     imap_batch,
     resolve_scheduler,
