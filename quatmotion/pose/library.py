@@ -519,9 +519,9 @@ class PoseLibrary:
         workers, scheduler
             Where the clips are prepared: :func:`quatmotion.parallel.imap_batch`.
         chunk_size : int, optional
-            Clips per task of the index pass. Each task carries the projection model (about
-            0.7 MB at rank 50), so by default eight clips share one once there are at least
-            64 clips, else every clip is a task. The learn pass sends clips one by one.
+            Clips per task of the index pass. Each task carries the projection model (its
+            size: docs/performance.md), so by default eight clips share one once there are
+            at least 64 clips, else every clip is a task. The learn pass sends clips one by one.
         flush_poses : int
             Vectors per insertion into the HNSW graph.
         index_threads : int
