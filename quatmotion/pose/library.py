@@ -10,8 +10,9 @@ by the registered method of that name (``quatmotion.pose.methods.METHODS[metric_
 whose ``projection_`` the library stores: ``bench pose`` scores that same code, trained on
 the same kind of set, as its ``"pose index default"`` row):
 
-* ``"GPD+LMS"`` (the default; docs/performance.md compares it in ``bench pose``): non-negative least-squares weights per GPD dimension from similar and
-  dissimilar pairs; ``W`` is the diagonal of their square roots, dimensions of weight 0 left out.
+* ``"GPD+LMS"`` (the default; docs/performance.md compares it in ``bench pose``):
+  non-negative least-squares weights per GPD dimension from similar and dissimilar pairs;
+  ``W`` is the diagonal of their square roots, dimensions of weight 0 left out.
 * ``"GPD+RDSR"`` (the GPD paper): RDSR of rank ``rank`` from the similar pairs and an
   unlabeled random sample.
 
