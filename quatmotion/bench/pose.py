@@ -185,6 +185,7 @@ def _index_default_entry(
     n_unlabeled: int,
     n_pairs: int,
     seed: int,
+    near: NDArray[np.bool_] | None = None,
 ) -> dict[str, Any]:
     """What ``quatmotion pose index`` ships, trained as it trains on the training clips: the
     registered default method on the library's own training set
@@ -206,10 +207,13 @@ def _index_default_entry(
         fit_s = time.perf_counter() - t0
         d = np.asarray(method.distances(test_a, test_b), dtype=np.float64)
         prec, thr = evaluate.transition_precision(d, test_labels)
-        return {
+        entry = {
             "precision": prec, "threshold": thr, "fit_seconds": fit_s, "metric": DEFAULT_METRIC,
             "pairs_from": source, "positive_pairs": int(similar.sum()),
         }  # fmt: skip
+        if near is not None and test_labels[near].any() and (~test_labels[near]).any():
+            entry["near_precision"] = evaluate.transition_precision(d[near], test_labels[near])[0]
+        return entry
     except Exception as exc:  # one broken method must not sink the benchmark
         return {"error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc(limit=3)}
 

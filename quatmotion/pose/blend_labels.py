@@ -320,8 +320,12 @@ def judge(
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 4)
     ref = np.asarray(natural_reference, dtype=np.float64).reshape(len(QUANTITIES))
     q = _quantities(world, pairs, fps, settings)
-    own_a = _quantities(world, pairs[:, [0, 1, 0, 1]], fps, settings)
-    own_b = _quantities(world, pairs[:, [2, 3, 2, 3]], fps, settings)
+    # the natural windows of the sources, each pose once
+    ends, where = np.unique(
+        np.concatenate((pairs[:, :2], pairs[:, 2:])), axis=0, return_inverse=True
+    )
+    own = _quantities(world, ends[:, [0, 1, 0, 1]], fps, settings)[where.reshape(-1)]
+    own_a, own_b = own[: len(pairs)], own[len(pairs) :]
     scale = np.maximum(np.maximum(own_a, own_b), ref[None])
     scale[:, QUANTITIES.index("penetration")] = np.maximum(
         scale[:, QUANTITIES.index("penetration")], settings.penetration_floor_cm

@@ -13,6 +13,8 @@ One implementation: :class:`~quatmotion.pose.library.PoseLibrary` learns its met
 ``METHODS[name]`` (:meth:`FeatureMetric.fit_features`) and stores
 :attr:`FeatureMetric.projection_`; :func:`project_features` maps poses to the index space for
 both, so the library's distances and the benchmark's are the same numbers.
+- ``"FEET"``: no learning, Euclidean distance of the two feet in the body frame (the baseline
+  of the blended-transition labels, :mod:`quatmotion.pose.blend_labels`).
 - ``"JOD"``, ``"WJOD"``, ``"LJOD"``, ``"JCD"``, ``"WJCD"``, ``"LJCD"``: Eq. 40-43 on raw joints.
 - Aliases for the learners on GPD: ``"L2"``, ``"L2+LMS"`` / ``"LMS"``, ``"Xing"``, ``"SDA"``,
   ``"RDSR"``.
@@ -52,6 +54,7 @@ __all__ = [
     "LEARNERS",
     "METHODS",
     "FeatureMetric",
+    "FeetDistance",
     "JointDistanceMethod",
     "PoseMethod",
     "project_features",
@@ -312,6 +315,32 @@ class FeatureMetric:
         return f"FeatureMetric({self.feature!r}, {self.learner!r}, {self.kwargs!r})"
 
 
+class FeetDistance:
+    """The strong simple baseline of the blended-transition labels: no learning, the Euclidean
+    distance between the two feet's body-local positions (cm), the Hip at the origin."""
+
+    _FEET = (12, 15)  # LFoot, RFoot in JOINTS_16 order
+
+    def __init__(self, random_state: Any = None) -> None:
+        pass
+
+    def fit(
+        self, unlabeled: PoseData, train_a: PoseData, train_b: PoseData, train_labels: ArrayLike
+    ) -> FeetDistance:
+        return self
+
+    def _rows(self, data: PoseData) -> FloatArray:
+        return np.asarray(data.positions)[:, self._FEET].reshape(len(data), -1)
+
+    def distances(self, a: PoseData, b: PoseData) -> FloatArray:
+        return np.linalg.norm(self._rows(a) - self._rows(b), axis=1)
+
+    def pairwise(self, query: PoseData, base: PoseData) -> FloatArray:
+        from scipy.spatial.distance import cdist
+
+        return cdist(self._rows(query), self._rows(base))
+
+
 class JointDistanceMethod(JointDistance):
     """:class:`~quatmotion.pose.baselines.JointDistance` accepting (and ignoring) a seed."""
 
@@ -341,6 +370,7 @@ def _build_registry() -> dict[str, Callable[..., PoseMethod]]:
     for feature in FEATURES:
         for learner in LEARNERS:
             registry[f"{feature}+{learner}"] = _feature_method(feature, learner)
+    registry["FEET"] = FeetDistance
     registry["L2"] = registry["GPD+L2"]
     registry["LMS"] = registry["L2+LMS"] = registry["GPD+LMS"]
     registry["Xing"] = registry["GPD+Xing"]
