@@ -361,7 +361,7 @@ def blended_transition_labels(
     reference: ArrayLike | None = None,
     n_positive: int = 500,
     n_negative: int = 500,
-    max_mean_distance: float = 10.0,
+    max_mean_distance: float = 25.0,
     n_queries: int = 4000,
     settings: BlendSettings = BlendSettings(),
     random_state: int | np.random.Generator | None = 0,
@@ -369,7 +369,8 @@ def blended_transition_labels(
     """Balanced good/bad transition pairs of ``clips`` judged on their blended transitions.
 
     Candidates are :func:`~quatmotion.pose.labels.candidate_pairs` (cross-clip, Eq. 35 under
-    ``max_mean_distance``), as for the point-cloud labels; each is played and judged
+    ``max_mean_distance``: 25 cm, wider than the point-cloud labels' 10 cm, since few pairs
+    that close play badly once blended and cleaned up); each is played and judged
     (:func:`judge`). ``reference`` (the natural percentiles) is computed on ``clips`` unless
     given (fit it on training clips, reuse on test clips). Returns the pairs (positives first;
     ``cloud_distance`` holds the artefact ratio) and the reference used.
