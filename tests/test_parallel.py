@@ -25,6 +25,7 @@ import pytest
 from quatmotion.errors import FormatError
 from quatmotion.parallel import (
     SCHEDULER_ENV,
+    Runner,
     Scheduler,
     SchedulerError,
     imap_batch,
@@ -74,6 +75,25 @@ def thread_counts(_item: object) -> list[int]:
     from threadpoolctl import threadpool_info
 
     return [info["num_threads"] for info in threadpool_info()]
+
+
+class Model:
+    """A stand-in for a shared model: counts, per process, how often it was unpickled."""
+
+    loads = 0
+
+    def __init__(self, scale: float) -> None:
+        self.scale = scale
+        self.table = np.arange(50_000, dtype=np.float64)  # large enough to matter per task
+
+    def __setstate__(self, state: dict) -> None:
+        Model.loads += 1
+        self.__dict__.update(state)
+
+
+def scaled_with_context(seed: int, model: Model) -> tuple[float, int, int, int]:
+    """The item through the batch's context; which process and which copy ran it."""
+    return seed * model.scale + model.table[seed], os.getpid(), id(model), Model.loads
 
 
 def results_bytes(results: list) -> list[bytes]:
@@ -245,7 +265,53 @@ def test_a_stream_holds_at_most_window_items_ahead() -> None:
     assert stream.stats().n_done == 30
 
 
+# --- the batch context ----------------------------------------------------------------------
+
+
+def _check_context_results(outcomes: list, n: int) -> None:
+    assert [o.index for o in outcomes] == list(range(n))
+    assert [o.value[0] for o in outcomes] == [k * 2.5 + k for k in range(n)]
+    by_process: dict[int, set[int]] = {}
+    for o in outcomes:
+        _, pid, copy, loads = o.value
+        by_process.setdefault(pid, set()).add(copy)
+        if pid != os.getpid():
+            assert loads == 1  # each worker process unpickled the context once, whatever its tasks
+    assert all(len(copies) == 1 for copies in by_process.values())  # one copy per process
+
+
+@pytest.mark.parametrize("runner", [Runner.inline(), Runner.local(workers=2)], ids=str)
+def test_a_batch_context_reaches_every_item_and_is_read_once_per_worker(runner: Runner) -> None:
+    outcomes = list(runner.map(scaled_with_context, range(20), context=Model(2.5)))
+    _check_context_results(outcomes, 20)
+    # A second batch with another context on the kept pool sees the new one, not the cached one.
+    again = runner.run(scaled_with_context, range(4), context=Model(1.0))
+    assert again.ok and [v[0] for v in again.results] == [k * 1.0 + k for k in range(4)]
+
+
+def test_runner_map_without_context_calls_the_job_with_the_item_alone() -> None:
+    result = Runner.local(workers=2).run(clip_features, range(6))
+    assert result.ok
+    assert results_bytes(result.results) == results_bytes(
+        run_batch(clip_features, range(6)).results
+    )
+    with pytest.raises(SchedulerError):
+        Runner.dask("processes")
+
+
 # --- Dask -----------------------------------------------------------------------------------
+
+
+def test_dask_sends_the_batch_context_to_each_worker_once(dask_cluster: str) -> None:
+    outcomes = list(
+        Runner.dask(dask_cluster).map(scaled_with_context, range(20), context=Model(2.5))
+    )
+    _check_context_results(outcomes, 20)
+    distributed = pytest.importorskip("distributed")
+    with distributed.Client(dask_cluster, set_as_default=False) as client:
+        result = Runner.dask(client).run(scaled_with_context, range(6), context=Model(2.5))
+        assert result.ok and result.stats.workers == 2
+        assert client.status == "running"  # a caller's client is left open
 
 
 def test_dask_gives_the_local_bytes_in_input_order_and_reports_bad_items(dask_cluster: str) -> None:

@@ -1,6 +1,10 @@
 """Batch execution: a pure per-item function mapped over a list of items (clips), on this
 machine's cores by default and on a Dask distributed cluster when one is named.
 
+    runner = Runner.local(workers=2)   # or Runner.dask(address_or_client), Runner.resolve(name)
+    for outcome in runner.map(encode_clip, paths, context=models):   # encode_clip(path, models)
+        ...
+
 Infrastructure: any layer may import it; it imports nothing of quatmotion but
 :mod:`quatmotion.errors` (and Dask only when a Dask scheduler is asked for).
 
@@ -24,6 +28,7 @@ from quatmotion.parallel.batch import (
     run_batch,
     shutdown_pools,
 )
+from quatmotion.parallel.runner import Runner
 from quatmotion.parallel.scheduler import (
     SCHEDULER_ENV,
     Scheduler,
@@ -39,6 +44,7 @@ __all__ = [
     "BatchStream",
     "Failure",
     "Outcome",
+    "Runner",
     "Scheduler",
     "SchedulerError",
     "available_cpus",

@@ -1,5 +1,10 @@
-"""The Dask distributed back end of :mod:`quatmotion.parallel.batch` (imported only when a
-batch is sent to a Dask scheduler, so Dask stays an optional dependency)."""
+"""The Dask distributed back end of :mod:`quatmotion.parallel` (imported only when a batch is
+sent to a Dask scheduler, so Dask stays an optional dependency).
+
+The batch's context, if any, is sent to every worker once with
+``client.scatter(context, broadcast=True)``; tasks carry the future, which Dask resolves to the
+worker's copy.
+"""
 
 from __future__ import annotations
 
@@ -7,13 +12,13 @@ import asyncio
 import uuid
 from collections import deque
 from collections.abc import Callable, Iterator
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from quatmotion.parallel import _worker
-from quatmotion.parallel.scheduler import Scheduler, SchedulerError
+from quatmotion.parallel._protocol import Outcome, _Collector, _Task
+from quatmotion.parallel.scheduler import SchedulerError
 
-if TYPE_CHECKING:
-    from quatmotion.parallel.batch import Outcome, _Collector, _Task
+__all__ = ["connect", "run"]
 
 _INSTALL_HINT = "pip install 'quatmotion[scale]' (or 'dask[distributed]')"
 
@@ -43,46 +48,54 @@ def connect(address: str, timeout: float) -> Any:
 
 
 def run(
-    func: Callable[[Any], Any],
+    func: Callable[..., Any],
     tasks: deque[_Task],
-    scheduler: Scheduler,
-    window: int,
     collector: _Collector,
-    connect_timeout: float,
-    report_workers: Callable[[int], None],
+    context: Any,
+    *,
+    client: Any,
+    cap: int | None,
+    window: int,
 ) -> Iterator[Outcome[Any]]:
-    """Submit ``tasks`` to the cluster, at most ``window`` items ahead of the oldest unyielded
-    one, and yield outcomes in input order."""
+    """Submit ``tasks`` through ``client``, at most ``cap`` in flight (default two per cluster
+    thread) and ``window`` items ahead of the oldest unyielded one; yield outcomes in input
+    order. The caller owns the client."""
     import distributed
 
-    assert scheduler.address is not None
-    client = connect(scheduler.address, connect_timeout)
+    threads = sum(client.nthreads().values())
+    capacity = cap or 2 * max(1, threads)
+    collector.workers = cap or threads
+    batch = uuid.uuid4().hex[:12]
+    if context is not _worker.NO_CONTEXT:
+        # hash=False: a fresh key per batch, so a context equal to an older one's is not
+        # mistaken for data the cluster may already have dropped.
+        context = client.scatter(context, broadcast=True, hash=False)
+    finished = distributed.as_completed(loop=client.loop)
+    in_flight: dict[str, _Task] = {}
+    futures: dict[str, Any] = {}
+
+    def fill() -> None:
+        horizon = collector.next_index + window
+        while tasks and len(in_flight) < capacity and tasks[0].first < horizon:
+            task = tasks.popleft()
+            future = client.submit(
+                _worker.run_task,
+                func,
+                task.entries,
+                context,
+                key=f"quatmotion-batch-{batch}-{task.number}",
+                pure=False,
+            )
+            in_flight[future.key] = task
+            futures[future.key] = future
+            finished.add(future)
+
     try:
-        threads = sum(client.nthreads().values())
-        capacity = scheduler.workers or 2 * max(1, threads)
-        report_workers(scheduler.workers or threads)
-        batch = uuid.uuid4().hex[:12]
-        finished = distributed.as_completed(loop=client.loop)
-        in_flight: dict[str, _Task] = {}
-
-        def fill() -> None:
-            horizon = collector.next_index + window
-            while tasks and len(in_flight) < capacity and tasks[0].first < horizon:
-                task = tasks.popleft()
-                future = client.submit(
-                    _worker.run_task,
-                    func,
-                    task.entries,
-                    key=f"quatmotion-batch-{batch}-{task.number}",
-                    pure=False,
-                )
-                in_flight[future.key] = task
-                finished.add(future)
-
         fill()
         while in_flight:
             future = next(finished)
             task = in_flight.pop(future.key)
+            futures.pop(future.key, None)
             try:
                 records = future.result()
             except distributed.KilledWorker as exc:
@@ -101,4 +114,7 @@ def run(
             fill()
             yield from collector.pop_ready()
     finally:
-        client.close()
+        if futures:  # stopped early: what has not finished is cancelled
+            client.cancel(list(futures.values()))
+        if hasattr(context, "release"):
+            context.release()

@@ -73,13 +73,36 @@ def limit_threads_in_worker() -> None:
         _thread_state.numba_limited = True
 
 
-def run_items(func: Callable[[Any], Any], entries: Sequence[tuple[int, Any]]) -> list[Record]:
-    """Apply ``func`` to every ``(index, item)``; an exception fails that item only."""
+# Contexts already read by this worker process, by token (the newest few: a batch's context is
+# read once per worker, and a kept pool serves the batches that follow).
+_contexts: dict[str, Any] = {}
+_CONTEXTS_KEPT = 2
+
+
+class NoContext:
+    """The context of a batch that has none: the job is called ``func(item)``."""
+
+    def __repr__(self) -> str:
+        return "NO_CONTEXT"
+
+    def __reduce__(self) -> str:
+        return "NO_CONTEXT"  # one instance in every process
+
+
+NO_CONTEXT = NoContext()
+
+
+def run_items(
+    func: Callable[..., Any], entries: Sequence[tuple[int, Any]], context: Any = NO_CONTEXT
+) -> list[Record]:
+    """Apply ``func`` to every ``(index, item)`` (``func(item, context)`` when the batch has a
+    context); an exception fails that item only."""
     records: list[Record] = []
+    with_context = context is not NO_CONTEXT
     for index, item in entries:
         start, cpu_start = time.perf_counter(), time.thread_time()
         try:
-            value = func(item)
+            value = func(item, context) if with_context else func(item)
         except Exception as exc:  # any error of the job is this item's failure, no other's
             succeeded, value = False, (one_line(exc), "".join(traceback.format_exception(exc)))
         else:
@@ -89,14 +112,42 @@ def run_items(func: Callable[[Any], Any], entries: Sequence[tuple[int, Any]]) ->
     return records
 
 
-def run_task(func: Callable[[Any], Any], entries: Sequence[tuple[int, Any]]) -> list[Record]:
+def run_task(
+    func: Callable[..., Any], entries: Sequence[tuple[int, Any]], context: Any = NO_CONTEXT
+) -> list[Record]:
     """The task a pool or a Dask worker runs: single-threaded, then :func:`run_items`."""
     limit_threads_in_worker()
-    return run_items(func, entries)
+    return run_items(func, entries, context)
 
 
-def run_pickled_task(payload: bytes) -> list[Record]:
-    """:func:`run_task` of a task the caller pickled, ``(func, entries)``.
+def context_from_file(token: str, path: str) -> Any:
+    """The context pickled at ``path`` under ``token``, read once per worker process.
+
+    Raises
+    ------
+    RuntimeError
+        The file cannot be read or unpickled here (one line).
+    """
+    import pickle
+
+    if token not in _contexts:
+        try:
+            with open(path, "rb") as file:
+                value = pickle.load(file)
+        except Exception as exc:  # the task's own failure, told in one line
+            raise RuntimeError(
+                f"a worker process cannot read the batch's context ({one_line(exc)}): define "
+                f"what it uses in an importable module"
+            ) from None
+        while len(_contexts) >= _CONTEXTS_KEPT:
+            del _contexts[next(iter(_contexts))]
+        _contexts[token] = value
+    return _contexts[token]
+
+
+def run_pickled_task(payload: bytes, context_ref: tuple[str, str] | None = None) -> list[Record]:
+    """:func:`run_task` of a task the caller pickled, ``(func, entries)``; ``context_ref`` is
+    ``(token, path)`` of the batch's pickled context, or None when it has none.
 
     Raises
     ------
@@ -113,4 +164,5 @@ def run_pickled_task(payload: bytes) -> list[Record]:
             f"a worker process cannot read the task ({one_line(exc)}): define what the job "
             f"uses in an importable module"
         ) from None
-    return run_task(func, entries)
+    context = NO_CONTEXT if context_ref is None else context_from_file(*context_ref)
+    return run_task(func, entries, context)

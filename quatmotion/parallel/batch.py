@@ -42,16 +42,15 @@ from __future__ import annotations
 import contextlib
 import pickle
 import sys
-import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from quatmotion.parallel import _context, _worker
+from quatmotion.parallel import _pool, _worker
+from quatmotion.parallel._pool import shutdown_pools
+from quatmotion.parallel._protocol import Failure, Outcome, ProgressCallback, _Collector, _Task
 from quatmotion.parallel.scheduler import Scheduler, resolve_scheduler
 
 __all__ = [
@@ -66,67 +65,8 @@ __all__ = [
 ]
 
 T = TypeVar("T")
-ProgressCallback = Callable[[int, int], None]
 
 DEFAULT_CONNECT_TIMEOUT = 10.0  # seconds to reach a Dask scheduler
-
-
-@dataclass(frozen=True)
-class Failure:
-    """An item that did not complete.
-
-    Attributes
-    ----------
-    index : int
-        Its position in the input list.
-    item : object
-        The item itself (a path, for clip jobs).
-    message : str
-        One line: what went wrong.
-    detail : str
-        The traceback text where there is one (an exception of the job), else ``""``.
-    """
-
-    index: int
-    item: Any
-    message: str
-    detail: str = ""
-
-    def __str__(self) -> str:
-        # A FormatError's message already starts with the file's name.
-        if self.message.startswith(str(self.item)):
-            return self.message
-        return f"{self.item}: {self.message}"
-
-
-@dataclass(frozen=True)
-class Outcome(Generic[T]):
-    """One item's outcome: its value, or its failure.
-
-    Attributes
-    ----------
-    index : int
-    item : object
-    value : object or None
-        ``func(item)``; ``None`` when the item failed.
-    failure : Failure or None
-    seconds : float
-        Time ``func`` ran for this item, in its worker (0 when it never ran to an end there).
-    cpu_seconds : float
-        CPU time of the worker thread meanwhile (below ``seconds`` when it waited for a core).
-    """
-
-    index: int
-    item: Any
-    value: T | None
-    failure: Failure | None
-    seconds: float = 0.0
-    cpu_seconds: float = 0.0
-
-    @property
-    def ok(self) -> bool:
-        """Whether the item succeeded."""
-        return self.failure is None
 
 
 @dataclass(frozen=True)
@@ -203,63 +143,6 @@ class BatchResult(Generic[T]):
         return not self.failures
 
 
-@dataclass(frozen=True)
-class _Task:
-    """Consecutive items sent to a worker together."""
-
-    number: int
-    entries: tuple[tuple[int, Any], ...]
-
-    @property
-    def first(self) -> int:
-        return self.entries[0][0]
-
-
-class _Collector:
-    """Outcomes arriving in any order, handed out in input order; counts and progress."""
-
-    def __init__(self, items: Sequence[Any], progress: ProgressCallback | None) -> None:
-        self.items = items
-        self.progress = progress
-        self.ready: dict[int, Outcome[Any]] = {}
-        self.next_index = 0
-        self.done = 0
-        self.failed = 0
-        self.retried = 0
-        self.work_seconds = 0.0
-        self.first_start: float | None = None
-
-    def _add(self, outcome: Outcome[Any]) -> None:
-        if outcome.index in self.ready or outcome.index < self.next_index:
-            raise RuntimeError(f"item {outcome.index} finished twice")  # a bug of this module
-        self.ready[outcome.index] = outcome
-        self.done += 1
-        self.failed += not outcome.ok
-        self.work_seconds += outcome.seconds
-        if self.progress is not None:
-            self.progress(self.done, len(self.items))
-
-    def add_records(self, records: Iterable[_worker.Record]) -> None:
-        for index, succeeded, value, seconds, cpu, start in records:
-            if self.first_start is None or start < self.first_start:
-                self.first_start = start
-            item = self.items[index]
-            if succeeded:
-                self._add(Outcome(index, item, value, None, seconds, cpu))
-            else:
-                failure = Failure(index, item, *value)  # value is (message, detail)
-                self._add(Outcome(index, item, None, failure, seconds, cpu))
-
-    def fail(self, task: _Task, message: str) -> None:
-        for index, item in task.entries:
-            self._add(Outcome(index, item, None, Failure(index, item, message)))
-
-    def pop_ready(self) -> Iterator[Outcome[Any]]:
-        while self.next_index in self.ready:
-            yield self.ready.pop(self.next_index)
-            self.next_index += 1
-
-
 def _check_picklable(func: Callable[[Any], Any]) -> None:
     try:
         pickle.dumps(func)
@@ -274,11 +157,6 @@ def _positive(name: str, value: Any, minimum: int = 1) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
     return value
-
-
-def _module_of(func: Callable[[Any], Any]) -> str | None:
-    inner = getattr(func, "func", func)  # functools.partial
-    return getattr(inner, "__module__", None)
 
 
 class BatchStream(Generic[T]):
@@ -299,8 +177,12 @@ class BatchStream(Generic[T]):
         window: int,
         progress: ProgressCallback | None,
         connect_timeout: float,
+        context: Any = _worker.NO_CONTEXT,
+        client: Any = None,
     ) -> None:
         self._func = func
+        self._context = context
+        self._client = client
         self._items = items
         self._scheduler = scheduler
         self._retries = retries
@@ -308,7 +190,7 @@ class BatchStream(Generic[T]):
         self._window = window
         self._connect_timeout = connect_timeout
         self._collector = _Collector(items, progress)
-        self._workers = scheduler.n_workers or 0
+        self._collector.workers = scheduler.n_workers or 0
         self._start: float | None = None
         self._end: float | None = None
         self._generator = self._generate()
@@ -339,7 +221,7 @@ class BatchStream(Generic[T]):
             n_failed=c.failed,
             retried=None if self._scheduler.kind == "dask" else c.retried,
             scheduler=self._scheduler.describe(),
-            workers=self._workers,
+            workers=c.workers,
             wall_seconds=wall,
             work_seconds=c.work_seconds,
             startup_seconds=(
@@ -364,212 +246,55 @@ class BatchStream(Generic[T]):
             collector.progress(0, len(self._items))
         tasks = self._tasks()
         kind = self._scheduler.kind
-        if not tasks:
-            runner: Iterator[Outcome[Any]] = iter(())
-        elif kind == "inline":
-            runner = self._run_inline(tasks)
-        elif kind == "processes":
-            runner = self._run_pool(tasks)
-        else:
-            from quatmotion.parallel import _dask
-
-            runner = _dask.run(
-                self._func,
-                tasks,
-                self._scheduler,
-                self._window,
-                collector,
-                self._connect_timeout,
-                self._set_workers,
-            )
         try:
-            yield from runner
+            if not tasks:
+                return
+            if kind == "inline":
+                yield from self._run_inline(tasks)
+            elif kind == "processes":
+                yield from _pool.run(
+                    self._func,
+                    tasks,
+                    collector,
+                    self._context,
+                    workers=collector.workers,
+                    retries=self._retries,
+                    window=self._window,
+                )
+            else:
+                yield from self._run_dask(tasks)
         finally:
             self._end = time.perf_counter()
-            close = getattr(runner, "close", None)
-            if close is not None:
-                close()
-
-    def _set_workers(self, n: int) -> None:
-        self._workers = n
 
     def _run_inline(self, tasks: deque[_Task]) -> Iterator[Outcome[Any]]:
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=1), _numba_single_thread():
             for task in tasks:
-                self._collector.add_records(_worker.run_items(self._func, task.entries))
+                records = _worker.run_items(self._func, task.entries, self._context)
+                self._collector.add_records(records)
                 yield from self._collector.pop_ready()
 
-    def _run_pool(self, tasks: deque[_Task]) -> Iterator[Outcome[Any]]:
-        collector = self._collector
-        n = self._workers
-        # The executor itself queues one call beyond its workers; more in flight would only
-        # widen the set of tasks a dead worker takes down with it.
-        capacity = n + 1
-        suspects: deque[_Task] = deque()
-        deaths: dict[int, int] = {}
-        in_flight: dict[Future[list[_worker.Record]], _Task] = {}
-        pool: ProcessPoolExecutor | None = None
+    def _run_dask(self, tasks: deque[_Task]) -> Iterator[Outcome[Any]]:
+        from quatmotion.parallel import _dask
 
-        def submit(task: _Task, payload: bytes) -> None:
-            assert pool is not None
-            in_flight[pool.submit(_worker.run_pickled_task, payload)] = task
-
-        def settle(future: Future[list[_worker.Record]], task: _Task, crashed: list[_Task]) -> None:
-            try:
-                records = future.result()
-            except BrokenProcessPool:
-                crashed.append(task)
-                return
-            except Exception as exc:  # the task never ran: the worker could not read it
-                collector.fail(task, _worker.one_line(exc))
-            else:
-                collector.add_records(records)
-            payloads.pop(task.number, None)
-
-        # Each task is pickled here, once (the pool sends the bytes): whether they name the main
-        # script tells which workers the batch needs (see _context), and a task that cannot be
-        # pickled fails alone, at once. Kept until the task is settled, for a re-run.
-        payloads: dict[int, bytes] = {}
-
-        def payload_of(task: _Task) -> bytes | None:
-            if task.number not in payloads:
-                try:
-                    payloads[task.number] = pickle.dumps(
-                        (self._func, task.entries), protocol=pickle.HIGHEST_PROTOCOL
-                    )
-                except Exception as exc:  # an item that cannot be sent fails alone
-                    message = f"cannot be sent to a worker process: {_worker.one_line(exc)}"
-                    collector.fail(task, message)
-                    return None
-            return payloads[task.number]
-
-        def drop_unsendable() -> None:
-            """Fail and drop the tasks at the head of ``tasks`` that cannot be pickled."""
-            while tasks and payload_of(tasks[0]) is None:
-                tasks.popleft()
-
-        import_main: bool | None = None  # the first task sent decides, for the whole batch
+        client = self._client
+        if client is None:
+            assert self._scheduler.address is not None
+            client = _dask.connect(self._scheduler.address, self._connect_timeout)
         try:
-            while tasks or suspects or in_flight:
-                if pool is None:
-                    if import_main is None:
-                        drop_unsendable()
-                        if not tasks:
-                            yield from collector.pop_ready()
-                            continue
-                        import_main = _names_main(payloads[tasks[0].number])
-                    pool = _shared_pool(n, _module_of(self._func), import_main=import_main)
-                try:
-                    if suspects:
-                        if not in_flight:
-                            submit(suspects[0], payloads[suspects[0].number])
-                            suspects.popleft()
-                    else:
-                        horizon = collector.next_index + self._window
-                        drop_unsendable()
-                        while tasks and len(in_flight) < capacity and tasks[0].first < horizon:
-                            submit(tasks[0], payloads[tasks[0].number])
-                            tasks.popleft()
-                            drop_unsendable()
-                except BrokenProcessPool:
-                    # A worker died since the last look: while the kept pool was idle (start
-                    # afresh), or under a task in flight (found below, like any death).
-                    if not in_flight:
-                        _discard_pool(n, pool, wait=True)
-                        pool = None
-                        continue
-                done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
-                crashed: list[_Task] = []
-                for future in done:
-                    settle(future, in_flight.pop(future), crashed)
-                if crashed:
-                    # The pool is broken: every task still in flight fails the same way.
-                    for future, task in list(in_flight.items()):
-                        settle(future, task, crashed)
-                    in_flight.clear()
-                    _discard_pool(n, pool, wait=True)
-                    pool = None
-                    for task in sorted(crashed, key=lambda t: t.number):
-                        deaths[task.number] = deaths.get(task.number, 0) + 1
-                        if deaths[task.number] > self._retries:
-                            times = deaths[task.number]
-                            message = (
-                                f"its worker process died running it "
-                                f"({times} time{'s' if times > 1 else ''}; gave up)"
-                            )
-                            if import_main and collector.done == collector.failed:
-                                message += _MAIN_HINT
-                            collector.fail(task, message)
-                            payloads.pop(task.number, None)
-                        else:
-                            collector.retried += len(task.entries)
-                            suspects.append(task)
-                yield from collector.pop_ready()
-        finally:
-            # Stopped early: what has not started is cancelled; the few tasks already running
-            # (at most workers + 1) finish unread, and the warm pool stays for the next batch.
-            for future in in_flight:
-                future.cancel()
-
-
-# Local pools outlive their batches, one per size and kind: a batch after the first (the second
-# pass of a pose-library build, a benchmark's repetitions) finds its workers started and warm
-# (modules imported, compiled kernels loaded). They end with the process, or with
-# shutdown_pools().
-_pools: dict[tuple[int, bool], ProcessPoolExecutor] = {}
-_pools_lock = threading.Lock()
-
-_MAIN_HINT = (
-    "; its workers import the main script first, to find what the job uses from it: keep the "
-    'script\'s work under `if __name__ == "__main__":`'
-)
-
-
-def _names_main(payload: bytes) -> bool:
-    """Whether a pickled task may refer to something of the main script.
-
-    A pickle names the module of every function and class it refers to, so a task that needs
-    the main script contains ``__main__``; a byte string that merely contains those bytes
-    costs a worker that imports the script, as ``multiprocessing`` always does.
-    """
-    return b"__main__" in payload
-
-
-def _shared_pool(n: int, module: str | None, *, import_main: bool) -> ProcessPoolExecutor:
-    with _pools_lock:
-        pool = _pools.get((n, import_main))
-        if pool is None:
-            context = _context.context(import_main=import_main)
-            # Workers fork from a server process started once, with these modules imported
-            # (never __main__ itself: the fork server would run an unguarded script's work).
-            preload = ["quatmotion.parallel._worker"]
-            if module and module != "__main__":
-                preload.append(module)
-            context.set_forkserver_preload(preload)
-            pool = ProcessPoolExecutor(
-                max_workers=n, mp_context=context, initializer=_worker.limit_threads_in_worker
+            yield from _dask.run(
+                self._func,
+                tasks,
+                self._collector,
+                self._context,
+                client=client,
+                cap=self._scheduler.workers,
+                window=self._window,
             )
-            _pools[n, import_main] = pool
-        return pool
-
-
-def _discard_pool(n: int, pool: ProcessPoolExecutor, *, wait: bool) -> None:
-    with _pools_lock:
-        for key, kept in list(_pools.items()):
-            if key[0] == n and kept is pool:
-                del _pools[key]
-    pool.shutdown(wait=wait, cancel_futures=True)
-
-
-def shutdown_pools() -> None:
-    """End the worker processes of every local pool (the next batch starts new ones)."""
-    with _pools_lock:
-        pools = list(_pools.items())
-        _pools.clear()
-    for _, pool in pools:
-        pool.shutdown(wait=True, cancel_futures=True)
+        finally:
+            if self._client is None:  # connected here: closed here; a caller's client stays
+                client.close()
 
 
 @contextlib.contextmanager
@@ -641,15 +366,43 @@ def imap_batch(
         The scheduler is malformed (here), or, when iteration starts, a Dask scheduler cannot
         be reached or ``dask.distributed`` is not installed.
     """
+    return open_stream(
+        func,
+        items,
+        resolve_scheduler(scheduler, workers=workers),
+        retries=retries,
+        chunk_size=chunk_size,
+        window=window,
+        progress=progress,
+        connect_timeout=connect_timeout,
+    )
+
+
+def open_stream(
+    func: Callable[..., T],
+    items: Iterable[Any],
+    scheduler: Scheduler,
+    *,
+    retries: int = 1,
+    chunk_size: int = 1,
+    window: int | None = None,
+    progress: ProgressCallback | None = None,
+    connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
+    context: Any = _worker.NO_CONTEXT,
+    client: Any = None,
+) -> BatchStream[T]:
+    """:func:`imap_batch` on a resolved scheduler, with a batch context (``func(item,
+    context)``) and, for Dask, a caller's ``distributed.Client``; what
+    :meth:`quatmotion.parallel.Runner.map` calls. Checks the arguments as :func:`imap_batch`
+    documents."""
     if not callable(func):
         raise TypeError(f"func must be callable, got {type(func).__name__}")
     _check_picklable(func)
-    sched = resolve_scheduler(scheduler, workers=workers)
     items = list(items)
     _positive("retries", retries, minimum=0)
     _positive("chunk_size", chunk_size)
     if window is None:
-        window = 4 * chunk_size * ((sched.n_workers or 2) + 1)
+        window = 4 * chunk_size * ((scheduler.n_workers or 2) + 1)
     _positive("window", window)
     window = max(window, chunk_size)
     if progress is not None and not callable(progress):
@@ -657,12 +410,14 @@ def imap_batch(
     return BatchStream(
         func,
         items,
-        sched,
+        scheduler,
         retries=retries,
         chunk_size=chunk_size,
         window=window,
         progress=progress,
         connect_timeout=float(connect_timeout),
+        context=context,
+        client=client,
     )
 
 
