@@ -10,7 +10,8 @@ them, and the row ``"pose index default"`` (what ``quatmotion pose index`` ships
 its own pairs) are fitted on the training pairs and scored on the test pairs by transition
 precision (METRICS.md). Reported per method: mean and standard deviation over seeds, the
 share of good labels among decided candidates, and, for comparison, the transition precision
-of the same methods on *near* pairs only (Eq. 35 mean joint distance under 10 cm, the paper's tau; candidates reach 25 cm).
+of the same methods on *near* pairs only (Eq. 35 mean joint distance under 10 cm, the paper's
+tau; candidates reach 25 cm).
 
 Quick mode: one seed, fewer clips and pairs, and the RDSR / Xing learners (minutes per fit on
 a shared machine) left out and listed in ``not_run``.
