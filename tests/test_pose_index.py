@@ -377,3 +377,31 @@ def test_pose_index_library_and_the_benchmark_method_give_the_same_distances(
     # and the index holds exactly those vectors: every pose finds itself at distance ~0
     ids, dist = lib.search(lib.project(gpd[a[:20]]), k=1)
     assert np.all(dist[:, 0] < 1e-6)
+
+
+def test_every_registered_method_fits_and_its_projection_gives_its_distances() -> None:
+    """Issue 20 (1): every FEATURE+LEARNER method that is a Euclidean projection measures
+    through ``projection_`` (the form a library stores); the rest (JRF+LMS, the joint
+    distances, FEET) fit and give finite distances."""
+    from quatmotion.pose import methods
+    from quatmotion.pose.data import PoseClip, PoseData
+    from quatmotion.synthetic import generate_clip
+
+    clips = [
+        PoseClip.from_motion(generate_clip(k, 2, n_frames=240), fps=15, height=170)
+        for k in ("walk", "squat")
+    ]
+    poses = PoseData.concat([c.poses for c in clips])
+    rng = np.random.default_rng(0)
+    a, b = rng.integers(0, len(poses), 40), rng.integers(0, len(poses), 40)
+    labels = rng.random(40) < 0.5
+    for name in ("GPD+L2", "JO+L2", "JC+LMS", "GPD+SDA", "JRF+LMS", "FEET", "LJCD"):
+        method = methods.METHODS[name](random_state=0).fit(poses, poses[a], poses[b], labels)
+        d = method.distances(poses[a], poses[b])
+        assert d.shape == (40,) and np.all(np.isfinite(d)), name
+        projection = getattr(method, "projection_", None)
+        if projection is not None:
+            raw = method.raw_features(poses)
+            z = methods.project_features(raw, projection)
+            np.testing.assert_allclose(d, np.linalg.norm(z[a] - z[b], axis=1), atol=1e-9)
+    assert methods.METHODS["JRF+LMS"]().fit(poses, poses[a], poses[b], labels).projection_ is None

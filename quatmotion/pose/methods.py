@@ -111,6 +111,9 @@ class _L2:
 
         return cdist(Q, B)
 
+    def projection(self, n_features: int) -> FloatArray:
+        return np.eye(n_features)
+
 
 def project_features(raw: ArrayLike, projection: dict[str, Any]) -> FloatArray:
     """Raw feature rows mapped to a metric's Euclidean space:
