@@ -36,6 +36,7 @@ from quatmotion.cli._common import (
     user_errors,
     write_clip,
 )
+from quatmotion.errors import FormatError
 
 _METHODS = "best, spline, naive, qssd or ksvd"
 
@@ -71,14 +72,22 @@ def _clip_rows(archive, first: int = 0) -> list[dict[str, object]]:
     """The clips of an open archive from ``first`` on, as ``ls --json`` lists them."""
     rows = []
     units: dict[int, dict[str, object]] = {}  # per skeleton: clips share them
+    damaged = {d.index: d.reason for d in getattr(archive, "damaged", ())}
     for i, entry in enumerate(archive.clips[first:], start=first):
         size = archive.chunk_bytes(i)
         if entry.skeleton not in units:
             bvh = archive.bvh_unit(entry.skeleton)  # from the header: no record parsed
-            units[entry.skeleton] = (
-                bvh_unit_label(*bvh) if bvh else unit_label(archive.skeleton(entry.skeleton))
-            )
+            try:
+                units[entry.skeleton] = (
+                    bvh_unit_label(*bvh) if bvh else unit_label(archive.skeleton(entry.skeleton))
+                )
+            except FormatError:  # its record is lost (a damaged file opened to recover)
+                units[entry.skeleton] = {
+                    "unit": None, "cm_per_unit": None, "unit_source": "damaged",
+                    "unit_guessed": False,
+                }  # fmt: skip
         unit = units[entry.skeleton]
+        damage = damaged.get(i)
         rows.append(
             {
                 "name": entry.name,
@@ -91,7 +100,8 @@ def _clip_rows(archive, first: int = 0) -> list[dict[str, object]]:
                 "max_error_cm": entry.max_error,
                 "arms_cm": entry.arms,
                 **unit,
-                "unit_text": unit_text(unit),
+                "damaged": damage,
+                "unit_text": "-" if unit["unit_source"] == "damaged" else unit_text(unit),
             }
         )
     return rows
@@ -203,6 +213,13 @@ def decompress(
         list[str] | None, typer.Option("--clip", help="Only this clip (repeatable).")
     ] = None,
     force: ForceOption = False,
+    skip_damaged: Annotated[
+        bool,
+        typer.Option(
+            "--skip-damaged",
+            help="Recover every intact clip of a damaged file; list the damaged ones, exit 1.",
+        ),
+    ] = False,
 ) -> None:
     """Write the clips of a .qmz file as AMC (+ASF) or BVH, each under its own name."""
     from quatmotion.codec import open_archive
@@ -214,10 +231,13 @@ def decompress(
         if out.exists() and not out.is_dir():
             raise CliInputError(f"{out}: exists and is not a folder")
         check_writable(out, folder=True)
-        with open_archive(library) as archive:
+        with open_archive(library, recover=skip_damaged) as archive:
             # A clip named twice (or by name and number) is written once.
             wanted = list(dict.fromkeys(archive.index_of(c) for c in clip or []))
             wanted = wanted or range(len(archive))
+            damaged = {d.index: d for d in archive.damaged}
+            skipped = [damaged[i] for i in wanted if i in damaged]
+            wanted = [i for i in wanted if i not in damaged]
             planned = []  # every clip's files, checked before anything is written
             for i in wanted:
                 entry = archive.clips[i]
@@ -232,10 +252,25 @@ def decompress(
                 outputs.folder(out)
                 task = progress.add_task("decompressing", total=len(planned))
                 for i, files in planned:
-                    write_clip(archive.read(i), files, outputs)
+                    try:
+                        motion = archive.read(i)
+                    except FormatError as error:
+                        hint = "" if skip_damaged else " (--skip-damaged recovers the others)"
+                        raise FormatError(error.reason + hint, library) from None
+                    write_clip(motion, files, outputs)
                     written += 1
                     progress.advance(task)
         console.print(f"wrote {written} clip(s) to {out}")
+        if skipped:
+            _report_damaged(library, skipped)
+            raise typer.Exit(code=1)
+
+
+def _report_damaged(library: Path, damaged) -> None:
+    """One line per damaged clip on stderr: what ``ls`` and ``decompress --skip-damaged`` say."""
+    error_console.print(f"{library}: {len(damaged)} damaged clip(s) not recovered:")
+    for d in damaged:
+        error_console.print(f"  {d.name} (clip {d.index}): {d.reason}", highlight=False)
 
 
 @app.command("ls")
@@ -249,10 +284,16 @@ def list_library(
 
     with user_errors():
         require_file(library)
-        with open_archive(library) as archive:
+        with open_archive(library, recover=True) as archive:
             rows = _clip_rows(archive)
             if as_json:
-                print_json(_library_doc(library, archive, rows))
+                doc = _library_doc(library, archive, rows)
+                doc["damaged"] = [
+                    {"index": d.index, "name": d.name, "reason": d.reason} for d in archive.damaged
+                ]
+                print_json(doc)
+                if archive.damaged:
+                    raise typer.Exit(code=1)
                 return
             table = Table(
                 title=f"{library} ({archive.size:,} bytes, method {archive.header.method})",
@@ -263,8 +304,9 @@ def list_library(
                 table.add_column(name, justify="left" if name in ("clip", "unit") else "right")
             for r in rows:
                 ratio = "-" if r["ratio"] is None else f"{r['ratio']:.0f}"
+                label = f"{r['name']} (damaged)" if r["damaged"] else str(r["name"])
                 table.add_row(
-                    str(r["name"]), str(r["frames"]), f"{r['fps']:g}", f"{r['bytes']:,}", ratio,
+                    label, str(r["frames"]), f"{r['fps']:g}", f"{r['bytes']:,}", ratio,
                     f"{r['max_error_cm']:.3f}", f"{r['arms_cm']:.3f}", str(r["unit_text"]),
                 )  # fmt: skip
             console.print(table)
@@ -274,6 +316,9 @@ def list_library(
                 f"{len(archive)} clip(s); whole file {archive.size:,} bytes, ratio {whole} "
                 "(clip rows count their own chunk only; skeletons and models are shared)"
             )
+            if archive.damaged:
+                _report_damaged(library, archive.damaged)
+                raise typer.Exit(code=1)
 
 
 @app.command()

@@ -17,7 +17,7 @@ Layout (compression and decompression apart, format and math apart):
 ``docs/format.md`` specifies the file byte by byte.
 """
 
-from quatmotion.codec.archive import Archive, open_archive
+from quatmotion.codec.archive import Archive, DamagedClip, open_archive
 from quatmotion.codec.compress import DEFAULT_MAX_ERROR_CM, CompressionResult, append, compress
 from quatmotion.codec.methods import METHODS
 
@@ -27,6 +27,7 @@ __all__ = [
     "DEFAULT_MAX_ERROR_CM",
     "METHODS",
     "Archive",
+    "DamagedClip",
     "CompressionResult",
     "append",
     "compress",

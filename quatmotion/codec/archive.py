@@ -23,9 +23,11 @@ from quatmotion.codec.channels import channel_rotations, from_channels
 from quatmotion.codec.container import (
     ChunkRef,
     ClipEntry,
+    DamagedSpan,
     Header,
     read_chunk,
     read_preamble,
+    recover_chunks,
     scan_chunks,
 )
 from quatmotion.codec.library import LayoutInfo
@@ -41,7 +43,26 @@ from quatmotion.errors import FormatError
 from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion, Skeleton
 
-__all__ = ["Archive", "DecodedChannels", "open_archive"]
+__all__ = ["Archive", "DamagedClip", "DecodedChannels", "open_archive"]
+
+
+@dataclass(frozen=True)
+class DamagedClip:
+    """A clip of a damaged file that cannot be decoded (:attr:`Archive.damaged`).
+
+    Attributes
+    ----------
+    index : int
+        Its position in the header's index.
+    name : str
+    reason : str
+        What is damaged (its own chunk, or the skeleton record or layout it needs), with the
+        byte offset where the damage was found.
+    """
+
+    index: int
+    name: str
+    reason: str
 
 
 @dataclass(frozen=True)
@@ -63,10 +84,14 @@ class Archive:
     path : Path or None
     header : Header
     clips : tuple of ClipEntry
-        The index, in file order.
+        The index, in file order (damaged clips included: indices never shift).
+    damaged : tuple of DamagedClip
+        With ``recover=True``, the clips that cannot be decoded and why (empty for a whole
+        file); reading one raises :class:`~quatmotion.errors.FormatError` with its reason.
+        Without it a damaged file raises when opened, or when a damaged clip is read.
     """
 
-    def __init__(self, source: str | Path | bytes):
+    def __init__(self, source: str | Path | bytes, *, recover: bool = False):
         if isinstance(source, bytes | bytearray):
             self.path = None
             self._name = Path("<bytes>")
@@ -79,14 +104,19 @@ class Archive:
             size = os.fstat(self._file.fileno()).st_size
         try:
             self.size = size
+            self.damaged: tuple[DamagedClip, ...] = ()
+            self._clip_damage: dict[int, str] = {}
             read_preamble(self._file, self._name)
-            chunks = list(scan_chunks(self._file, self._name, size))
-            if not chunks or chunks[0].tag != b"H":
-                raise FormatError("the first chunk is not the header", self._name)
-            self.header = Header.from_bytes(
-                read_chunk(self._file, chunks[0], self._name), self._name
-            )
-            self._split(chunks[1:])
+            if recover:
+                self._open_recovering()
+            else:
+                chunks = list(scan_chunks(self._file, self._name, size))
+                if not chunks or chunks[0].tag != b"H":
+                    raise FormatError("the first chunk is not the header", self._name)
+                self.header = Header.from_bytes(
+                    read_chunk(self._file, chunks[0], self._name), self._name
+                )
+                self._split(chunks[1:])
         except BaseException:
             self._file.close()
             raise
@@ -113,6 +143,91 @@ class Archive:
         self._record_chunks = chunks[:n_s]
         self._layout_chunks = chunks[n_s : n_s + n_l]
         self._clip_chunks = chunks[n_s + n_l :]
+
+    def _open_recovering(self) -> None:
+        """Read what a damaged file still holds: every chunk whose CRC holds, placed by the
+        header's tables; the clips whose chunk, skeleton record or layout is lost go to
+        :attr:`damaged`."""
+        self._file.seek(0)
+        items = recover_chunks(self._file.read())
+        first = items[0] if items else None
+        if not isinstance(first, ChunkRef) or first.tag != b"H":
+            where = first.reason if isinstance(first, DamagedSpan) else "the file ends"
+            raise FormatError(
+                f"the header is damaged ({where}): no clip can be named or recovered", self._name
+            )
+        self.header = h = Header.from_bytes(read_chunk(self._file, first, self._name), self._name)
+        expected = [b"S"] * len(h.records) + [b"L"] * len(h.layouts) + [b"C"] * len(h.clips)
+        placed: list[ChunkRef | None] = [None] * len(expected)
+        rest = items[1:]
+        last = rest[-1] if rest else None
+        end_whole = isinstance(last, ChunkRef) and last.offset + last.length + 4 == self.size
+        lost = [
+            "lost in a damaged part of the file"
+            if end_whole
+            else f"missing: the file ends at byte {self.size}"
+        ] * len(expected)
+
+        def place(order: list[int], sequence) -> int:
+            """Give chunks positions in ``order`` while their count is known; returns how
+            many positions were decided."""
+            done = 0
+            for item in sequence:
+                if done == len(order):
+                    break
+                k = order[done]
+                if isinstance(item, ChunkRef):
+                    if item.tag != expected[k]:
+                        break  # out of step with the tables: stop placing from this side
+                    placed[k] = item
+                elif item.n_chunks == 1:
+                    lost[k] = item.reason
+                else:
+                    for j in order[done:]:
+                        lost[j] = item.reason  # somewhere in this span, or after it
+                    break
+                done += 1
+            return done
+
+        forward = place(list(range(len(expected))), rest)
+        if end_whole:
+            # The file's end is whole: place from the end back as far as counts are known.
+            undecided = list(range(len(expected) - 1, forward - 1, -1))
+            place(undecided, reversed(rest))
+        n_s, n_l = len(h.records), len(h.layouts)
+        self._record_chunks = placed[:n_s]
+        self._layout_chunks = placed[n_s : n_s + n_l]
+        self._clip_chunks = placed[n_s + n_l :]
+        record_damage: dict[int, str] = {}
+        for k, rec in enumerate(h.records):
+            base = next(i for i, r in enumerate(h.records) if r.kind == rec.kind)
+            if placed[k] is None:
+                record_damage[k] = f"its skeleton record {k} is lost ({lost[k]})"
+            elif base in record_damage:
+                record_damage[k] = record_damage[base]  # deflated against record ``base``
+        layout_damage: dict[int, str] = {}
+        for k, lay in enumerate(h.layouts):
+            if placed[n_s + k] is None:
+                layout_damage[k] = f"its layout {k} is lost ({lost[n_s + k]})"
+            elif h.skeletons[lay.skeleton].record in record_damage:
+                layout_damage[k] = record_damage[h.skeletons[lay.skeleton].record]
+        for i, entry in enumerate(h.clips):
+            if placed[n_s + n_l + i] is None:
+                self._clip_damage[i] = lost[n_s + n_l + i]
+            elif h.skeletons[entry.skeleton].record in record_damage:
+                self._clip_damage[i] = record_damage[h.skeletons[entry.skeleton].record]
+            elif entry.layout in layout_damage:
+                self._clip_damage[i] = layout_damage[entry.layout]
+        self.damaged = tuple(
+            DamagedClip(i, h.clips[i].name, reason) for i, reason in self._clip_damage.items()
+        )
+
+    def _check_intact(self, i: int) -> None:
+        if i in self._clip_damage:
+            raise FormatError(
+                f"clip {self.header.clips[i].name!r} is damaged: {self._clip_damage[i]}",
+                self._name,
+            )
 
     # ------------------------------------------------------------------ context management
     def close(self) -> None:
@@ -149,8 +264,9 @@ class Archive:
         return match_clip(clip, self.names(), str(self._name))
 
     def chunk_bytes(self, clip: int | str) -> int:
-        """Size of a clip's own chunk (payload), bytes."""
-        return self._clip_chunks[self.index_of(clip)].length
+        """Size of a clip's own chunk (payload), bytes; 0 for a clip whose chunk is lost."""
+        ref = self._clip_chunks[self.index_of(clip)]
+        return 0 if ref is None else ref.length
 
     # ------------------------------------------------------------------ shared parts
     def record_text(self, k: int) -> str:
@@ -221,6 +337,7 @@ class Archive:
     def read_channels(self, clip: int | str) -> DecodedChannels:
         """A clip decoded to channels (corrections applied)."""
         i = self.index_of(clip)
+        self._check_intact(i)
         entry = self.header.clips[i]
         skeleton = self.skeleton(entry.skeleton)
         info, model = self.layout(entry.layout)
@@ -272,6 +389,8 @@ class Archive:
 
     def verify(self) -> None:
         """Read every chunk, checking every CRC (``FormatError`` on the first mismatch)."""
+        if self.damaged:
+            self._check_intact(self.damaged[0].index)
         for ref in [*self._record_chunks, *self._layout_chunks, *self._clip_chunks]:
             read_chunk(self._file, ref, self._name)
 
@@ -286,8 +405,13 @@ def _known() -> set[str]:
     return set(METHODS)
 
 
-def open_archive(source: str | Path | bytes) -> Archive:
+def open_archive(source: str | Path | bytes, *, recover: bool = False) -> Archive:
     """Open a ``.qmz`` file (a path, or its bytes) for lazy clip access.
+
+    With ``recover=True`` a damaged file (a flipped byte, a file cut short) opens as long as
+    its header is whole: every chunk's CRC is checked at once, the clips that cannot be decoded
+    are listed in :attr:`Archive.damaged` and every other clip reads bit for bit as from the
+    whole file.
 
     Raises
     ------
@@ -297,4 +421,4 @@ def open_archive(source: str | Path | bytes) -> Archive:
     FileNotFoundError
         If the path does not exist.
     """
-    return Archive(source)
+    return Archive(source, recover=recover)

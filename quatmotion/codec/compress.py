@@ -119,11 +119,13 @@ def _load_inputs(
     failed: list[tuple[str, str]] | None = None,
     units: str | float | None = None,
     on_doubt: Callable[[str, Doubt], None] | None = None,
+    report: Progress | None = None,
 ) -> tuple[list[Motion], list[tuple[int, str]]]:
     """Motions and their source sizes from clips, files and folders (AMC files on
     ``skeleton``, BVH files in ``units``). With ``failed``, a file that cannot be read is noted
     there (file, reason) and left out instead of raising; ``on_doubt(file, doubt)`` hears what
-    is doubtful in a file read (:func:`quatmotion.io.implausible_values`)."""
+    is doubtful in a file read (:func:`quatmotion.io.implausible_values`); ``report`` hears
+    ``("read", done, total)`` as files are read."""
     motions: list[Motion] = []
     sources: list[tuple[int, str]] = []
     paths: list[Path] = []
@@ -136,7 +138,12 @@ def _load_inputs(
             sources.append(tuple(known[len(motions) - 1]) if known is not None else (0, ""))
         else:
             paths.append(Path(item))
-    for path in find_motion_files(paths) if paths else []:
+    files = find_motion_files(paths) if paths else []
+    if report is not None and files:
+        report("read", 0, len(files))
+    for n_read, path in enumerate(files, 1):
+        if report is not None and (n_read == len(files) or n_read % 16 == 0):
+            report("read", n_read, len(files))
         try:
             amc = path.suffix.lower() == ".amc"
             motion = read_motion(path, skeleton if amc else None, units=None if amc else units)
@@ -203,33 +210,60 @@ def _validate(motions: list[Motion], max_error: float | None, ratio: float | Non
 # ---------------------------------------------------------------------------------- skeletons
 @dataclass
 class _SkeletonTable:
+    """The archive's skeleton records and entries, found again by dictionary lookups.
+
+    A skeleton is keyed by :meth:`Skeleton.fingerprint`; exact equality (``same_skeleton``)
+    still decides within a fingerprint's bucket, so a digest collision can never merge two
+    skeletons. A record is keyed by its (kind, scale, text). Each lookup is O(1) in the number
+    of skeletons already held (a library of one skeleton per clip stays linear)."""
+
     records: list[RecordEntry] = field(default_factory=list)
     texts: list[str] = field(default_factory=list)
     skeletons: list[SkeletonEntry] = field(default_factory=list)
     objects: list[Skeleton] = field(default_factory=list)
     new_records: list[bytes] = field(default_factory=list)
+    comparisons: int = 0
+    """How many exact skeleton comparisons were made (the lookups' cost, for the tests)."""
+
+    def __post_init__(self) -> None:
+        self._by_object: dict[int, int] = {}  # id() of a held object (kept alive by objects)
+        self._by_fingerprint: dict[str, list[int]] = {}
+        self._record_of: dict[tuple[int, float, str], int] = {}
+        self._first_text: dict[int, str] = {}
+        for k, s in enumerate(self.objects):
+            self._by_object.setdefault(id(s), k)
+            self._by_fingerprint.setdefault(s.fingerprint(), []).append(k)
+        for k, (r, t) in enumerate(zip(self.records, self.texts, strict=True)):
+            self._record_of.setdefault((r.kind, r.scale, t), k)
+            self._first_text.setdefault(r.kind, t)
 
     def index(self, skeleton: Skeleton) -> int:
         """The skeleton's entry, adding it (and its record, if its text is new)."""
-        for k, s in enumerate(self.objects):
-            if s is skeleton or same_skeleton(s, skeleton):
+        k = self._by_object.get(id(skeleton))
+        if k is not None and self.objects[k] is skeleton:
+            return k
+        fingerprint = skeleton.fingerprint()
+        bucket = self._by_fingerprint.setdefault(fingerprint, [])
+        for k in bucket:
+            self.comparisons += 1
+            if same_skeleton(self.objects[k], skeleton):
                 return k
         kind, text, scale = skeleton_record(skeleton)
         key = (kind, scale, text)
-        known = [(r.kind, r.scale, t) for r, t in zip(self.records, self.texts, strict=True)]
-        if key in known:
-            record = known.index(key)
-        else:
-            first = next(
-                (t for r, t in zip(self.records, self.texts, strict=True) if r.kind == kind), ""
-            )
-            self.new_records.append(deflate_text(text, first))
+        record = self._record_of.get(key)
+        if record is None:
+            self.new_records.append(deflate_text(text, self._first_text.get(kind, "")))
             self.records.append(RecordEntry(kind, scale))
             self.texts.append(text)
             record = len(self.records) - 1
+            self._record_of[key] = record
+            self._first_text.setdefault(kind, text)
         self.skeletons.append(SkeletonEntry(record, skeleton.name))
         self.objects.append(skeleton)
-        return len(self.objects) - 1
+        k = len(self.objects) - 1
+        bucket.append(k)
+        self._by_object[id(skeleton)] = k
+        return k
 
 
 # ---------------------------------------------------------------------------------- encoding
@@ -745,7 +779,7 @@ def compress(
     failed: list[tuple[str, str]] = []
     skip = on_error == "skip"
     motions, sources = _load_inputs(
-        clips, skeleton, sources, failed if skip else None, units, on_doubt
+        clips, skeleton, sources, failed if skip else None, units, on_doubt, report
     )
     table = _SkeletonTable()
     if skip:
@@ -753,7 +787,12 @@ def compress(
     _validate(motions, max_error, ratio)
     clip_skeleton = [table.index(m.skeleton) for m in motions]
     report("prepare", 0, len(motions))
-    library = prepare_library(motions, sources, vertices=bound_on == "vertices")
+    library = prepare_library(
+        motions,
+        sources,
+        vertices=bound_on == "vertices",
+        progress=lambda done, total: report("prepare", done, total),
+    )
     layout_skeletons = [table.index(info.skeleton) for info in library.layouts]
     q = quality if quality is not None else codec.default_quality
 

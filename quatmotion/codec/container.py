@@ -35,11 +35,13 @@ __all__ = [
     "MAGIC",
     "ChunkRef",
     "ClipEntry",
+    "DamagedSpan",
     "Header",
     "LayoutEntry",
     "RecordEntry",
     "SkeletonEntry",
     "read_chunk",
+    "recover_chunks",
     "scan_chunks",
     "write_chunk",
 ]
@@ -277,3 +279,83 @@ def read_chunk(f: BinaryIO, ref: ChunkRef, source: Path) -> bytes:
             source,
         )
     return payload
+
+
+@dataclass(frozen=True)
+class DamagedSpan:
+    """Bytes of a file where no intact chunk could be read (recovery scanning).
+
+    ``n_chunks`` is how many chunks the span held when that is known (its framing was whole
+    and only the checksum failed: 1), else ``None`` (the framing itself is damaged, or the file
+    ends inside it)."""
+
+    start: int
+    end: int
+    reason: str
+    n_chunks: int | None
+
+
+def _chunk_at(data: bytes, pos: int) -> tuple[ChunkRef | None, int | None, str]:
+    """The chunk starting at ``pos`` of ``data``: (ref if its CRC holds, its end if its framing
+    is whole, why not)."""
+    tag = data[pos : pos + 1]
+    if tag not in TAGS:
+        return None, None, f"unknown chunk tag {tag!r} at byte {pos}"
+    length = shift = 0
+    p = pos + 1
+    while True:
+        if p >= len(data):
+            return None, None, f"truncated inside the chunk length at byte {pos}"
+        b = data[p]
+        p += 1
+        length |= (b & 0x7F) << shift
+        if not b & 0x80:
+            break
+        shift += 7
+        if shift > 63:
+            return None, None, f"chunk length varint longer than 64 bits at byte {pos}"
+    end = p + length + 4
+    if end > len(data):
+        return (
+            None,
+            None,
+            (
+                f"truncated: the {TAGS[tag]} chunk at byte {pos} needs {end - pos} bytes, "
+                f"{len(data) - pos} remain"
+            ),
+        )
+    head = data[pos:p]
+    crc = int.from_bytes(data[end - 4 : end], "little")
+    if zlib.crc32(memoryview(data)[p : end - 4], zlib.crc32(head)) != crc:
+        return None, end, f"checksum mismatch in the {TAGS[tag]} chunk at byte {pos}"
+    return ChunkRef(tag, p, length, crc, head), end, ""
+
+
+def recover_chunks(data: bytes) -> list[ChunkRef | DamagedSpan]:
+    """Every intact chunk of a file's bytes (after the preamble), in order, with the damaged
+    spans between them.
+
+    A chunk whose framing is whole but whose checksum fails is one damaged span of one chunk.
+    Where the framing is damaged (a flipped tag or length) the scan resynchronises on the next
+    byte where a chunk with a matching CRC32 starts; where the file ends early the rest is one
+    span of unknown count. Each chunk returned has passed its CRC check."""
+    items: list[ChunkRef | DamagedSpan] = []
+    pos = PREAMBLE_BYTES
+    while pos < len(data):
+        ref, end, reason = _chunk_at(data, pos)
+        if ref is not None:
+            items.append(ref)
+            pos = end
+            continue
+        if end is not None and (end == len(data) or _chunk_at(data, end)[0] is not None):
+            items.append(DamagedSpan(pos, end, reason, 1))  # framing whole: one chunk lost
+            pos = end
+            continue
+        start = pos
+        pos += 1
+        while pos < len(data):
+            if data[pos : pos + 1] in TAGS and _chunk_at(data, pos)[0] is not None:
+                break
+            pos += 1
+        items.append(DamagedSpan(start, pos, reason, None))
+    return items

@@ -13,6 +13,7 @@ Conventions
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -151,6 +152,7 @@ def prepare_library(
     layouts: list[LayoutInfo] | None = None,
     *,
     vertices: bool = False,
+    progress: Callable[[int, int], None] | None = None,
 ) -> PreparedLibrary:
     """Group clips by skeleton structure, fit each layout, and compute every clip's channels.
 
@@ -165,6 +167,8 @@ def prepare_library(
     vertices : bool
         The bound covers the virtual vertices: every rotation channel's lever arm is at least
         their 3 cm (a twist about a bone moves no joint but turns the vertices).
+    progress : callable, optional
+        Called as ``progress(done, total)`` while the clips' channels are computed.
     """
     existing = list(layouts or [])
     keys = [layout_key(info.skeleton) for info in existing]
@@ -190,11 +194,14 @@ def prepare_library(
         keys.append(key)
     clips = []
     members: list[list[int]] = [[] for _ in existing]
+    layout_of = {key: k for k, key in reversed(list(enumerate(keys)))}  # first layout wins
     for i, m in enumerate(motions):
-        k = keys.index(layout_key(m.skeleton))
+        k = layout_of[layout_key(m.skeleton)]
         info = existing[k]
         X, at_rest = to_channels(m, info.layout, info.reference)
         size, fmt = sources[i] if sources else (0, "")
         clips.append(PreparedClip(m, k, X, at_rest, forward_kinematics(m), size, fmt))
         members[k].append(i)
+        if progress is not None and (i + 1 == len(motions) or (i + 1) % 16 == 0):
+            progress(i + 1, len(motions))
     return PreparedLibrary(existing, clips, members, vertices)
