@@ -325,7 +325,7 @@ def _compress(space: _Workspace, methods: Iterable[str]) -> None:
     for method in methods:
         out = space.folder / f"{method}.qmz"
         codec.compress(space.files, out, max_error=1.0, method=method, workers=1)
-        with codec.open(out) as library:
+        with codec.Archive.open(out) as library:
             for name in library.names():
                 library.read(name)
                 library.sample(name, [0.0, 0.01])

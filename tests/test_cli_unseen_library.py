@@ -265,7 +265,7 @@ def test_compress_reads_a_studio_layout_in_its_unit_and_warns_about_a_giant(tmp_
     result = _invoke("compress", bvh, "-o", lib, "--max-error", "1", "--workers", "1")
     assert result.exit_code == 0, result.output
     assert _warnings(result) == [] and "length unit: in (guessed)" in result.stdout
-    with codec.open(lib) as archive:
+    with codec.Archive.open(lib) as archive:
         assert _max_error(truth, archive.read(0)) <= 1.0 + 1e-6  # the bound, in true cm
 
     truth, giant = studio_walk(300.0, 1.0)
@@ -278,7 +278,7 @@ def test_compress_reads_a_studio_layout_in_its_unit_and_warns_about_a_giant(tmp_
     result = _invoke("compress", bvh, "-o", lib, "--max-error", "1", "--units", "cm")
     assert result.exit_code == 0, result.output
     assert _warnings(result) == [] and "length unit: cm (given)" in result.stdout
-    with codec.open(lib) as archive:
+    with codec.Archive.open(lib) as archive:
         decoded = archive.read(0)
     assert _max_error(truth, decoded) <= 1.0 + 1e-6  # the bound holds on the true figure
     listing = _invoke("ls", lib)
@@ -293,7 +293,7 @@ def test_append_takes_the_unit_and_reports_it(tmp_path, clips, studio_walk):
     guessed = _invoke("append", lib, tmp_path / "studio.bvh", "--workers", "1")
     assert guessed.exit_code == 0, guessed.output
     assert _warnings(guessed) == [] and "in (guessed)" in guessed.stdout
-    with codec.open(lib) as archive:
+    with codec.Archive.open(lib) as archive:
         assert archive.read("studio").skeleton.extras["bvh_scale"] == INCH_CM
 
 

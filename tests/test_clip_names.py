@@ -44,7 +44,7 @@ def test_no_match_names_close_ones_and_several_are_an_error_listing_them():
 
 def test_a_qmz_reads_a_clip_by_its_file_name():
     clips = [generate_clip("walk", 1, n_frames=30), generate_clip("run", 2, n_frames=30)]
-    with codec.open(codec.compress(clips, max_error=2.0, workers=1).data) as archive:
+    with codec.Archive.open(codec.compress(clips, max_error=2.0, workers=1).data) as archive:
         assert archive.read(f"{clips[1].name}.bvh").name == clips[1].name
         assert archive.index_of(f"{clips[0].name}.amc") == 0
         with pytest.raises(KeyError, match="close names"):

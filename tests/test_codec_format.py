@@ -33,7 +33,7 @@ def library(clips):
 
 
 def _read_everything(data: bytes) -> None:
-    with codec.open(data) as archive:
+    with codec.Archive.open(data) as archive:
         archive.verify()
         for i in range(len(archive)):
             archive.read(i)
@@ -68,18 +68,18 @@ def test_newer_version_and_wrong_magic(library, tmp_path):
     newer = bytearray(library)
     newer[len(MAGIC) : len(MAGIC) + 2] = (FORMAT_VERSION + 1).to_bytes(2, "little")
     with pytest.raises(FormatError, match="newer"):
-        codec.open(bytes(newer))
+        codec.Archive.open(bytes(newer))
     path = tmp_path / "x.qmz"
     path.write_bytes(b"BVH" + library[3:])
     with pytest.raises(FormatError, match="magic") as info:
-        codec.open(path)
+        codec.Archive.open(path)
     assert str(path) in str(info.value)
 
 
 def test_one_clip_decodes_alone_as_in_a_full_decode(clips, library):
-    with codec.open(library) as full:
+    with codec.Archive.open(library) as full:
         everything = [full.read(i) for i in range(len(full))]
-    with codec.open(library) as archive:
+    with codec.Archive.open(library) as archive:
         alone = archive.read(clips[1].name)  # nothing else decoded first
         assert archive._layouts  # the shared model was read, no other clip chunk
     np.testing.assert_array_equal(alone.rotations, everything[1].rotations)
@@ -89,9 +89,9 @@ def test_one_clip_decodes_alone_as_in_a_full_decode(clips, library):
 def test_append_keeps_old_clips_and_adds_the_new(clips, library, tmp_path):
     path = tmp_path / "lib.qmz"
     path.write_bytes(library)
-    before = [codec.open(path).read(i) for i in range(2)]
+    before = [codec.Archive.open(path).read(i) for i in range(2)]
     codec.append(path, [clips[2]], max_error=2.0)
-    with codec.open(path) as archive:
+    with codec.Archive.open(path) as archive:
         assert archive.names() == [c.name for c in clips]
         for i in range(2):
             np.testing.assert_array_equal(archive.read(i).rotations, before[i].rotations)
@@ -156,6 +156,6 @@ def test_a_bvh_skeleton_is_stored_as_its_hierarchy_whether_its_unit_was_given_or
     write_bvh(generate_clip("walk", 3, n_frames=20), path)
     for motion, kind in ((read_bvh(path), RECORD_BVH_GUESSED), (read_bvh(path, 1.0), RECORD_BVH)):
         assert skeleton_record(motion.skeleton)[0] == kind
-        with codec.open(codec.compress([motion], max_error=1.0).data) as archive:
+        with codec.Archive.open(codec.compress([motion], max_error=1.0).data) as archive:
             back = archive.read(0).skeleton
         assert dict(back.extras) == dict(motion.skeleton.extras)

@@ -47,15 +47,15 @@ def generated():
 @pytest.mark.parametrize("method", ["best", "spline", "naive"])
 def test_generated_clips_meet_the_bound_exactly_described(generated, method):
     result = codec.compress(generated, max_error=1.0, method=method)
-    with codec.open(result.data) as archive:
+    with codec.Archive.open(result.data) as archive:
         assert archive.names() == [m.name for m in generated]
         for original in generated:
             decoded = archive.read(original.name)
             _assert_exact_metadata(original, decoded)
             _assert_bound(original, decoded, 1.0)
     # the declared errors are what a decoder measures
-    for entry, original in zip(codec.open(result.data).clips, generated, strict=True):
-        decoded = codec.open(result.data).read(entry.name)
+    for entry, original in zip(codec.Archive.open(result.data).entries, generated, strict=True):
+        decoded = codec.Archive.open(result.data).read(entry.name)
         err = frame_errors(forward_kinematics(original), decoded)
         assert entry.max_error == pytest.approx(err.max(), rel=1e-5, abs=1e-6)
 
@@ -64,15 +64,15 @@ def test_generated_clips_meet_the_bound_exactly_described(generated, method):
 def test_sparse_codecs_meet_the_bound_after_repair(generated, learner, monkeypatch, tmp_path):
     monkeypatch.setitem(METHODS, learner, SparseMethod(learner, max_iter=2))
     result = codec.compress(generated, max_error=2.0, method=learner)
-    with codec.open(result.data) as archive:
+    with codec.Archive.open(result.data) as archive:
         for original in generated:
             _assert_bound(original, archive.read(original.name), 2.0)
     # appending codes the new clip on the dictionary stored in the file
     path = tmp_path / f"{learner}.qmz"
     codec.compress(generated[:1], path, max_error=2.0, method=learner)
-    first = codec.open(path).read(0)
+    first = codec.Archive.open(path).read(0)
     codec.append(path, generated[1:], max_error=2.0)
-    with codec.open(path) as archive:
+    with codec.Archive.open(path) as archive:
         assert archive.names() == [m.name for m in generated]
         np.testing.assert_array_equal(archive.read(0).rotations, first.rotations)
         _assert_bound(generated[1], archive.read(1), 2.0)
@@ -81,7 +81,7 @@ def test_sparse_codecs_meet_the_bound_after_repair(generated, learner, monkeypat
 def test_tight_vertex_bound(generated):
     clip = generated[0].slice(0, 40)
     result = codec.compress([clip], max_error=0.05, bound_on="vertices")
-    decoded = codec.open(result.data).read(0)
+    decoded = codec.Archive.open(result.data).read(0)
     _assert_bound(clip, decoded, 0.05, vertices=True)
     assert VIRTUAL_VERTEX_CM == 3.0
 
@@ -104,7 +104,7 @@ def test_real_clip_round_trip(name, tmp_path):
     clip = read_motion(REAL[name])
     clip = clip.slice(0, min(clip.n_frames, 120 if name != "cmu_amc" else clip.n_frames))
     result = codec.compress([clip], max_error=2.0)
-    decoded = codec.open(result.data).read(0)
+    decoded = codec.Archive.open(result.data).read(0)
     _assert_exact_metadata(clip, decoded)
     _assert_bound(clip, decoded, 2.0)
     # a decoded clip writes to its format and the reader reads it back
@@ -137,4 +137,4 @@ def test_repair_meets_the_bound_when_lever_arms_understate(generated, monkeypatc
     monkeypatch.setattr(library, "measure_weights", understated)
     clip = generated[1]
     result = codec.compress([clip], max_error=1.0, method="spline")
-    _assert_bound(clip, codec.open(result.data).read(0), 1.0)
+    _assert_bound(clip, codec.Archive.open(result.data).read(0), 1.0)

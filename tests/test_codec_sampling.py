@@ -29,7 +29,7 @@ def _nlerp(a, b, f):
 
 
 def test_frame_times_give_the_decoded_frames(archive):
-    for i, entry in enumerate(archive.clips):
+    for i, entry in enumerate(archive.entries):
         root, rot = archive.read_rotations(i)
         times = np.arange(entry.n_frames) / entry.fps
         s_root, s_rot = archive.sample(i, times)
@@ -44,7 +44,7 @@ def test_random_times_follow_the_model(archive):
     coefficients) for spline methods, else the normalised lerp of the decoded frames; either way
     close to the lerp of the neighbouring frames."""
     rng = np.random.default_rng(0)
-    for i, entry in enumerate(archive.clips):
+    for i, entry in enumerate(archive.entries):
         root, rot = archive.read_rotations(i)
         T = entry.n_frames
         times = rng.uniform(0, (T - 1) / entry.fps, 200)
@@ -95,7 +95,7 @@ def _scipy_spline(archive, i, u):
 
 def test_clamp_and_loop_edges(archive):
     root, rot = archive.read_rotations(0)
-    entry = archive.clips[0]
+    entry = archive.entries[0]
     T, fps = entry.n_frames, entry.fps
     r, q = archive.sample(0, [-5.0, -1e-3, 1e3, (T - 1) / fps + 1e-3])
     assert quat.angle(q[:2], rot[[0, 0]]).max() < 1e-9
@@ -112,7 +112,7 @@ def test_clamp_and_loop_edges(archive):
 
 
 def test_joint_subsets_and_scalar_times(archive):
-    sk = archive.skeleton(archive.clips[1].skeleton)
+    sk = archive.skeleton(archive.entries[1].skeleton)
     times = np.array([0.1, 0.25, 0.5])
     root, rot = archive.sample(1, times)
     pick = [5, 2, sk.n_joints - 1]
@@ -125,7 +125,7 @@ def test_joint_subsets_and_scalar_times(archive):
     r1, q1 = archive.sample(1, 0.25, joints=sk.joint_names[2])
     assert r1.shape == (3,) and q1.shape == (1, 4)
     assert np.abs(q1[0] - rot[1, 2]).max() < 1e-12
-    by_name, _ = archive.sample(archive.clips[1].name, 0.25)
+    by_name, _ = archive.sample(archive.entries[1].name, 0.25)
     assert np.array_equal(by_name, root[1])
 
 
@@ -161,7 +161,7 @@ def test_corrections_are_exact_at_frames(clips, monkeypatch):
     monkeypatch.setattr(library, "measure_weights", understated)
     archive = codec.open(codec.compress([clips[1]], max_error=1.0, method="spline").data)
     assert len(archive.clip_parts(0).corrections) > 0
-    entry = archive.clips[0]
+    entry = archive.entries[0]
     root, rot = archive.read_rotations(0)
     s_root, s_rot = archive.sample(0, np.arange(entry.n_frames) / entry.fps)
     assert quat.angle(s_rot, rot).max() < 1e-9

@@ -76,11 +76,11 @@ def test_distinct_skeletons_stay_distinct_and_equal_ones_share(tmp_path):
     path = tmp_path / "x.qmz"
     codec.compress(clips, path, max_error=1.0)
     with codec.open_archive(path) as archive:
-        entries = {c.name: c for c in archive.clips}
+        entries = {c.name: c for c in archive.entries}
         # a and c: equal skeletons (distinct objects) share one entry; b, d, e have their own.
         assert entries["a"].skeleton == entries["c"].skeleton
         assert len({entries[n].skeleton for n in "abde"}) == 4
-        assert len(archive.clips) == 5
+        assert len(archive.entries) == 5
         # Layouts follow structure: d's renamed joint has its own; a, b, c share one.
         assert entries["a"].layout == entries["b"].layout == entries["c"].layout
         assert entries["d"].layout != entries["a"].layout

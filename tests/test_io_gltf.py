@@ -151,7 +151,7 @@ def test_every_command_takes_glb_clips(tmp_path):
     lib = tmp_path / "lib.qmz"
     result = _cli("compress", clips, "-o", lib, "--max-error", "1", "--workers", "1")
     assert result.exit_code == 0, result.output
-    with codec.open(lib) as archive:
+    with codec.Archive.open(lib) as archive:
         assert sorted(archive.names()) == ["jump", "run", "squat", "walk"]
         decoded = archive.read("walk")
     error = np.linalg.norm(

@@ -146,7 +146,7 @@ def test_cli_index_then_search_returns_the_query_pose(
     from typer.testing import CliRunner
 
     from quatmotion.cli import app
-    from quatmotion.pose import library
+    from quatmotion.pose import methods
 
     # RDSR's fit (1683 x 1683 eigenproblems) is tested in test_pose_rdsr.py and takes minutes on
     # a shared machine; here the plumbing is under test, so a linear projection of the same
@@ -160,7 +160,7 @@ def test_cli_index_then_search_returns_the_query_pose(
             self.components_ = vt[: self.n_components]
             return self
 
-    monkeypatch.setattr(library, "RDSR", _Projection)
+    monkeypatch.setattr(methods, "RDSR", _Projection)  # the library learns by METHODS
     runner = CliRunner()
     out = tmp_path / "poses.idx"
     files = [str(DATA / "cmu" / "02" / f) for f in ("02_01.amc", "02_02.amc", "02_03.amc")]
@@ -309,3 +309,99 @@ def test_a_query_far_outside_the_library_range_does_not_swamp_its_pose() -> None
         far[:, j] = (50.0 - offset[j]) / scale[j]
     ids, _ = lib.search(lib.project(far), 1)
     assert np.mean(ids[:, 0] == np.arange(len(raw))) > 0.8
+
+
+@pytest.mark.parametrize("metric_name", ["GPD+LMS", "GPD+RDSR"])
+def test_pose_index_library_and_the_benchmark_method_give_the_same_distances(
+    tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, metric_name: str
+) -> None:
+    """Issue 20 (1): ``pose index`` writes the registered method ``bench pose`` scores: the
+    method of that name, fitted on the library's own training set through the benchmark's
+    interface (PoseData pairs), gives the library's distances on the same poses."""
+    from sklearn.decomposition import PCA
+    from typer.testing import CliRunner
+
+    from quatmotion.cli import app
+    from quatmotion.io import write_bvh
+    from quatmotion.pose import methods
+    from quatmotion.pose.data import PoseClip, PoseData
+    from quatmotion.pose.library import load_pose_clip, training_set
+    from quatmotion.synthetic import generate_clip
+
+    if metric_name == "GPD+RDSR":  # RDSR's own fit is tested in test_pose_rdsr.py (minutes)
+        monkeypatch.setattr(methods, "RDSR", lambda n_components, random_state: PCA(n_components))
+    paths = []
+    for seed, kind in enumerate(["walk", "squat", "wave"]):
+        paths.append(tmp_path / f"{kind}.bvh")
+        write_bvh(generate_clip(kind, seed, n_frames=150, fps=30.0), paths[-1])
+    out = tmp_path / "poses.idx"
+    res = CliRunner().invoke(
+        app,
+        ["pose", "index", *map(str, paths), "-o", str(out), "--metric", metric_name,
+         "--rank", "12", "--workers", "1"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    lib = PoseLibrary.load(out)
+    assert lib.meta["metric"] == metric_name
+    clips = [  # as the command loaded them, in the library's order
+        load_pose_clip(name, fps=lib.meta["fps"], height=lib.meta["height_cm"])
+        for name in lib.clip_names
+    ]
+    factory_options = {"n_components": lib.meta["rank"]} if metric_name == "GPD+RDSR" else {}
+    method = methods.METHODS[metric_name](random_state=lib.meta["seed"], **factory_options)
+    unl, pairs, similar, _ = training_set(
+        clips, n_unlabeled=lib.meta["n_unlabeled"], n_pairs=500, seed=lib.meta["seed"],
+        dissimilar=method.uses_dissimilar,
+    )  # fmt: skip
+    assert int(similar.sum()) == lib.meta["n_positive_pairs"]
+    poses = PoseData.concat([c.poses for c in clips])
+    method.fit(poses[unl], poses[pairs[:, 0]], poses[pairs[:, 1]], similar)
+    rng = np.random.default_rng(3)
+    a, b = rng.integers(0, len(poses), 200), rng.integers(0, len(poses), 200)
+    gpd = poses.gpd
+    ours = np.linalg.norm(lib.project(gpd[a]) - lib.project(gpd[b]), axis=1)
+    theirs = method.distances(poses[a], poses[b])
+    np.testing.assert_allclose(theirs, ours, rtol=1e-6, atol=1e-9)
+    assert np.ptp(ours) > 0  # a metric that tells poses apart, not a constant
+    # poses of a clip outside the library's range (the clipped scaler matters there)
+    other = PoseClip.from_motion(
+        generate_clip("kick", 7, n_frames=90), fps=lib.meta["fps"], height=lib.meta["height_cm"]
+    ).poses
+    q = rng.integers(0, len(other), 200)
+    ours = np.linalg.norm(lib.project(other.gpd[q]) - lib.project(gpd[b]), axis=1)
+    np.testing.assert_allclose(method.distances(other[q], poses[b]), ours, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(
+        method.pairwise(other[q[:5]], poses[b[:7]]),
+        cdist(lib.project(other.gpd[q[:5]]), lib.project(gpd[b[:7]])), rtol=1e-6, atol=1e-9,
+    )  # fmt: skip
+    # and the index holds exactly those vectors: every pose finds itself at distance ~0
+    ids, dist = lib.search(lib.project(gpd[a[:20]]), k=1)
+    assert np.all(dist[:, 0] < 1e-6)
+
+
+def test_every_registered_method_fits_and_its_projection_gives_its_distances() -> None:
+    """Issue 20 (1): every FEATURE+LEARNER method that is a Euclidean projection measures
+    through ``projection_`` (the form a library stores); the rest (JRF+LMS, the joint
+    distances, FEET) fit and give finite distances."""
+    from quatmotion.pose import methods
+    from quatmotion.pose.data import PoseClip, PoseData
+    from quatmotion.synthetic import generate_clip
+
+    clips = [
+        PoseClip.from_motion(generate_clip(k, 2, n_frames=240), fps=15, height=170)
+        for k in ("walk", "squat")
+    ]
+    poses = PoseData.concat([c.poses for c in clips])
+    rng = np.random.default_rng(0)
+    a, b = rng.integers(0, len(poses), 40), rng.integers(0, len(poses), 40)
+    labels = rng.random(40) < 0.5
+    for name in ("GPD+L2", "JO+L2", "JC+LMS", "GPD+SDA", "JRF+LMS", "FEET", "LJCD"):
+        method = methods.METHODS[name](random_state=0).fit(poses, poses[a], poses[b], labels)
+        d = method.distances(poses[a], poses[b])
+        assert d.shape == (40,) and np.all(np.isfinite(d)), name
+        projection = getattr(method, "projection_", None)
+        if projection is not None:
+            raw = method.raw_features(poses)
+            z = methods.project_features(raw, projection)
+            np.testing.assert_allclose(d, np.linalg.norm(z[a] - z[b], axis=1), atol=1e-9)
+    assert methods.METHODS["JRF+LMS"]().fit(poses, poses[a], poses[b], labels).projection_ is None

@@ -95,10 +95,10 @@ def test_pose_index_cli_skips_a_bad_file_and_exits_1(
 
     from quatmotion.cli import app
     from quatmotion.io import write_bvh
-    from quatmotion.pose import library
+    from quatmotion.pose import methods
     from quatmotion.synthetic import generate_clip
 
-    monkeypatch.setattr(library, "RDSR", lambda n_components, random_state: PCA(n_components))
+    monkeypatch.setattr(methods, "RDSR", lambda n_components, random_state: PCA(n_components))
     for seed, kind in enumerate(["walk", "squat", "kick"]):
         write_bvh(generate_clip(kind, seed, n_frames=120, fps=60.0), tmp_path / f"{kind}.bvh")
     (tmp_path / "broken.bvh").write_text("HIERARCHY\nROOT Hips\n{\n")

@@ -50,5 +50,5 @@ def test_a_readme_python_snippet_runs_as_written(tmp_path: Path, how: str, numbe
     assert "Traceback" not in done.stderr and "leaked" not in done.stderr, done.stderr
     for written in re.findall(r"\"([\w.-]+\.qmz)\"", snippet):
         # what the snippet wrote is a whole library (written before it was opened again)
-        with codec.open(tmp_path / written) as library:
+        with codec.Archive.open(tmp_path / written) as library:
             assert library.names()

@@ -45,8 +45,8 @@ def test_browse_lists_every_clip_with_the_library_and_index_facts(client, motion
         [f"{k}_{s}" for k in ("walk", "squat", "jumping_jack") for s in range(2)] + ["kick_0"]
     )
     assert data["labels"] == ["jumping_jack", "kick", "squat", "walk"]
-    with codec.open(motion_library["library"]) as archive:
-        for position, entry in enumerate(archive.clips):
+    with codec.Archive.open(motion_library["library"]) as archive:
+        for position, entry in enumerate(archive.entries):
             clip = by_name[entry.name]
             assert clip["id"] == entry.name
             assert clip["label"] == entry.name.rsplit("_", 1)[0]
@@ -97,7 +97,7 @@ def test_info_names_files_not_paths(client, motion_library):
 # ------------------------------------------------------------------------------ play data
 def test_frames_are_the_decoded_library_clip(client, motion_library):
     payload = client.get("/api/clips/walk_0/frames").json()
-    with codec.open(motion_library["library"]) as archive:
+    with codec.Archive.open(motion_library["library"]) as archive:
         decoded = archive.read("walk_0")
     expected = forward_kinematics(decoded).all_positions()
     shown = frame_data.decode_clip(payload)
@@ -457,3 +457,75 @@ def test_serve_command_checks_input_and_warns_off_the_loopback(motion_library, m
         ["serve", "--library", str(motion_library["library"]), "--host", "0.0.0.0", "--port", "0"],
     )
     assert wide.exit_code == 0 and "warning: --host 0.0.0.0" in wide.output
+
+
+def test_clips_of_one_stem_in_two_folders_stay_two_rows_joined_on_their_content(tmp_path):
+    """Two ``take_001`` in s1/ and s2/ and a third clip, in a library, an index and a pose
+    index: three rows, named apart by their relative paths, each joined across the three
+    files (labels, pose search, compare with its own original)."""
+    import dataclasses
+
+    from quatmotion.pose.data import PoseClip
+    from quatmotion.pose.library import PoseLibrary
+    from quatmotion.retrieval.build import build_index
+
+    files = {
+        "s1/take_001": ("walk", 1),
+        "s2/take_001": ("squat", 2),
+        "s1/kick_0": ("kick", 0),
+    }
+    paths = {}
+    for name, (kind, seed) in files.items():
+        path = tmp_path / "clips" / f"{name}.bvh"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_motion(generate_clip(kind, seed, n_frames=90), path)
+        paths[name] = path
+    labels = {str(p): files[n][0] for n, p in paths.items()}
+    report = build_index([tmp_path / "clips"], tmp_path / "c.qidx", kinds=("motion",),
+                         labels=labels, workers=1)  # fmt: skip
+    assert len(report.added) == 3 and not report.failures, report
+    display = {"s1/take_001": "s1/take_001", "s2/take_001": "s2/take_001", "s1/kick_0": "kick_0"}
+    motions = [dataclasses.replace(read_motion(p), name=display[n]) for n, p in paths.items()]
+    codec.compress(motions, tmp_path / "c.qmz", max_error=1.0)
+    prepared = [
+        PoseClip.from_motion(read_motion(p), fps=30, height=170, name=str(p))
+        for p in paths.values()
+    ]
+    PoseLibrary.build(prepared, n_pairs=50, n_unlabeled=200).save(tmp_path / "p.idx")
+
+    for served in (
+        create_app(tmp_path / "c.qmz", tmp_path / "c.qidx", tmp_path / "p.idx"),
+        create_app(index=tmp_path / "c.qidx", poses=tmp_path / "p.idx"),
+    ):
+        with TestClient(served, base_url=BASE) as client:
+            rows = client.get("/api/clips").json()["clips"]
+            assert sorted(r["name"] for r in rows) == ["kick_0", "s1/take_001", "s2/take_001"]
+            assert all(r["in_index"] and r["in_poses"] for r in rows)
+            by_name = {r["name"]: r for r in rows}
+            assert by_name["s1/take_001"]["label"] == "walk"
+            assert by_name["s2/take_001"]["label"] == "squat"
+            payloads = []
+            for name in ("s1/take_001", "s2/take_001"):
+                clip_id = by_name[name]["id"]
+                payloads.append(client.get(f"/api/clips/{clip_id}/frames").json())
+                hits = client.get("/api/poses", params={"clip": clip_id, "frame": 10}).json()
+                assert hits["results"][0]["id"] == clip_id  # the pose clip is this clip's own
+                if rows[0]["in_library"]:
+                    compare = client.get(f"/api/clips/{clip_id}/compare")
+                    assert compare.status_code == 200, compare.text
+            assert payloads[0] != payloads[1]  # each row plays its own clip
+            served.state.catalogue.close()
+
+
+def test_clip_key_is_the_content_hash_whatever_names_the_clip(tmp_path):
+    path = tmp_path / "a" / "take_001.bvh"
+    path.parent.mkdir()
+    write_motion(generate_clip("walk", 4, n_frames=30), path)
+    from quatmotion.collection import content_hash
+
+    sha = content_hash(path)
+    assert clips_module.clip_key(path) == sha == clips_module.clip_key(str(path))
+    assert clips_module.clip_key(type("Ref", (), {"sha256": "abc"})()) == "abc"
+    assert clips_module.clip_key("take_001", {"take_001": sha}) == sha
+    assert clips_module.clip_key("take_001") is None
+    assert clips_module.clip_key(tmp_path / "missing.bvh") is None

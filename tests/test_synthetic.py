@@ -293,3 +293,22 @@ def test_generated_clip_round_trips_through_asf_amc_and_bvh(tmp_path):
     from_bvh = io.read_bvh(tmp_path / "gen_01.bvh")
     np.testing.assert_allclose(forward_kinematics(from_amc).positions, expected, atol=1e-4)
     np.testing.assert_allclose(forward_kinematics(from_bvh).positions, expected, atol=1e-4)
+
+
+def test_generated_skeletons_carry_the_asf_readers_own_layout(tmp_path):
+    """The generated skeleton's ASF bookkeeping is the reader's (quatmotion.io.asf_extras):
+    written and read back, every key of the reader's layout is there with the same value."""
+    from quatmotion.io import read_asf, write_asf
+    from quatmotion.synthetic import cmu_skeleton
+
+    made = cmu_skeleton(163.0)
+    write_asf(made, tmp_path / "made.asf")
+    read = read_asf(tmp_path / "made.asf")
+    reader_keys = set(read.extras) - {"bone_vectors_cm"}
+    assert reader_keys <= set(made.extras)
+    for key in ("format", "asf_units", "asf_root", "asf_hierarchy", "angle_unit"):
+        assert made.extras[key] == read.extras[key], key
+    assert [b["name"] for b in made.extras["asf_bones"]] == [
+        b["name"] for b in read.extras["asf_bones"]
+    ]
+    assert set(made.extras["asf_bones"][0]) == set(read.extras["asf_bones"][0])

@@ -68,7 +68,7 @@ def test_compress_reads_in_the_unit_given_and_hears_the_doubts(tmp_path, studio_
         [path], max_error=1.0, units="cm", workers=1, on_doubt=lambda *doubt: heard.append(doubt)
     )
     assert heard == []
-    with codec.open(result.data) as archive:
+    with codec.Archive.open(result.data) as archive:
         decoded = archive.read(0)
     assert decoded.skeleton.extras["bvh_scale"] == 1.0
     true = forward_kinematics(truth).all_positions()

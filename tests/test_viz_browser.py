@@ -99,7 +99,7 @@ def test_view_page_plays_offline_and_shows_the_comparison(browser, compare_page,
 
 def _decoded(motion: Motion) -> Motion:
     """``motion`` through the codec at 1 cm, as ``view --compare-decoded`` shows it."""
-    with codec.open(codec.compress([motion], max_error=1.0).data) as archive:
+    with codec.Archive.open(codec.compress([motion], max_error=1.0).data) as archive:
         return archive.read(0)
 
 

@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from quatmotion._atomic import atomic_write_json
-from quatmotion.codec import compress, open_archive
+from quatmotion.codec import Archive, compress
 from quatmotion.codec.methods import METHODS, SparseMethod
 from quatmotion.codec.methods.sparse import cached_fit_seconds, clear_fit_cache
 from quatmotion.codec.metrics import collection_errors
@@ -87,7 +87,7 @@ def _row(result, source_bytes: int, decode_runs: int) -> dict[str, Any]:
     errors = collection_errors(result.clip_errors)
     frames = errors.frames
     to_rotations, to_positions = [], []
-    with open_archive(result.data) as archive:
+    with Archive.open(result.data) as archive:
         for _ in range(decode_runs):
             t = time.perf_counter()
             for i in range(len(archive)):

@@ -75,7 +75,7 @@ def _warm_up() -> None:
 def decode_figures(data: bytes, repeats: int = 3, seed: int = 0) -> dict[str, Any]:
     """Decode and sample timings of one archive's bytes (see the module docstring)."""
     with open_archive(data) as archive:
-        frames = sum(c.n_frames for c in archive.clips)
+        frames = sum(c.n_frames for c in archive.entries)
 
         def rotations():
             for i in range(len(archive)):
@@ -93,7 +93,7 @@ def decode_figures(data: bytes, repeats: int = 3, seed: int = 0) -> dict[str, An
     with open_archive(data) as archive:
         for k in range(len(archive.header.layouts)):
             archive.layout(k)
-        for i, entry in enumerate(archive.clips):
+        for i, entry in enumerate(archive.entries):
             duration = (entry.n_frames - 1) / entry.fps
             c = time.thread_time()
             archive.sample(i, 0.5 * duration)

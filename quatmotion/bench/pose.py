@@ -58,6 +58,8 @@ UNLABELED_COUNTS = (0, 1000, 2000, 5000)
 ALPHAS = (0.1, 1.0, 10.0, 100.0)
 FEATURES = ("JO", "JC", "JRF", "GPD")
 LEARNERS = ("L2", "LMS", "Xing", "SDA", "RDSR")
+#: The row of what ``pose index`` ships, trained on its own pairs (see _index_default_entry).
+INDEX_DEFAULT = "pose index default"
 
 
 @dataclass
@@ -171,6 +173,51 @@ class _Task:
         )
 
 
+def _index_default_entry(
+    clips: list[Clip],
+    train: list[int],
+    train_pose_ids: NDArray[np.int64],
+    all_poses: PoseData,
+    test_a: PoseData,
+    test_b: PoseData,
+    test_labels: NDArray[np.bool_],
+    *,
+    n_unlabeled: int,
+    n_pairs: int,
+    seed: int,
+    near: NDArray[np.bool_] | None = None,
+) -> dict[str, Any]:
+    """What ``quatmotion pose index`` ships, trained as it trains on the training clips: the
+    registered default method on the library's own training set
+    (:func:`quatmotion.pose.library.training_set`), scored on the test pairs."""
+    from quatmotion.pose.library import DEFAULT_METRIC, training_set
+    from quatmotion.pose.methods import METHODS
+
+    try:
+        t0 = time.perf_counter()
+        method = METHODS[DEFAULT_METRIC](random_state=seed)
+        unl, pairs, similar, source = training_set(
+            [clips[i].pose_clip for i in train], n_unlabeled=n_unlabeled, n_pairs=n_pairs,
+            seed=seed, dissimilar=method.uses_dissimilar,
+        )  # fmt: skip
+        ids = train_pose_ids
+        method.fit(
+            all_poses[ids[unl]], all_poses[ids[pairs[:, 0]]], all_poses[ids[pairs[:, 1]]], similar
+        )
+        fit_s = time.perf_counter() - t0
+        d = np.asarray(method.distances(test_a, test_b), dtype=np.float64)
+        prec, thr = evaluate.transition_precision(d, test_labels)
+        entry = {
+            "precision": prec, "threshold": thr, "fit_seconds": fit_s, "metric": DEFAULT_METRIC,
+            "pairs_from": source, "positive_pairs": int(similar.sum()),
+        }  # fmt: skip
+        if near is not None and test_labels[near].any() and (~test_labels[near]).any():
+            entry["near_precision"] = evaluate.transition_precision(d[near], test_labels[near])[0]
+        return entry
+    except Exception as exc:  # one broken method must not sink the benchmark
+        return {"error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc(limit=3)}
+
+
 def _transition_experiment(
     clips: list[Clip],
     train: list[int],
@@ -251,6 +298,12 @@ def _transition_experiment(
             }
         log(f"  transition {name}: {entry.get('precision', entry.get('error'))}")
         result["methods"][name] = entry
+
+    result["methods"][INDEX_DEFAULT] = _index_default_entry(
+        clips, train, train_pose_ids, all_poses, test_a, test_b, te.labels,
+        n_unlabeled=default_unl, n_pairs=n_pairs, seed=int(rng.integers(2**31)),
+    )  # fmt: skip
+    log(f"  transition {INDEX_DEFAULT}: {result['methods'][INDEX_DEFAULT].get('precision')}")
 
     if sweeps and "GPD+RDSR" in methods:
         sweep = {}

@@ -65,7 +65,10 @@ import numpy as np
 
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench import provenance
-from quatmotion.codec.compress import clip_jobs, code_clip
+from quatmotion.codec.compress import ClipJob as CodecJob
+from quatmotion.codec.compress import code_clip, plan_clip_jobs
+from quatmotion.codec.library import prepare_library
+from quatmotion.codec.methods import get_method
 from quatmotion.collection import ReadSettings, find_clips
 from quatmotion.io import read_motion
 from quatmotion.parallel import available_cpus, imap_batch, run_batch, shutdown_pools
@@ -90,6 +93,19 @@ def retrieval_features(path: str) -> ClipRecord:
     motion features), as the index build runs it."""
     source = find_clips([path])[0]
     return index_clip(ClipJob(source, ("motion",), ReadSettings(strict=False)))
+
+
+def codec_clip_jobs(paths: list, *, max_error: float = 1.0, seed: int = 0) -> list[CodecJob]:
+    """The per-clip jobs ``compress`` hands to :mod:`quatmotion.parallel` for the clips of
+    ``paths`` with the default method (shared models fitted, every clip prepared):
+    :func:`~quatmotion.codec.compress.code_clip` over them is the batch step on its own."""
+    method = get_method("best")
+    motions = [read_motion(p) for p in paths]
+    library = prepare_library(motions, [(0, "")] * len(motions))
+    jobs, _, _ = plan_clip_jobs(
+        method, library, method.default_quality, max_error, seed, [], verify=True
+    )
+    return jobs
 
 
 def generated_pose_clip(spec: tuple[str, int, int], *, fps: float, height: float) -> PoseClip:
@@ -529,7 +545,7 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
             "pose_features": _throughput(job, paths, n_frames, dask_ok),
             "retrieval_index_build": _throughput(retrieval_features, paths, n_frames, dask_ok),
             "codec_compress": _throughput(
-                code_clip, clip_jobs([read_motion(p) for p in paths], seed=seed), n_frames, dask_ok
+                code_clip, codec_clip_jobs(paths, seed=seed), n_frames, dask_ok
             ),
         }
     result["throughput_clips"] = {"clips": n_clips, "frames_per_clip": 480, "file_fps": 120}

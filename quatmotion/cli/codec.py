@@ -54,16 +54,17 @@ def _reporter(progress):
     return report
 
 
-def _summary(result) -> str:
+def _summary(details: dict) -> str:
     from quatmotion.codec.metrics import collection_errors
 
-    errors = collection_errors(result.clip_errors)
-    source = sum(result.source_bytes)
-    raw = sum(result.raw_bytes)
-    parts = [f"{result.size:,} bytes"]
+    errors = collection_errors(details["clip_errors"])
+    source = sum(details["source_bytes"])
+    raw = sum(details["raw_bytes"])
+    size = len(details["data"])
+    parts = [f"{size:,} bytes"]
     if source:
-        parts.append(f"{source / result.size:.0f}:1 against the source text")
-    parts.append(f"{raw / result.size:.0f}:1 against float32 channels")
+        parts.append(f"{source / size:.0f}:1 against the source text")
+    parts.append(f"{raw / size:.0f}:1 against float32 channels")
     parts.append(f"ARMS {errors.arms:.3f} cm, max joint error {errors.max_joint:.3f} cm")
     return ", ".join(parts)
 
@@ -72,8 +73,9 @@ def _clip_rows(archive, first: int = 0) -> list[dict[str, object]]:
     """The clips of an open archive from ``first`` on, as ``ls --json`` lists them."""
     rows = []
     units: dict[int, dict[str, object]] = {}  # per skeleton: clips share them
+    refs = archive.clips()
     damaged = {d.index: d.reason for d in getattr(archive, "damaged", ())}
-    for i, entry in enumerate(archive.clips[first:], start=first):
+    for i, entry in enumerate(archive.entries[first:], start=first):
         size = archive.chunk_bytes(i)
         if entry.skeleton not in units:
             bvh = archive.bvh_unit(entry.skeleton)  # from the header: no record parsed
@@ -102,6 +104,7 @@ def _clip_rows(archive, first: int = 0) -> list[dict[str, object]]:
                 **unit,
                 "damaged": damage,
                 "unit_text": "-" if unit["unit_source"] == "damaged" else unit_text(unit),
+                "ref": refs[i].to_dict(),
             }
         )
     return rows
@@ -110,14 +113,42 @@ def _clip_rows(archive, first: int = 0) -> list[dict[str, object]]:
 def _library_doc(path: Path, archive, rows: list[dict[str, object]]) -> dict[str, object]:
     """One ``.qmz`` as ``ls --json`` and ``compress --json`` print it."""
     source = sum(int(r["source_bytes"]) for r in rows)  # type: ignore[call-overload]
+    settings = archive.settings
     return {
         "library": str(path),
         "bytes": archive.size,
         "method": archive.header.method,
+        "format_version": archive.version,
+        "settings": None if settings is None else settings.to_dict(),
         "source_bytes": source,
         "ratio": source / archive.size if source else None,
         "clips": [{k: v for k, v in r.items() if k != "unit_text"} for r in rows],
     }
+
+
+def _settings_line(archive) -> str:
+    """How the file was made, from the settings it stores (format version 2 on)."""
+    settings = archive.settings
+    if settings is None:
+        return (
+            f"made by quatmotion 0.3.0 or earlier (format version {archive.version}): "
+            "settings not stored"
+        )
+    target = (
+        f"ratio {settings.ratio:g}"
+        if settings.ratio is not None
+        else "no bound"
+        if settings.max_error is None
+        else f"max error {settings.max_error:g} cm on {settings.bound_on}"
+    )
+    quality = "default" if settings.quality is None else f"{settings.quality:g}"
+    read = settings.read
+    units = "guessed" if read.units is None else str(read.units)
+    return (
+        f"made with: method {settings.method}, {target}, quality {quality}, seed {settings.seed}; "
+        f"read with units {units}, skeleton {read.skeleton or 'found by name'}, "
+        f"translations {read.translations}{', strict' if read.strict else ''}"
+    )
 
 
 def _units_line(rows: list[dict[str, object]]) -> str:
@@ -154,51 +185,54 @@ def compress(
     scheduler; a file that cannot be read is reported and left out, and the command then ends
     with exit code 1.
     """
-    from quatmotion.codec import DEFAULT_MAX_ERROR_CM, open_archive
-    from quatmotion.codec import compress as run_compress
+    from quatmotion.codec import Archive, CompressSettings
+    from quatmotion.codec.compress import build_library, runner_of
+    from quatmotion.collection import ReadSettings
 
     with user_errors():
-        if max_error is not None and ratio is not None:
-            raise CliInputError("give --max-error or --ratio, not both")
-        if max_error is None and ratio is None:
-            max_error = DEFAULT_MAX_ERROR_CM
         check_units(units)
         if skeleton is not None:
             require_file(skeleton)
         for path in inputs:
             if not path.exists():
                 raise CliInputError(f"{path}: no such file or folder")
+        read = ReadSettings(
+            units=_units(units), skeleton=None if skeleton is None else str(skeleton)
+        )
+        settings = CompressSettings(
+            max_error=max_error if max_error is not None or ratio is not None else 1.0,
+            ratio=ratio, method=method, seed=seed, on_error="skip", read=read,
+        )  # fmt: skip
         check_outputs([out], [*inputs, skeleton], force=force)
         from quatmotion.cli.warmup import ensure_kernels
 
         groups = ("read", "codec", "learn") if method in ("qssd", "ksvd") else ("read", "codec")
         ensure_kernels(*groups, workers=workers, scheduler=scheduler)
         with progress_bar(error_console if as_json else console) as progress:
-            result = run_compress(
-                inputs, out, max_error=max_error, ratio=ratio, method=method,
-                skeleton=skeleton, units=units, seed=seed, progress=_reporter(progress),
-                workers=workers, scheduler=scheduler, on_error="skip",
-                on_doubt=doubt_reporter(progress),
+            report = build_library(
+                inputs, out, settings, runner=runner_of(workers, scheduler),
+                progress=_reporter(progress), on_doubt=doubt_reporter(progress),
             )  # fmt: skip
-        with open_archive(result.data) as archive:
+        with Archive.open(report.details["data"]) as archive:
             rows = _clip_rows(archive)
             doc = _library_doc(out, archive, rows)
-    report_skipped(f"{name}: {reason}" for name, reason in result.failed)
+    failed = [(str(f.item), f.message) for f in report.failures]
+    report_skipped(f"{name}: {reason}" for name, reason in failed)
     if as_json:
         print_json(
             {
                 **doc,
-                "max_error_cm": max_error,
+                "max_error_cm": settings.max_error,
                 "target_ratio": ratio,
-                "failed": [{"input": name, "reason": reason} for name, reason in result.failed],
+                "failed": [{"input": name, "reason": reason} for name, reason in failed],
             }
         )
     else:
-        console.print(f"wrote {out}: {len(result.clip_errors)} clip(s), {_summary(result)}")
+        console.print(f"wrote {out}: {len(report.added)} clip(s), {_summary(report.details)}")
         console.print(_units_line(rows), markup=False, highlight=False)
-        if result.failed:
-            console.print(f"{len(result.failed)} input(s) failed")
-    if result.failed:
+        if failed:
+            console.print(f"{len(failed)} input(s) failed")
+    if failed:
         raise typer.Exit(code=1)
 
 
@@ -222,7 +256,7 @@ def decompress(
     ] = False,
 ) -> None:
     """Write the clips of a .qmz file as AMC (+ASF) or BVH, each under its own name."""
-    from quatmotion.codec import open_archive
+    from quatmotion.codec import Archive
 
     with user_errors():
         require_file(library)
@@ -231,7 +265,7 @@ def decompress(
         if out.exists() and not out.is_dir():
             raise CliInputError(f"{out}: exists and is not a folder")
         check_writable(out, folder=True)
-        with open_archive(library, recover=skip_damaged) as archive:
+        with Archive.open(library, recover=skip_damaged) as archive:
             # A clip named twice (or by name and number) is written once.
             wanted = list(dict.fromkeys(archive.index_of(c) for c in clip or []))
             wanted = wanted or range(len(archive))
@@ -240,7 +274,7 @@ def decompress(
             wanted = [i for i in wanted if i not in damaged]
             planned = []  # every clip's files, checked before anything is written
             for i in wanted:
-                entry = archive.clips[i]
+                entry = archive.entries[i]
                 skeleton = archive.skeleton(entry.skeleton)
                 fmt = (format or entry.source_format or "").lower().lstrip(".")
                 if fmt not in ("amc", "bvh"):
@@ -279,12 +313,12 @@ def list_library(
     as_json: JsonOption = False,
 ) -> None:
     """List a .qmz file's clips: frames, bytes, ratio, declared max error, ARMS and the length
-    unit each was read in."""
-    from quatmotion.codec import open_archive
+    unit each was read in, and how the file was made (its settings)."""
+    from quatmotion.codec import Archive
 
     with user_errors():
         require_file(library)
-        with open_archive(library, recover=True) as archive:
+        with Archive.open(library, recover=True) as archive:
             rows = _clip_rows(archive)
             if as_json:
                 doc = _library_doc(library, archive, rows)
@@ -316,6 +350,7 @@ def list_library(
                 f"{len(archive)} clip(s); whole file {archive.size:,} bytes, ratio {whole} "
                 "(clip rows count their own chunk only; skeletons and models are shared)"
             )
+            console.print(_settings_line(archive), markup=False, highlight=False)
             if archive.damaged:
                 _report_damaged(library, archive.damaged)
                 raise typer.Exit(code=1)
@@ -334,8 +369,8 @@ def append(
     scheduler: SchedulerOption = None,
 ) -> None:
     """Add clips to a .qmz file without re-encoding the clips already in it."""
-    from quatmotion.codec import append as run_append
-    from quatmotion.codec import open_archive
+    from quatmotion.codec import Archive
+    from quatmotion.codec.compress import add_to_library, runner_of
 
     with user_errors():
         require_file(library)
@@ -348,16 +383,44 @@ def append(
         check_outputs([library], [*inputs, skeleton], replace=True)
         from quatmotion.cli.warmup import ensure_kernels
 
+        with Archive.open(library) as archive:
+            made = archive.settings
+        settings = _add_settings(made, max_error, units, skeleton)
         ensure_kernels("read", "codec", workers=workers, scheduler=scheduler)
         with progress_bar() as progress:
-            result = run_append(
-                library, inputs, max_error=max_error, skeleton=skeleton, units=units,
-                progress=_reporter(progress), workers=workers, scheduler=scheduler,
-                on_doubt=doubt_reporter(progress),
+            report = add_to_library(
+                library, inputs, settings, runner=runner_of(workers, scheduler),
+                progress=_reporter(progress), on_doubt=doubt_reporter(progress),
             )  # fmt: skip
-        with open_archive(result.data) as archive:
-            rows = _clip_rows(archive, len(archive) - len(result.clip_errors))
-    console.print(
-        f"added {len(result.clip_errors)} clip(s) to {library}: now {result.size:,} bytes"
-    )
+        if not report.added:
+            console.print(f"added 0 clips to {library}: it already holds all {len(report.skipped)}")
+            return
+        with Archive.open(library) as archive:
+            rows = _clip_rows(archive, len(archive) - len(report.added))
+            size = archive.size
+    skipped = f" ({len(report.skipped)} already in it)" if report.skipped else ""
+    console.print(f"added {len(report.added)} clip(s) to {library}{skipped}: now {size:,} bytes")
     console.print(_units_line(rows), markup=False, highlight=False)
+
+
+def _units(units):
+    """--units as ReadSettings takes it: a unit name, or centimetres per unit as a number."""
+    from quatmotion.io import LENGTH_UNITS
+
+    if units is None or units.strip().lower() in LENGTH_UNITS:
+        return None if units is None else units.strip().lower()
+    return float(units)
+
+
+def _add_settings(made, max_error, units, skeleton):
+    """The settings new clips are coded with: the file's own (version 2) with what the command
+    line gives on top."""
+    from quatmotion.codec import CompressSettings
+
+    base = made or CompressSettings()
+    read = base.read
+    if units is not None:
+        read = read.replace(units=_units(units))
+    if skeleton is not None:
+        read = read.replace(skeleton=str(skeleton))
+    return base.replace(max_error=max_error, ratio=None, read=read)

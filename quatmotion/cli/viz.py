@@ -38,7 +38,7 @@ def _read(spec: str, skeleton: Path | None, units: str | None = None) -> Motion:
             raise CliInputError(f"{spec}: expected LIBRARY.qmz::CLIP")
         from quatmotion import codec
 
-        with codec.open(require_file(Path(library))) as archive:
+        with codec.Archive.open(require_file(Path(library))) as archive:
             motion = archive.read(clip)
         return dataclasses.replace(motion, name=f"{Path(library).name}::{clip}")
     return read_clip(Path(spec), skeleton, units)
@@ -49,7 +49,9 @@ def _decoded(motion: Motion) -> Motion:
     decoded."""
     from quatmotion import codec
 
-    with codec.open(codec.compress([motion], max_error=codec.DEFAULT_MAX_ERROR_CM).data) as archive:
+    with codec.Archive.open(
+        codec.compress([motion], max_error=codec.DEFAULT_MAX_ERROR_CM).data
+    ) as archive:
         decoded = archive.read(0)
     return dataclasses.replace(decoded, name=f"{motion.name} (decoded)")
 

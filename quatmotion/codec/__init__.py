@@ -9,26 +9,36 @@ Layout (compression and decompression apart, format and math apart):
   ``naive``, ``qssd``, ``ksvd``);
 * the format: :mod:`~quatmotion.codec.container` (chunks, CRC, header and index),
   :mod:`~quatmotion.codec.skeletons` (exact skeleton records), :mod:`~quatmotion.codec.binary`;
-* compression: :mod:`~quatmotion.codec.compress` (the orchestrator: :func:`compress`,
-  :func:`append`), :mod:`~quatmotion.codec.library` (a collection prepared for encoding),
-  :mod:`~quatmotion.codec.repair` (per-frame corrections that make the bound hold);
-* decompression: :mod:`~quatmotion.codec.archive` (:func:`open`: lazy, random access).
+* the file kind (the collection model's surface): :meth:`Archive.build` (sources and a
+  :class:`CompressSettings` in, a ``.qmz`` and a :class:`~quatmotion.collection.BuildReport`
+  out), :meth:`Archive.open` (a reader: ``.clips()`` references, ``.settings``, ``.format``),
+  :meth:`Archive.add`;
+* compression: :mod:`~quatmotion.codec.compress` (the orchestrator, as named steps),
+  :mod:`~quatmotion.codec.settings`, :mod:`~quatmotion.codec.library` (a collection prepared
+  for encoding), :mod:`~quatmotion.codec.repair` (per-frame corrections that make the bound
+  hold);
+* decompression: :mod:`~quatmotion.codec.archive` (lazy, random access).
+
+``compress``, ``append``, ``open`` and ``open_archive`` are the names before 0.4.0 (thin
+wrappers of the above).
 
 ``docs/format.md`` specifies the file byte by byte.
 """
 
 from quatmotion.codec.archive import Archive, DamagedClip, open_archive
-from quatmotion.codec.compress import DEFAULT_MAX_ERROR_CM, CompressionResult, append, compress
+from quatmotion.codec.compress import CompressionResult, append, compress
 from quatmotion.codec.methods import METHODS
+from quatmotion.codec.settings import DEFAULT_MAX_ERROR_CM, CompressSettings
 
-open = open_archive  # noqa: A001 (the API the issue names: codec.open(path))
+open = open_archive  # noqa: A001 (before 0.4.0; Archive.open now)
 
 __all__ = [
     "DEFAULT_MAX_ERROR_CM",
     "METHODS",
     "Archive",
-    "DamagedClip",
+    "CompressSettings",
     "CompressionResult",
+    "DamagedClip",
     "append",
     "compress",
     "open",

@@ -1,27 +1,33 @@
-"""Reading ``.qmz`` files: lazy, random access to clips (decompression).
+"""Reading ``.qmz`` files: lazy, random access to clips (decompression), and the file kind's
+surface (:meth:`Archive.build`, :meth:`Archive.open`, :meth:`Archive.add`).
 
-:func:`open_archive` (``quatmotion.codec.open``) reads the preamble, walks the chunk framing
-and parses the header; nothing else. :meth:`Archive.read` decodes one clip from its own chunk
-plus the skeleton record and library model it needs (each parsed once and cached), so one clip
-decodes without decoding any other.
+:meth:`Archive.open` reads the preamble, walks the chunk framing and parses the header (the
+decoder of the file's format version); nothing else. :meth:`Archive.read` decodes one clip
+from its own chunk plus the skeleton record and library model it needs (each parsed once and
+cached), so one clip decodes without decoding any other.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
+import json
 import os
 import zlib
 from collections import OrderedDict
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from quatmotion._format import FileFormat
 from quatmotion.codec.binary import Reader
 from quatmotion.codec.channels import channel_rotations, from_channels
 from quatmotion.codec.container import (
+    QMZ_FORMAT,
     ChunkRef,
     ClipEntry,
     DamagedSpan,
@@ -40,9 +46,15 @@ from quatmotion.codec.skeletons import (
     inflate_text,
     skeleton_from_record,
 )
+from quatmotion.collection import ClipRef
 from quatmotion.errors import FormatError
 from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion, Skeleton
+
+if TYPE_CHECKING:
+    from quatmotion.codec.settings import CompressSettings
+    from quatmotion.collection import BuildReport
+    from quatmotion.parallel import Runner
 
 __all__ = ["Archive", "ClipParts", "DamagedClip", "DecodedChannels", "open_archive"]
 
@@ -99,13 +111,73 @@ class Archive:
     ----------
     path : Path or None
     header : Header
-    clips : tuple of ClipEntry
+    entries : tuple of ClipEntry
         The index, in file order (damaged clips included: indices never shift).
     damaged : tuple of DamagedClip
         With ``recover=True``, the clips that cannot be decoded and why (empty for a whole
         file); reading one raises :class:`~quatmotion.errors.FormatError` with its reason.
         Without it a damaged file raises when opened, or when a damaged clip is read.
+    format : FileFormat
+        The ``.qmz`` format; :attr:`version` is the version this file was read in.
     """
+
+    format: FileFormat = QMZ_FORMAT
+
+    # ------------------------------------------------------------------ the file kind
+    @classmethod
+    def build(
+        cls,
+        sources: Iterable[Any],
+        out: str | Path | None,
+        settings: CompressSettings | None = None,
+        *,
+        runner: Runner | None = None,
+        progress: Callable[[str, int, int], None] | None = None,
+    ) -> BuildReport:
+        """Compress clips (files, folders, motions, :class:`~quatmotion.collection.ClipSource`)
+        into one ``.qmz`` library at ``out`` (atomically; None: bytes only, in
+        ``report.details["data"]``). See :func:`quatmotion.codec.compress.build_library`."""
+        from quatmotion.codec.compress import build_library
+
+        return build_library(sources, out, settings, runner=runner, progress=progress)
+
+    @classmethod
+    def open(cls, path: str | Path | bytes, *, recover: bool = False) -> Archive:
+        """Open a ``.qmz`` file (a path, or its bytes) for lazy clip access.
+
+        With ``recover=True`` a damaged file (a flipped byte, a file cut short) opens as long
+        as its header is whole: every chunk's CRC is checked at once, the clips that cannot be
+        decoded are listed in :attr:`damaged` and every other clip reads bit for bit as from
+        the whole file.
+
+        Raises
+        ------
+        FormatError
+            Wrong magic, a format version this code does not read, truncation, a checksum
+            failure in the header, or tables that do not match the chunks (naming the file).
+        FileNotFoundError
+            If the path does not exist.
+        """
+        return cls(path, recover=recover)
+
+    @classmethod
+    def add(
+        cls,
+        path: str | Path,
+        sources: Iterable[Any],
+        settings: CompressSettings | None = None,
+        *,
+        runner: Runner | None = None,
+        progress: Callable[[str, int, int], None] | None = None,
+        labels: Any = None,
+    ) -> BuildReport:
+        """Add clips to an existing ``.qmz`` file (rewritten atomically), the clips already in
+        it kept byte for byte (:func:`quatmotion.codec.compress.add_to_library`)."""
+        if labels is not None:
+            raise ValueError("a .qmz library stores no labels (give them to the clip index)")
+        from quatmotion.codec.compress import add_to_library
+
+        return add_to_library(path, sources, settings, runner=runner, progress=progress)
 
     def __init__(self, source: str | Path | bytes, *, recover: bool = False):
         if isinstance(source, bytes | bytearray):
@@ -122,7 +194,7 @@ class Archive:
             self.size = size
             self.damaged: tuple[DamagedClip, ...] = ()
             self._clip_damage: dict[int, str] = {}
-            read_preamble(self._file, self._name)
+            self.version = read_preamble(self._file, self._name)
             if recover:
                 self._open_recovering()
             else:
@@ -130,7 +202,7 @@ class Archive:
                 if not chunks or chunks[0].tag != b"H":
                     raise FormatError("the first chunk is not the header", self._name)
                 self.header = Header.from_bytes(
-                    read_chunk(self._file, chunks[0], self._name), self._name
+                    read_chunk(self._file, chunks[0], self._name), self._name, self.version
                 )
                 self._split(chunks[1:])
         except BaseException:
@@ -173,7 +245,9 @@ class Archive:
             raise FormatError(
                 f"the header is damaged ({where}): no clip can be named or recovered", self._name
             )
-        self.header = h = Header.from_bytes(read_chunk(self._file, first, self._name), self._name)
+        self.header = h = Header.from_bytes(
+            read_chunk(self._file, first, self._name), self._name, self.version
+        )
         expected = [b"S"] * len(h.records) + [b"L"] * len(h.layouts) + [b"C"] * len(h.clips)
         placed: list[ChunkRef | None] = [None] * len(expected)
         rest = items[1:]
@@ -258,8 +332,41 @@ class Archive:
 
     # ------------------------------------------------------------------ index
     @property
-    def clips(self) -> tuple[ClipEntry, ...]:
+    def entries(self) -> tuple[ClipEntry, ...]:
+        """The clip index, in file order."""
         return self.header.clips
+
+    def clips(self) -> tuple[ClipRef, ...]:
+        """Every clip's reference, in file order. A version 1 file stored none: its clips'
+        references hash the clip's stored chunk (an identity within this file only) and name
+        no source."""
+        return tuple(
+            entry.ref if entry.ref is not None else self._v1_ref(i)
+            for i, entry in enumerate(self.header.clips)
+        )
+
+    def _v1_ref(self, i: int) -> ClipRef:
+        digest = hashlib.sha256(b"quatmotion-qmz-v1-clip\0")
+        if i in self._clip_damage:  # a damaged clip of a recovered file: its name only
+            digest.update(b"damaged\0" + self.header.clips[i].name.encode())
+        else:
+            digest.update(read_chunk(self._file, self._clip_chunks[i], self._name))
+        return ClipRef(self.header.clips[i].name, digest.hexdigest())
+
+    @property
+    def settings(self) -> CompressSettings | None:
+        """How the file was made (version 2 on); None for a version 1 file."""
+        from quatmotion.codec.settings import CompressSettings
+
+        if not self.header.settings:
+            return None
+        try:
+            values = json.loads(self.header.settings.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as error:
+            raise FormatError(
+                f"header: settings are not valid JSON ({error})", self._name
+            ) from None
+        return CompressSettings.from_dict(values, self._name)
 
     def __len__(self) -> int:
         return len(self.header.clips)
@@ -480,19 +587,5 @@ def _known() -> set[str]:
 
 
 def open_archive(source: str | Path | bytes, *, recover: bool = False) -> Archive:
-    """Open a ``.qmz`` file (a path, or its bytes) for lazy clip access.
-
-    With ``recover=True`` a damaged file (a flipped byte, a file cut short) opens as long as
-    its header is whole: every chunk's CRC is checked at once, the clips that cannot be decoded
-    are listed in :attr:`Archive.damaged` and every other clip reads bit for bit as from the
-    whole file.
-
-    Raises
-    ------
-    FormatError
-        Wrong magic, a newer format version, truncation, a checksum failure in the header, or
-        tables that do not match the chunks (naming the file).
-    FileNotFoundError
-        If the path does not exist.
-    """
+    """:meth:`Archive.open` (the name before 0.4.0)."""
     return Archive(source, recover=recover)

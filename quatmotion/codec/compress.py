@@ -1,18 +1,24 @@
 """Compression: clips in, a ``.qmz`` library out (the orchestrator, as named steps).
 
-:func:`compress` reads as the steps it takes: load the inputs, store the skeletons, prepare the
-library (layouts, channels, weights), encode with the chosen method (searching its quality knob
-for ``ratio``), decode every clip back and repair the frames over ``max_error``, assemble the
-container, write it atomically. :func:`append` adds clips to an existing file without
-re-encoding the clips already in it (their chunks are copied byte for byte).
+:func:`build_library` (:meth:`quatmotion.codec.Archive.build`) reads as the steps it takes:
+read the clips (:func:`quatmotion.collection.read_clip`, every clip named by
+:func:`quatmotion.collection.unique_names`), store their skeletons, prepare the library
+(layouts, channels, weights), fit the shared models on a bounded seeded sample, encode every
+clip (searching the method's quality knob for ``ratio``), decode every clip back and repair the
+frames over ``max_error``, assemble the header and write the container
+(:func:`quatmotion.codec.container.write_container`) atomically. :func:`add_to_library`
+(:meth:`Archive.add`) adds clips to an existing file without re-encoding the clips already in
+it (their chunks are copied byte for byte). :func:`compress` and :func:`append` are the names
+before 0.4.0, kept as thin wrappers.
 """
 
 from __future__ import annotations
 
 import io
+import json
 import time
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,16 +26,14 @@ from typing import Any
 import numpy as np
 
 from quatmotion._atomic import atomic_write_bytes
-from quatmotion.codec.archive import open_archive
+from quatmotion.codec.archive import Archive
 from quatmotion.codec.container import (
-    FORMAT_VERSION,
-    MAGIC,
     ClipEntry,
     Header,
     LayoutEntry,
     RecordEntry,
     SkeletonEntry,
-    write_chunk,
+    write_container,
 )
 from quatmotion.codec.library import PreparedLibrary, prepare_library
 from quatmotion.codec.methods import ClipContext, EncodedLibrary, Method, get_method
@@ -40,11 +44,19 @@ from quatmotion.codec.repair import (
     find_corrections,
     write_clip_prefix,
 )
+from quatmotion.codec.settings import DEFAULT_MAX_ERROR_CM, FIT_SAMPLE_CLIPS, CompressSettings
 from quatmotion.codec.skeletons import deflate_text, same_skeleton, skeleton_record
+from quatmotion.collection import (
+    BuildReport,
+    ClipRef,
+    ReadSettings,
+    find_clips,
+    read_clip,
+)
 from quatmotion.errors import FormatError
-from quatmotion.io import Doubt, find_motion_files, implausible_values, read_motion
+from quatmotion.io import Doubt
 from quatmotion.motion import Motion, Skeleton
-from quatmotion.parallel import Scheduler, run_batch
+from quatmotion.parallel import Failure, Runner, Scheduler
 
 __all__ = [
     "DEFAULT_MAX_ERROR_CM",
@@ -52,25 +64,22 @@ __all__ = [
     "ClipJob",
     "CodedClip",
     "CompressionResult",
+    "add_to_library",
     "append",
-    "clip_jobs",
+    "build_library",
     "code_clip",
     "compress",
+    "plan_clip_jobs",
+    "runner_of",
 ]
 
-DEFAULT_MAX_ERROR_CM = 1.0
-"""The bound the command line and the viewer use when none is given: every joint within 1 cm."""
-
-FIT_SAMPLE_CLIPS = 256
-"""Most clips of one skeleton structure its shared model is learned on; a larger library
-learns on a seeded sample of this many and encodes every clip with it."""
-
 Progress = Callable[[str, int, int], None]
+OnDoubt = Callable[[str, Doubt], None]
 
 
 @dataclass
 class CompressionResult:
-    """What :func:`compress` made.
+    """What :func:`compress` made (the return before 0.4.0; :class:`BuildReport` now).
 
     Attributes
     ----------
@@ -110,101 +119,109 @@ class CompressionResult:
     def size(self) -> int:
         return len(self.data)
 
+    @classmethod
+    def from_report(cls, report: BuildReport) -> CompressionResult:
+        d = report.details
+        return cls(
+            d["data"], report.path, d["method"], d["clip_errors"], d["clip_bytes"],
+            d["source_bytes"], d["raw_bytes"], d["seconds"], d["quality"], d["corrections"],
+            [(str(f.item), f.message) for f in report.failures],
+        )  # fmt: skip
 
-# ---------------------------------------------------------------------------------- inputs
-def _load_inputs(
-    items: Sequence[Motion | str | Path],
-    skeleton: Skeleton | str | Path | None,
-    known: Sequence[tuple[int, str]] | None = None,
-    failed: list[tuple[str, str]] | None = None,
-    units: str | float | None = None,
-    on_doubt: Callable[[str, Doubt], None] | None = None,
+
+# ---------------------------------------------------------------------------------- reading
+@dataclass
+class _Inputs:
+    """The clips read (step 1), each with its reference and its source's size and format."""
+
+    motions: list[Motion] = field(default_factory=list)
+    refs: list[ClipRef] = field(default_factory=list)
+    sources: list[tuple[int, str]] = field(default_factory=list)
+    failures: list[Failure] = field(default_factory=list)
+    doubts: list[tuple[ClipRef, str]] = field(default_factory=list)
+
+    def keep(self, motion: Motion, ref: ClipRef, source: tuple[int, str]) -> None:
+        self.motions.append(motion)
+        self.refs.append(ref)
+        self.sources.append(source)
+
+    def fail(self, item: object, error: BaseException) -> None:
+        message = getattr(error, "reason", None) or str(error) or type(error).__name__
+        if isinstance(error, FormatError):
+            message = str(error)
+        self.failures.append(Failure(len(self.failures), item, str(message).splitlines()[0]))
+
+
+def _read_step(
+    sources: Iterable[Any],
+    read: ReadSettings,
+    skip: bool,
+    known: Sequence[tuple[int, str]] | None,
+    on_doubt: OnDoubt | None,
     report: Progress | None = None,
-) -> tuple[list[Motion], list[tuple[int, str]]]:
-    """Motions and their source sizes from clips, files and folders (AMC files on
-    ``skeleton``, BVH files in ``units``). With ``failed``, a file that cannot be read is noted
-    there (file, reason) and left out instead of raising; ``on_doubt(file, doubt)`` hears what
-    is doubtful in a file read (:func:`quatmotion.io.implausible_values`); ``report`` hears
-    ``("read", done, total)`` as files are read."""
-    motions: list[Motion] = []
-    sources: list[tuple[int, str]] = []
-    paths: list[Path] = []
-    in_memory = [item for item in items if isinstance(item, Motion)]
+) -> _Inputs:
+    """Every clip of ``sources`` read by :func:`quatmotion.collection.read_clip`, named by the
+    collection's rules. With ``skip``, a file that cannot be found, hashed or read is noted in
+    the failures and left out instead of raising; ``report`` hears ``("read", done, total)``
+    as clips are read."""
+    out = _Inputs()
+    found_errors: list[tuple[str, str]] = []
+    items = [Path(s) if isinstance(s, str) else s for s in sources]
+    found = find_clips(items, read, on_error=found_errors if skip else None)
+    for path, reason in found_errors:
+        out.failures.append(Failure(len(out.failures), path, reason))
+    in_memory = [s for s in found if s.path is None]
     if known is not None and len(known) != len(in_memory):
         raise ValueError(f"sources gives {len(known)} sizes for {len(in_memory)} clips")
-    for item in items:
-        if isinstance(item, Motion):
-            motions.append(item)
-            sources.append(tuple(known[len(motions) - 1]) if known is not None else (0, ""))
-        else:
-            paths.append(Path(item))
-    files = find_motion_files(paths) if paths else []
-    if report is not None and files:
-        report("read", 0, len(files))
-    for n_read, path in enumerate(files, 1):
-        if report is not None and (n_read == len(files) or n_read % 16 == 0):
-            report("read", n_read, len(files))
+    sizes = iter(known or ())
+    if report is not None and found:
+        report("read", 0, len(found))
+    for n_read, source in enumerate(found, 1):
+        if report is not None and (n_read == len(found) or n_read % 16 == 0):
+            report("read", n_read, len(found))
         try:
-            amc = path.suffix.lower() == ".amc"
-            motion = read_motion(path, skeleton if amc else None, units=None if amc else units)
-            size = path.stat().st_size
+            motion, ref, doubts = read_clip(source, read)
+            size = (0, "") if source.path is None else _source_size(source.path)
         except (FormatError, OSError, ValueError) as error:
-            if failed is None:
+            if not skip:
                 raise
-            failed.append((str(path), str(error).splitlines()[0]))
+            out.fail(source, error)
             continue
-        for doubt in implausible_values(motion) if on_doubt is not None else ():
-            on_doubt(str(path), doubt)
-        motions.append(motion)
-        sources.append((size, path.suffix.lower().lstrip(".")))
-    if not motions:
+        if source.path is None and known is not None:
+            size = tuple(next(sizes))  # type: ignore[assignment]
+        for doubt in doubts:
+            out.doubts.append((ref, doubt.message))
+            if on_doubt is not None:
+                on_doubt(str(source), doubt)
+        out.keep(motion, ref, size)
+    if not out.motions and not out.failures:
         raise ValueError("nothing to compress: no clips given")
-    return motions, sources
+    return out
 
 
-def _admit(
-    motions: list[Motion],
-    sources: list[tuple[int, str]],
-    table: _SkeletonTable,
-    failed: list[tuple[str, str]],
-) -> tuple[list[Motion], list[tuple[int, str]]]:
-    """The clips that can be stored (frames, a name, a skeleton the format can record); the
-    others are noted in ``failed`` and left out."""
-    kept, kept_sources = [], []
-    for motion, source in zip(motions, sources, strict=True):
+def _source_size(path: Path) -> tuple[int, str]:
+    return path.stat().st_size, path.suffix.lower().lstrip(".")
+
+
+def _admit(inputs: _Inputs, table: _SkeletonTable, skip: bool) -> None:
+    """Keep the clips that can be stored (frames, a skeleton the format can record); the others
+    are noted in the failures (``skip``) or raise."""
+    kept = _Inputs(failures=inputs.failures, doubts=inputs.doubts)
+    for motion, ref, source in zip(inputs.motions, inputs.refs, inputs.sources, strict=True):
         try:
             if motion.n_frames == 0:
-                raise ValueError("no frames")
-            if not motion.name:
-                raise ValueError("every clip needs a name (its file stem)")
+                raise ValueError(f"clip {motion.name!r} has no frames")
             table.index(motion.skeleton)
         except ValueError as error:
-            failed.append((motion.name or "<unnamed clip>", str(error).splitlines()[0]))
+            if not skip:
+                raise
+            kept.fail(ref.path or ref.name, error)
             continue
-        kept.append(motion)
-        kept_sources.append(source)
-    if not kept:
-        name, reason = failed[0]
-        raise ValueError(f"nothing to compress: every input failed ({name}: {reason})")
-    return kept, kept_sources
-
-
-def _validate(motions: list[Motion], max_error: float | None, ratio: float | None) -> None:
-    if max_error is not None and ratio is not None:
-        raise ValueError("give max_error or ratio, not both")
-    if max_error is not None and not (np.isfinite(max_error) and max_error > 0):
-        raise ValueError(f"max_error must be a positive number of centimetres, got {max_error}")
-    if ratio is not None and not (np.isfinite(ratio) and ratio > 1):
-        raise ValueError(f"ratio must be a number above 1, got {ratio}")
-    names = [m.name for m in motions]
-    for m in motions:
-        if m.n_frames == 0:
-            raise ValueError(f"clip {m.name!r} has no frames")
-        if not m.name:
-            raise ValueError("every clip needs a name (its file stem)")
-    if len(set(names)) != len(names):
-        dup = sorted({n for n in names if names.count(n) > 1})
-        raise ValueError(f"clip names must be unique; repeated: {', '.join(dup[:5])}")
+        kept.keep(motion, ref, source)
+    if not kept.motions:
+        first = kept.failures[0] if kept.failures else None
+        raise ValueError(f"nothing to compress: every input failed ({first})")
+    inputs.motions, inputs.refs, inputs.sources = kept.motions, kept.refs, kept.sources
 
 
 # ---------------------------------------------------------------------------------- skeletons
@@ -377,26 +394,38 @@ def _one_clip(library: PreparedLibrary, i: int) -> PreparedLibrary:
     return PreparedLibrary(library.layouts, [clip], members, library.vertices)
 
 
-def _fit_members(library: PreparedLibrary, seed: int) -> list[list[int]]:
+def _fit_members(library: PreparedLibrary, seed: int, sample: int) -> list[list[int]]:
     """The clips each layout's shared model is learned on: all of them, or a seeded sample of
-    :data:`FIT_SAMPLE_CLIPS` in a larger library (learning time then stays flat in its size)."""
+    ``sample`` in a larger library (learning time then stays flat in its size)."""
     rng = np.random.default_rng(seed)
     out = []
     for members in library.members:
-        if len(members) <= FIT_SAMPLE_CLIPS:
+        if len(members) <= sample:
             out.append(list(members))
         else:
-            out.append(sorted(int(i) for i in rng.choice(members, FIT_SAMPLE_CLIPS, replace=False)))
+            out.append(sorted(int(i) for i in rng.choice(members, sample, replace=False)))
     return out
+
+
+def runner_of(
+    workers: int | None = None, scheduler: str | Scheduler | None = None
+) -> Runner | None:
+    """The :class:`~quatmotion.parallel.Runner` of the command line's ``--workers`` and
+    ``--scheduler`` (None for neither: the default, :meth:`Runner.resolve`)."""
+    if workers is None and scheduler is None:
+        return None
+    if isinstance(scheduler, Scheduler):
+        return Runner(scheduler)
+    return Runner.resolve(scheduler, workers=workers)
 
 
 @dataclass(frozen=True)
 class _Runner:
     """Where per-clip jobs run (:mod:`quatmotion.parallel`) and how progress is reported."""
 
-    workers: int | None
-    scheduler: str | Scheduler | None
+    runner: Runner | None
     report: Progress
+    fit_sample: int = FIT_SAMPLE_CLIPS
 
     def run(self, step: str, jobs: list[ClipJob]) -> list[CodedClip]:
         """``code_clip`` of every job, in input order.
@@ -406,16 +435,13 @@ class _Runner:
         ValueError
             Naming the first clip whose job failed (nothing is written then).
         """
-        scheduler = self.scheduler
-        if scheduler is None and self.workers is None and len(jobs) < 2:
-            scheduler = "inline"  # one clip: a process pool would only add its start-up
+        runner = self.runner
+        if runner is None:
+            # one clip: a process pool would only add its start-up
+            runner = Runner.inline() if len(jobs) < 2 else Runner.resolve(None)
         self.report(step, 0, len(jobs))
-        result = run_batch(
-            code_clip,
-            jobs,
-            workers=self.workers,
-            scheduler=scheduler,
-            progress=lambda done, total: self.report(step, done, total),
+        result = runner.run(
+            code_clip, jobs, progress=lambda done, total: self.report(step, done, total)
         )
         if result.failures:
             raise ValueError(str(result.failures[0]))
@@ -433,22 +459,24 @@ class _Coded:
     errors: list[ClipErrors] = field(default_factory=list)
 
 
-def _encode_once(
+def plan_clip_jobs(
     method: Method,
     library: PreparedLibrary,
     quality: float,
     max_error: float | None,
     seed: int,
     given: list,
-    runner: _Runner,
     *,
     verify: bool,
-) -> _Coded:
-    """Learn the shared models (on a sample), then code every clip as a per-clip job."""
-    runner.report("learn", 0, 1)
+    fit_sample: int = FIT_SAMPLE_CLIPS,
+) -> tuple[list[ClipJob], list[bytes], list[Any]]:
+    """The fit step: the shared models learned on a seeded sample of at most ``fit_sample``
+    clips per layout (``given`` models of the file appended to are kept), then one
+    :class:`ClipJob` per clip. Returns the jobs, the ``L`` chunks' model bytes (empty for a
+    given model: already in the file) and the models as the decoder reads them."""
     fitted = method.fit_models(
-        library, _fit_members(library, seed), quality=quality, max_error=max_error, seed=seed,
-        models=given,
+        library, _fit_members(library, seed, fit_sample), quality=quality, max_error=max_error,
+        seed=seed, models=given,
     )  # fmt: skip
     blobs, models = [], []
     for k, info in enumerate(library.layouts):
@@ -471,43 +499,32 @@ def _encode_once(
         )  # fmt: skip
         for i, clip in enumerate(library.clips)
     ]
+    return jobs, blobs, models
+
+
+def _encode_once(
+    method: Method,
+    library: PreparedLibrary,
+    quality: float,
+    max_error: float | None,
+    seed: int,
+    given: list,
+    runner: _Runner,
+    *,
+    verify: bool,
+) -> _Coded:
+    """Learn the shared models (on a sample), then code every clip as a per-clip job."""
+    runner.report("learn", 0, 1)
+    jobs, blobs, models = plan_clip_jobs(
+        method, library, quality, max_error, seed, given, verify=verify,
+        fit_sample=runner.fit_sample,
+    )  # fmt: skip
     coded = runner.run("encode", jobs)
     out = _Coded(EncodedLibrary(blobs, [c.payload for c in coded]), models)
     if verify:
         out.corrections = [c.corrections for c in coded]
         out.errors = [c.errors for c in coded]
     return out
-
-
-def clip_jobs(
-    clips: Sequence[Motion],
-    *,
-    max_error: float | None = DEFAULT_MAX_ERROR_CM,
-    method: str = "best",
-    quality: float | None = None,
-    seed: int = 0,
-) -> list[ClipJob]:
-    """The per-clip jobs :func:`compress` hands to :mod:`quatmotion.parallel` for ``clips``
-    (shared models learned, every clip prepared): :func:`code_clip` over them gives the
-    clips' payloads, corrections and errors. For measuring the batch step on its own (``bench
-    scale``); :func:`compress` is the way to make a file."""
-    codec = get_method(method)
-    motions = list(clips)
-    _validate(motions, max_error, None)
-    library = prepare_library(motions, [(0, "")] * len(motions))
-    q = quality if quality is not None else codec.default_quality
-    jobs: list[ClipJob] = []
-
-    class _Keep(_Runner):
-        """Keeps the jobs instead of running them."""
-
-        def run(self, step: str, planned: list[ClipJob]) -> list[CodedClip]:
-            jobs.extend(planned)
-            return [CodedClip(b"", Corrections.empty(), None) for _ in planned]
-
-    keep = _Keep(1, "inline", lambda *_: None)
-    _encode_once(codec, library, q, max_error, seed, [], keep, verify=True)
-    return jobs
 
 
 def _verify(
@@ -535,6 +552,7 @@ def _verify(
 
 def _clip_chunks(
     library: PreparedLibrary,
+    refs: list[ClipRef],
     clip_skeleton: list[int],
     encoded: EncodedLibrary,
     corrections: list[Corrections] | None,
@@ -558,6 +576,7 @@ def _clip_chunks(
                 clip.source_format,
                 err.max_joint if err else 0.0,
                 err.arms if err else 0.0,
+                refs[i],
             )
         )
     return entries, chunks
@@ -575,6 +594,7 @@ def _layout_chunks(library: PreparedLibrary, encoded: EncodedLibrary, start: int
 
 def _assemble(
     method: str,
+    settings: CompressSettings,
     table: _SkeletonTable,
     layout_skeletons: list[int],
     entries: list[ClipEntry],
@@ -582,19 +602,18 @@ def _assemble(
     layout_chunks: list[bytes],
     clip_chunks: list[bytes],
 ) -> bytes:
+    """The assemble step: the header (tables, clip index, the settings' JSON) and every chunk,
+    as :func:`~quatmotion.codec.container.write_container` writes them."""
     header = Header(
         method,
         tuple(table.records),
         tuple(table.skeletons),
         tuple(LayoutEntry(s) for s in layout_skeletons),
         tuple(entries),
+        json.dumps(settings.to_dict(), sort_keys=True, separators=(",", ":")).encode("utf-8"),
     )
     out = io.BytesIO()
-    out.write(MAGIC + FORMAT_VERSION.to_bytes(2, "little"))
-    write_chunk(out, b"H", header.to_bytes())
-    for tag, chunks in ((b"S", record_chunks), (b"L", layout_chunks), (b"C", clip_chunks)):
-        for payload in chunks:
-            write_chunk(out, tag, payload)
+    write_container(out, header, record_chunks, layout_chunks, clip_chunks)
     return out.getvalue()
 
 
@@ -651,41 +670,279 @@ def _text_bytes(motion: Motion) -> int:
     return len(bvh_text(motion))
 
 
-def _result(
+def _details(
     data: bytes,
-    path: Path | None,
     method: str,
     library: PreparedLibrary,
-    errors: list[ClipErrors],
-    corrections: list[Corrections],
+    coded: _Coded,
     started: float,
     quality: float,
-    *,
     first: int = 0,
-    failed: list[tuple[str, str]] | None = None,
-) -> CompressionResult:
-    """What :func:`compress` or :func:`append` made; ``first`` is the file's index of the
-    library's first clip (the clips before it were already in the file)."""
-    with open_archive(data) as archive:
+) -> dict[str, Any]:
+    """What a build or an add made, per clip of ``library`` (``first``: the file's index of
+    its first clip; the clips before it were already in the file)."""
+    with Archive.open(data) as archive:
         clip_bytes = [archive.chunk_bytes(i) for i in range(first, len(archive))]
-    return CompressionResult(
-        data,
-        path,
-        method,
-        errors,
-        clip_bytes,
-        [c.source_bytes for c in library.clips],
-        [
+    return {
+        "data": data,
+        "method": method,
+        "quality": quality,
+        "clip_errors": list(coded.errors),
+        "clip_bytes": clip_bytes,
+        "corrections": [len(c) for c in coded.corrections],
+        "source_bytes": [c.source_bytes for c in library.clips],
+        "raw_bytes": [
             4 * sum(len(ch) for ch in c.motion.skeleton.channels) * c.motion.n_frames
             for c in library.clips
         ],
-        time.perf_counter() - started,
-        quality,
-        [len(c) for c in corrections],
-        list(failed or []),
+        "seconds": time.perf_counter() - started,
+    }
+
+
+def _encode_step(
+    codec: Method,
+    library: PreparedLibrary,
+    settings: CompressSettings,
+    runner: _Runner,
+    file_size: Callable[..., int],
+) -> tuple[float, _Coded]:
+    """Fit, encode, verify and repair, by the settings' target: a ratio (search the quality
+    knob, then verify), a bound the method cannot aim at itself (try four quality steps and
+    keep the smallest file after repair), or one pass."""
+    q = settings.quality if settings.quality is not None else codec.default_quality
+    seed, max_error = settings.seed, settings.max_error
+    if settings.ratio is not None:
+        q, coded = _search_ratio(codec, library, settings.ratio, seed, file_size, runner)
+        return q, _verify(codec, library, coded, None, runner)
+    if max_error is not None and not codec.controls_bound and settings.quality is None:
+        best = None
+        for scale in (1.0, 0.5, 0.25, 0.125):
+            coded = _encode_once(
+                codec, library, q * scale, max_error, seed, [], runner, verify=True
+            )
+            size = file_size(coded.encoded, coded.corrections)
+            if best is None or size < best[0]:
+                best = (size, q * scale, coded)
+        assert best is not None
+        return best[1], best[2]
+    return q, _encode_once(codec, library, q, max_error, seed, [], runner, verify=True)
+
+
+def build_library(
+    sources: Iterable[Any],
+    out: str | Path | None,
+    settings: CompressSettings | None = None,
+    *,
+    runner: Runner | None = None,
+    progress: Progress | None = None,
+    on_doubt: OnDoubt | None = None,
+    source_sizes: Sequence[tuple[int, str]] | None = None,
+) -> BuildReport:
+    """Compress clips into one ``.qmz`` library (:meth:`quatmotion.codec.Archive.build`).
+
+    Parameters
+    ----------
+    sources : iterable
+        AMC (with its ASF found by :func:`quatmotion.collection.find_skeleton`) and BVH files,
+        folders (searched), motions in memory or :class:`~quatmotion.collection.ClipSource`.
+        Clips are named by :func:`quatmotion.collection.unique_names` (two ``take_001`` in
+        ``s1/`` and ``s2/`` are ``s1/take_001`` and ``s2/take_001``).
+    out : str or Path or None
+        Where to write the file (atomically). None: only the bytes, in
+        ``report.details["data"]``.
+    settings : CompressSettings, optional
+        How (stored in the file). Default: every joint within 1 cm with ``best``.
+    runner : Runner, optional
+        Where the per-clip jobs (encode, decode, repair) run (default
+        :meth:`Runner.resolve`: a local pool, or ``QUATMOTION_SCHEDULER``). The shared models
+        are learned here first (on at most ``settings.fit_sample`` clips of each skeleton
+        structure) and the file is assembled here: every scheduler and number of workers gives
+        the same bytes.
+    progress : callable, optional
+        ``progress(step_name, done, total)``.
+    on_doubt : callable, optional
+        ``on_doubt(file, doubt)`` as each doubtful clip is read (they are also in
+        ``report.doubts``).
+    source_sizes : sequence of (int, str), optional
+        For clips given in memory, the size and format of the files they came from.
+
+    Returns
+    -------
+    BuildReport
+        ``added`` the clips' references; ``failures`` the inputs left out (``on_error="skip"``);
+        ``details`` the bytes and per-clip sizes and errors (``data``, ``clip_errors``,
+        ``clip_bytes``, ``source_bytes``, ``raw_bytes``, ``quality``, ``seconds``).
+
+    Raises
+    ------
+    ValueError
+        Clips without frames, a skeleton that cannot be stored exactly, nothing to compress.
+        No file is written then.
+    FormatError
+        A malformed input file (naming it), with ``on_error="raise"``.
+    """
+    t0 = time.perf_counter()
+    settings = settings or CompressSettings()
+    report = progress or (lambda *_: None)
+    codec = get_method(settings.method)
+    skip = settings.on_error == "skip"
+    # 1. read
+    inputs = _read_step(sources, settings.read, skip, source_sizes, on_doubt, report)
+    # 2. store the skeletons
+    table = _SkeletonTable()
+    _admit(inputs, table, skip)
+    clip_skeleton = [table.index(m.skeleton) for m in inputs.motions]
+    # 3. prepare (layouts, channels, weights)
+    report("prepare", 0, len(inputs.motions))
+    library = prepare_library(
+        inputs.motions,
+        inputs.sources,
+        vertices=settings.bound_on == "vertices",
+        progress=lambda done, total: report("prepare", done, total),
+    )
+    layout_skeletons = [table.index(info.skeleton) for info in library.layouts]
+
+    def assemble(encoded: EncodedLibrary, corrections=None, errors=None) -> bytes:
+        entries, chunks = _clip_chunks(
+            library, inputs.refs, clip_skeleton, encoded, corrections, errors
+        )
+        return _assemble(
+            codec.name, settings, table, layout_skeletons, entries, table.new_records,
+            _layout_chunks(library, encoded, 0), chunks,
+        )  # fmt: skip
+
+    # 4. fit the shared models, encode, verify and repair
+    runner_ = _Runner(runner, report, settings.fit_sample)
+    q, coded = _encode_step(
+        codec, library, settings, runner_, lambda enc, fix=None: len(assemble(enc, fix))
+    )
+    # 5. assemble, 6. write
+    data = assemble(coded.encoded, coded.corrections, coded.errors)
+    path = None if out is None else Path(out)
+    if path is not None:
+        atomic_write_bytes(path, data)
+    report("done", len(inputs.motions), len(inputs.motions))
+    return BuildReport(
+        path=path,
+        added=list(inputs.refs),
+        failures=inputs.failures,
+        doubts=inputs.doubts,
+        settings=settings,
+        details=_details(data, codec.name, library, coded, t0, q),
     )
 
 
+def add_to_library(
+    path: str | Path,
+    sources: Iterable[Any],
+    settings: CompressSettings | None = None,
+    *,
+    runner: Runner | None = None,
+    progress: Progress | None = None,
+    on_doubt: OnDoubt | None = None,
+) -> BuildReport:
+    """Add clips to an existing ``.qmz`` file, rewritten atomically (:meth:`Archive.add`).
+
+    The clips already in the file keep their chunks byte for byte; the new ones are coded with
+    the file's method, with its library models where their skeleton structure is known, and
+    with ``settings`` (default: the file's own, else :class:`CompressSettings`; the method is
+    always the file's). A clip whose content hash the file already holds is skipped (in
+    ``report.skipped``); a new clip whose name the file holds is an error. The file keeps the
+    settings it was made with. A version 1 file is rewritten in the current version.
+    """
+    t0 = time.perf_counter()
+    path = Path(path)
+    with Archive.open(path) as archive:
+        old = archive.header
+        settings = settings or archive.settings or CompressSettings()
+        settings = settings.replace(method=old.method)
+        stored = archive.settings or settings
+        old_refs = archive.clips()
+        table = _SkeletonTable(
+            list(old.records),
+            [archive.record_text(k) for k in range(len(old.records))],
+            list(old.skeletons),
+            [archive.skeleton(k) for k in range(len(old.skeletons))],
+        )
+        layouts = [archive.layout(k) for k in range(len(old.layouts))]
+        old_records, old_layout_chunks, old_clip_chunks = archive.payloads()
+    inputs = _read_step(sources, settings.read, False, None, on_doubt)
+    known = {r.sha256: r for r in old_refs}
+    skipped = [known[r.sha256] for r in inputs.refs if r.sha256 in known]
+    keep = [i for i, r in enumerate(inputs.refs) if r.sha256 not in known]
+    inputs.motions = [inputs.motions[i] for i in keep]
+    inputs.refs = [_name_apart(r, old_refs, path) for r in (inputs.refs[i] for i in keep)]
+    inputs.sources = [inputs.sources[i] for i in keep]
+    inputs.motions = [
+        m if m.name == r.name else m.renamed(r.name)
+        for m, r in zip(inputs.motions, inputs.refs, strict=True)
+    ]
+    if not inputs.motions:
+        return BuildReport(path=path, skipped=skipped, settings=stored, details={})
+    codec = get_method(old.method)
+    _admit(inputs, table, False)
+    clip_skeleton = [table.index(m.skeleton) for m in inputs.motions]
+    library = prepare_library(inputs.motions, inputs.sources, [info for info, _ in layouts])
+    given = [model for _, model in layouts]
+    n_old = len(layouts)
+    layout_skeletons = [lay.skeleton for lay in old.layouts] + [
+        table.index(info.skeleton) for info in library.layouts[n_old:]
+    ]
+    q = settings.quality if settings.quality is not None else codec.default_quality
+    runner_ = _Runner(runner, progress or (lambda *_: None), settings.fit_sample)
+    coded = _encode_once(
+        codec, library, q, settings.max_error, settings.seed, given, runner_, verify=True
+    )
+    new_entries, new_chunks = _clip_chunks(
+        library, inputs.refs, clip_skeleton, coded.encoded, coded.corrections, coded.errors
+    )
+    old_entries = [
+        entry if entry.ref is not None else _with_ref(entry, ref)
+        for entry, ref in zip(old.clips, old_refs, strict=True)
+    ]
+    data = _assemble(
+        old.method, stored, table, layout_skeletons, old_entries + new_entries,
+        old_records + table.new_records,
+        old_layout_chunks + _layout_chunks(library, coded.encoded, n_old),
+        list(old_clip_chunks) + new_chunks,
+    )  # fmt: skip
+    atomic_write_bytes(path, data)
+    return BuildReport(
+        path=path,
+        added=list(inputs.refs),
+        skipped=skipped,
+        doubts=inputs.doubts,
+        settings=stored,
+        details=_details(data, codec.name, library, coded, t0, q, first=len(old.clips)),
+    )
+
+
+def _name_apart(ref: ClipRef, old: Sequence[ClipRef], path: Path) -> ClipRef:
+    """A new clip's reference named apart from the file's clips: where its name is taken by
+    another file's clip, the collection's rule (:func:`~quatmotion.collection.unique_names`)
+    over the two paths names it; a clip given in memory with a taken name is an error."""
+    from dataclasses import replace
+
+    from quatmotion.collection import unique_names
+
+    names = {r.name: r for r in old}
+    if ref.name not in names:
+        return ref
+    other = names[ref.name]
+    if ref.path is not None and other.path is not None and other.path != ref.path:
+        renamed = unique_names([Path(other.path), Path(ref.path)])[1]
+        if renamed not in names:
+            return replace(ref, name=renamed)
+    raise ValueError(f"{path}: already holds a clip named {ref.name!r}")
+
+
+def _with_ref(entry: ClipEntry, ref: ClipRef) -> ClipEntry:
+    from dataclasses import replace
+
+    return replace(entry, ref=ref)
+
+
+# ---------------------------------------------------------------------------------- before 0.4.0
 def compress(
     clips: Sequence[Motion | str | Path],
     out: str | Path | None = None,
@@ -703,138 +960,23 @@ def compress(
     workers: int | None = None,
     scheduler: str | Scheduler | None = None,
     on_error: str = "raise",
-    on_doubt: Callable[[str, Doubt], None] | None = None,
+    on_doubt: OnDoubt | None = None,
 ) -> CompressionResult:
-    """Compress clips into one ``.qmz`` library.
-
-    Parameters
-    ----------
-    clips : sequence of Motion, or paths of files and folders
-        AMC (with its ASF found by name, or ``skeleton``) and BVH files; folders are searched.
-    out : str or Path, optional
-        Where to write the file (atomically). Without it only the bytes are returned.
-    max_error : float, optional
-        Bound on the position error of every joint and end site of every frame, centimetres.
-        The encoder checks by decoding and repairs what exceeds it.
-    ratio : float, optional
-        Target compression ratio against the source text (or the writers' text for clips
-        given in memory) instead of a bound; the errors reached are reported.
-    method : {"best", "spline", "naive", "qssd", "ksvd"}
-    quality : float, optional
-        The method's size knob (its quantiser step; larger means smaller files). With
-        ``max_error`` it caps the step the rate control may use (``best``, ``spline``) or
-        fixes it (the others; without it they try their default and 1/2, 1/4, 1/8 of it and
-        keep the smallest file after repair).
-    bound_on : {"joints", "vertices"}
-        What ``max_error`` bounds: joint and end-site positions, or also the virtual vertices
-        3 cm along each joint's axes (the Animation Compression Library's measure).
-    skeleton : Skeleton or path, optional
-        The ASF for AMC inputs (else each AMC's is found by name).
-    units : str or float, optional
-        The length unit of BVH inputs (a name of :data:`quatmotion.io.BVH_UNITS` or
-        centimetres per unit); ``None`` guesses it from each file (stored with the skeleton,
-        which says it was guessed). ``max_error`` holds in the unit the clips are read in.
-    sources : sequence of (int, str), optional
-        For clips given in memory, the size and format (``"amc"``, ``"bvh"``) of the files
-        they came from (stored for ratios and ``ls``).
-    seed : int
-        Seed of every random choice (dictionary initialisation): same input and seed, same bytes.
-    progress : callable, optional
-        Called as ``progress(step_name, done, total)``.
-    workers, scheduler : optional
-        Where the per-clip jobs (encode, decode, repair) run, as for
-        :func:`quatmotion.parallel.run_batch`: by default a local process pool on every core
-        (or ``QUATMOTION_SCHEDULER``), ``"inline"`` in this process, ``tcp://HOST:PORT`` a Dask
-        cluster. The shared models are learned here first (on at most
-        :data:`FIT_SAMPLE_CLIPS` clips of each skeleton structure) and the file is assembled
-        here at the end: every scheduler and number of workers gives the same bytes.
-    on_error : {"raise", "skip"}
-        What a file that cannot be read, or a clip that cannot be stored, does: stop the
-        compression (nothing is written), or be left out and listed in
-        :attr:`CompressionResult.failed`.
-    on_doubt : callable, optional
-        ``on_doubt(file, doubt)`` for what is doubtful in an input file read
-        (:func:`quatmotion.io.implausible_values`: a guessed unit near a boundary, a frame rate
-        motion capture does not run at...), as the file is read.
-
-    Returns
-    -------
-    CompressionResult
-
-    Raises
-    ------
-    ValueError
-        Bad options, clips without frames or with duplicate names, a skeleton that cannot be
-        stored exactly. No file is written then.
-    FormatError
-        A malformed input file (naming it).
-    """
-    t0 = time.perf_counter()
-    report = progress or (lambda *_: None)
-    if on_error not in ("raise", "skip"):
-        raise ValueError(f"on_error must be 'raise' or 'skip', got {on_error!r}")
-    if bound_on not in ("joints", "vertices"):
-        raise ValueError(f"bound_on must be 'joints' or 'vertices', got {bound_on!r}")
-    codec = get_method(method)
-    failed: list[tuple[str, str]] = []
-    skip = on_error == "skip"
-    motions, sources = _load_inputs(
-        clips, skeleton, sources, failed if skip else None, units, on_doubt, report
-    )
-    table = _SkeletonTable()
-    if skip:
-        motions, sources = _admit(motions, sources, table, failed)
-    _validate(motions, max_error, ratio)
-    clip_skeleton = [table.index(m.skeleton) for m in motions]
-    report("prepare", 0, len(motions))
-    library = prepare_library(
-        motions,
-        sources,
-        vertices=bound_on == "vertices",
-        progress=lambda done, total: report("prepare", done, total),
-    )
-    layout_skeletons = [table.index(info.skeleton) for info in library.layouts]
-    q = quality if quality is not None else codec.default_quality
-
-    def file_size(encoded: EncodedLibrary, corrections=None) -> int:
-        return len(_build(encoded, corrections, None))
-
-    def _build(encoded, corrections, errors) -> bytes:
-        entries, chunks = _clip_chunks(library, clip_skeleton, encoded, corrections, errors)
-        return _assemble(
-            codec.name,
-            table,
-            layout_skeletons,
-            entries,
-            table.new_records,
-            _layout_chunks(library, encoded, 0),
-            chunks,
-        )
-
-    runner = _Runner(workers, scheduler, report)
-    if ratio is not None:
-        q, coded = _search_ratio(codec, library, ratio, seed, file_size, runner)
-        coded = _verify(codec, library, coded, None, runner)
-    elif max_error is not None and not codec.controls_bound and quality is None:
-        best = None
-        for scale in (1.0, 0.5, 0.25, 0.125):
-            coded = _encode_once(
-                codec, library, q * scale, max_error, seed, [], runner, verify=True
-            )
-            size = file_size(coded.encoded, coded.corrections)
-            if best is None or size < best[0]:
-                best = (size, q * scale, coded)
-        _, q, coded = best
-    else:
-        coded = _encode_once(codec, library, q, max_error, seed, [], runner, verify=True)
-    encoded, corrections, errors = coded.encoded, coded.corrections, coded.errors
-    data = _build(encoded, corrections, errors)
-    path = None
-    if out is not None:
-        path = Path(out)
-        atomic_write_bytes(path, data)
-    report("done", len(motions), len(motions))
-    return _result(data, path, codec.name, library, errors, corrections, t0, q, failed=failed)
+    """The name before 0.4.0: :meth:`Archive.build` with a :class:`CompressSettings` made of
+    the keywords (``max_error`` and ``ratio`` both None: no bound, as before). ``skeleton`` may
+    only be a path now (an ASF file or a folder)."""
+    if isinstance(skeleton, Skeleton):
+        raise TypeError("skeleton must be the path of an ASF file or folder")
+    settings = CompressSettings(
+        max_error=max_error, ratio=ratio, method=method, quality=quality, bound_on=bound_on,
+        seed=seed, on_error=on_error,
+        read=ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton)),
+    )  # fmt: skip
+    report = build_library(
+        clips, out, settings, runner=runner_of(workers, scheduler), progress=progress,
+        on_doubt=on_doubt, source_sizes=sources,
+    )  # fmt: skip
+    return CompressionResult.from_report(report)
 
 
 def append(
@@ -849,58 +991,19 @@ def append(
     progress: Progress | None = None,
     workers: int | None = None,
     scheduler: str | Scheduler | None = None,
-    on_doubt: Callable[[str, Doubt], None] | None = None,
+    on_doubt: OnDoubt | None = None,
 ) -> CompressionResult:
-    """Add clips to an existing ``.qmz`` file (rewritten atomically).
-
-    The clips already in the file keep their chunks byte for byte; the new ones are coded with
-    the file's method and with its library models where their skeleton structure is known.
-    Names must stay unique. ``skeleton``, ``units``, ``progress``, ``workers``, ``scheduler``
-    and ``on_doubt`` are those of :func:`compress`.
-    """
-    t0 = time.perf_counter()
-    path = Path(path)
-    motions, sources = _load_inputs(clips, skeleton, None, None, units, on_doubt)
-    with open_archive(path) as archive:
-        old = archive.header
-        old_names = set(archive.names())
-        for m in motions:
-            if m.name in old_names:
-                raise ValueError(f"{path}: already holds a clip named {m.name!r}")
-        _validate(motions, max_error, None)
-        codec = get_method(old.method)
-        table = _SkeletonTable(
-            list(old.records),
-            [archive.record_text(k) for k in range(len(old.records))],
-            list(old.skeletons),
-            [archive.skeleton(k) for k in range(len(old.skeletons))],
-        )
-        layouts = [archive.layout(k) for k in range(len(old.layouts))]
-        old_records, old_layout_chunks, old_clip_chunks = archive.payloads()
-    clip_skeleton = [table.index(m.skeleton) for m in motions]
-    library = prepare_library(motions, sources, [info for info, _ in layouts])
-    given = [model for _, model in layouts]
-    n_old = len(layouts)
-    layout_skeletons = [lay.skeleton for lay in old.layouts] + [
-        table.index(info.skeleton) for info in library.layouts[n_old:]
-    ]
-    q = quality if quality is not None else codec.default_quality
-    runner = _Runner(workers, scheduler, progress or (lambda *_: None))
-    coded = _encode_once(codec, library, q, max_error, seed, given, runner, verify=True)
-    encoded, corrections, errors = coded.encoded, coded.corrections, coded.errors
-    new_entries, new_chunks = _clip_chunks(library, clip_skeleton, encoded, corrections, errors)
-    entries = list(old.clips) + new_entries
-    chunks = list(old_clip_chunks) + new_chunks
-    data = _assemble(
-        old.method,
-        table,
-        layout_skeletons,
-        entries,
-        old_records + table.new_records,
-        old_layout_chunks + _layout_chunks(library, encoded, n_old),
-        chunks,
-    )
-    atomic_write_bytes(path, data)
-    return _result(
-        data, path, codec.name, library, errors, corrections, t0, q, first=len(old.clips)
-    )
+    """The name before 0.4.0: :meth:`Archive.add` with the keywords as settings."""
+    if isinstance(skeleton, Skeleton):
+        raise TypeError("skeleton must be the path of an ASF file or folder")
+    settings = CompressSettings(
+        max_error=max_error, quality=quality, seed=seed,
+        read=ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton)),
+    )  # fmt: skip
+    report = add_to_library(
+        path, clips, settings, runner=runner_of(workers, scheduler), progress=progress,
+        on_doubt=on_doubt,
+    )  # fmt: skip
+    if not report.added:
+        raise ValueError(f"{path}: already holds every clip given")
+    return CompressionResult.from_report(report)

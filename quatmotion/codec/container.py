@@ -13,7 +13,12 @@ Conventions
   clip. The header's counts say how many of each follow, so truncation is detected at any
   chunk boundary.
 * The header payload is raw deflate (zlib, level 9) of the :class:`Header` fields (see
-  :meth:`Header.to_bytes`).
+  :meth:`Header.to_bytes`). A format version, once released, never changes meaning: this
+  module writes :data:`FORMAT_VERSION` and keeps a reader of the header of every version from
+  :data:`QMZ_FORMAT` ``.oldest_readable`` (version 1, 0.3.0: no clip references, no settings;
+  version 2: each clip's :class:`~quatmotion.collection.ClipRef` and the settings' JSON).
+* :func:`write_container` is the one writer of these bytes (the compressor assembles a
+  :class:`Header` and the chunk payloads and hands them here).
 * Every error in reading is a :class:`~quatmotion.errors.FormatError` that names the file and
   says what is wrong: wrong magic, a newer version, truncation, a checksum mismatch, a value
   out of range.
@@ -22,17 +27,20 @@ Conventions
 from __future__ import annotations
 
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
+from quatmotion._format import FileFormat
 from quatmotion.codec.binary import Reader, Writer
+from quatmotion.collection import ClipRef
 from quatmotion.errors import FormatError
 
 __all__ = [
     "FORMAT_VERSION",
     "MAGIC",
+    "QMZ_FORMAT",
     "ChunkRef",
     "ClipEntry",
     "DamagedSpan",
@@ -44,12 +52,15 @@ __all__ = [
     "recover_chunks",
     "scan_chunks",
     "write_chunk",
+    "write_container",
 ]
 
 MAGIC = b"\x89QMZ\r\n\x1a\n"
 """First bytes of every ``.qmz`` file (as PNG's: catches text-mode mangling)."""
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 """The version this code writes and the newest it reads."""
+QMZ_FORMAT = FileFormat("qmz", FORMAT_VERSION, 1, "a .qmz motion library")
+"""The ``.qmz`` format's name and versions (the one version check, :mod:`quatmotion._format`)."""
 PREAMBLE_BYTES = len(MAGIC) + 2
 TAGS = {b"H": "header", b"S": "skeleton", b"L": "library", b"C": "clip"}
 SOURCE_FORMATS = ("", "amc", "bvh", "glb", "gltf")  # codes append-only: a code never changes
@@ -107,6 +118,8 @@ class ClipEntry:
     source_format: str
     max_error: float
     arms: float
+    ref: ClipRef | None = None
+    """Its reference (version 2 on; None in a version 1 file)."""
 
 
 @dataclass(frozen=True)
@@ -119,9 +132,11 @@ class Header:
     layouts: tuple[LayoutEntry, ...]
     clips: tuple[ClipEntry, ...]
     settings: bytes = field(default=b"")
+    """UTF-8 JSON of the :class:`~quatmotion.codec.CompressSettings` used (version 2 on;
+    empty in version 1)."""
 
     def to_bytes(self) -> bytes:
-        """The deflated header payload."""
+        """The deflated header payload, in :data:`FORMAT_VERSION` (every clip needs a ref)."""
         w = Writer().string(self.method).blob(self.settings)
         w.uvarint(len(self.records))
         for r in self.records:
@@ -141,12 +156,17 @@ class Header:
             w.string(c.name).uvarint(c.skeleton).uvarint(c.layout).uvarint(rates.index(c.fps))
             w.uvarint(c.n_frames).uvarint(c.source_bytes)
             w.u8(SOURCE_FORMATS.index(c.source_format)).f32(c.max_error).f32(c.arms)
+            _write_ref(w, c)
         compressor = zlib.compressobj(9, zlib.DEFLATED, -15, 9)
         return compressor.compress(w.bytes()) + compressor.flush()
 
     @classmethod
-    def from_bytes(cls, payload: bytes, source: str | Path | None = None) -> Header:
-        """Parse a header payload, checking every index against the tables."""
+    def from_bytes(
+        cls, payload: bytes, source: str | Path | None = None, version: int = FORMAT_VERSION
+    ) -> Header:
+        """Parse a header payload of format ``version``, checking every index against the
+        tables (the clip entries' decoder is the version's: :data:`_REF_READERS`)."""
+        read_ref = _REF_READERS[version]
         try:
             d = zlib.decompressobj(-15)
             raw = d.decompress(payload, 1 << 26) + d.flush()
@@ -177,15 +197,80 @@ class Header:
             fmt = r.u8()
             if fmt >= len(SOURCE_FORMATS):
                 raise FormatError(f"header: unknown source format code {fmt}", source)
+            max_error, arms = r.f32(), r.f32()
             clips.append(
                 ClipEntry(
-                    name, sk, lay, frames, fps, source_bytes, SOURCE_FORMATS[fmt], r.f32(), r.f32()
-                )
+                    name,
+                    sk,
+                    lay,
+                    frames,
+                    fps,
+                    source_bytes,
+                    SOURCE_FORMATS[fmt],
+                    max_error,
+                    arms,
+                    read_ref(r, name, source),
+                )  # fmt: skip
             )
         r.end()
         if (skeletons or layouts or clips) and not records:
             raise FormatError("header: clips without skeleton records", source)
         return cls(method, records, skeletons, layouts, tuple(clips), settings)
+
+
+def _write_ref(w: Writer, entry: ClipEntry) -> None:
+    """A clip entry's reference fields (version 2): sha256 (32 bytes), path, skeleton path,
+    skeleton fingerprint, units (strings, "" for none), units_guessed (u8)."""
+    ref = entry.ref
+    if ref is None:
+        raise ValueError(f"clip {entry.name!r}: a version {FORMAT_VERSION} entry needs its ref")
+    w.raw(bytes.fromhex(ref.sha256)).string(ref.path or "").string(ref.skeleton_path or "")
+    w.string(ref.skeleton).string(ref.units).u8(int(ref.units_guessed))
+
+
+def _ref_v1(r: Reader, name: str, source: str | Path | None) -> ClipRef | None:
+    """Version 1 stored no reference."""
+    return None
+
+
+def _ref_v2(r: Reader, name: str, source: str | Path | None) -> ClipRef:
+    sha = r.take(32).hex()
+    path, skeleton_path, fingerprint, units = r.string(), r.string(), r.string(), r.string()
+    guessed = r.u8()
+    if guessed > 1:
+        raise FormatError(f"header: clip {name!r}: units_guessed is {guessed}, not 0 or 1", source)
+    return ClipRef(
+        name, sha, path or None, skeleton_path or None, fingerprint, units, bool(guessed)
+    )
+
+
+_REF_READERS = {1: _ref_v1, 2: _ref_v2}
+"""The clip entry's tail by format version: a decoder per version, kept once released."""
+
+
+def write_container(
+    out: BinaryIO,
+    header: Header,
+    records: list[bytes],
+    layouts: list[bytes],
+    clips: Iterable[bytes],
+) -> None:
+    """Write a whole ``.qmz`` file in :data:`FORMAT_VERSION`: the preamble, the header, then
+    the ``S``, ``L`` and ``C`` chunks (as many as the header's tables list; ``clips`` may be
+    an iterator, read once, so clip payloads can stream from a spool)."""
+    if len(records) != len(header.records) or len(layouts) != len(header.layouts):
+        raise ValueError("the chunks do not match the header's tables")
+    out.write(MAGIC + FORMAT_VERSION.to_bytes(2, "little"))
+    write_chunk(out, b"H", header.to_bytes())
+    for tag, chunks in ((b"S", records), (b"L", layouts)):
+        for payload in chunks:
+            write_chunk(out, tag, payload)
+    n = 0
+    for payload in clips:
+        write_chunk(out, b"C", payload)
+        n += 1
+    if n != len(header.clips):
+        raise ValueError(f"{n} clip chunks for {len(header.clips)} clips in the header")
 
 
 @dataclass(frozen=True)
@@ -233,15 +318,9 @@ def read_preamble(f: BinaryIO, source: Path) -> int:
     if len(head) < PREAMBLE_BYTES:
         raise FormatError("truncated in the preamble", source)
     version = int.from_bytes(head[len(MAGIC) :], "little")
-    if version > FORMAT_VERSION:
-        raise FormatError(
-            f"written in format version {version}, newer than this quatmotion reads "
-            f"({FORMAT_VERSION}); upgrade quatmotion",
-            source,
-        )
     if version < 1:
         raise FormatError(f"invalid format version {version}", source)
-    return version
+    return QMZ_FORMAT.check(QMZ_FORMAT.name, version, source)
 
 
 def scan_chunks(f: BinaryIO, source: Path, size: int) -> Iterator[ChunkRef]:

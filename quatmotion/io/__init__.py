@@ -10,6 +10,7 @@ from quatmotion.io._text import decode_text
 from quatmotion.io.asf_amc import (
     AsfMatch,
     asf_bone_end_positions,
+    asf_extras,
     asf_text,
     find_asf_for_amc,
     match_asf_for_amc,
@@ -63,6 +64,7 @@ __all__ = [
     "PLAUSIBLE_FPS",
     "TRANSLATION_MODES",
     "asf_bone_end_positions",
+    "asf_extras",
     "asf_text",
     "body_size",
     "bvh_text",

@@ -32,7 +32,7 @@ Conventions
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -60,6 +60,7 @@ from quatmotion.motion import Motion, Skeleton, WorldTransforms, forward_kinemat
 __all__ = [
     "AsfMatch",
     "asf_bone_end_positions",
+    "asf_extras",
     "asf_text",
     "find_asf_for_amc",
     "match_asf_for_amc",
@@ -234,13 +235,70 @@ def parse_asf(text: str, path: str | Path, units: str | float | None = None) -> 
         sections.body["hierarchy"], sections.line["hierarchy"], bones, path
     )
     order = _joint_order([b["name"] for b in bones], parent_of, sections.line["hierarchy"], path)
-    extras = {
+    extras = asf_extras(
+        version=sections.header.get("version", "1.10"),
+        name=sections.header.get("name", ""),
+        documentation=tuple(" ".join(t) for _, t in sections.body.get("documentation", [])),
+        units=tuple(stated),
+        root={k: root[k] for k in ("order", "axis", "position", "orientation")},
+        bones=bones,
+        hierarchy=tuple(hierarchy),
+        length_scale=to_cm,
+        angle_unit=angle_unit,
+    )
+    if given is not None:
+        extras["length_unit_given"] = True
+    try:
+        return _asf_skeleton(order, parent_of, root, bones, to_cm, to_rad, path, extras)
+    except ValueError as error:  # e.g. lengths so large they overflow once in centimetres
+        raise FormatError(str(error), path) from error
+
+
+def asf_extras(
+    *,
+    version: str,
+    name: str,
+    documentation: Sequence[str],
+    units: Sequence[tuple[str, str]],
+    root: Mapping[str, Any],
+    bones: Sequence[Mapping[str, Any]],
+    hierarchy: Sequence[tuple[str, ...]],
+    length_scale: float,
+    angle_unit: str,
+) -> dict[str, Any]:
+    """The ASF bookkeeping of a skeleton, in the layout :func:`read_asf` gives ``extras`` and
+    :func:`write_asf` / :func:`write_amc` read: the one constructor of that layout, for a
+    skeleton made without a file (generated clips) to carry it.
+
+    Parameters
+    ----------
+    version, name : str
+        ``:version`` and ``:name``.
+    documentation : sequence of str
+        ``:documentation`` lines.
+    units : sequence of (str, str)
+        ``:units`` entries as written (``("length", "0.45")``).
+    root : mapping
+        ``order`` (tuple of str), ``axis`` (str), ``position`` and ``orientation`` (3 floats).
+    bones : sequence of mapping
+        One per bone, in file order: ``id``, ``name``, ``direction`` (3 floats, unit length),
+        ``length`` (file units), ``axis`` (3 floats, degrees), ``axis_order``, ``dof`` (tuple of
+        str), ``limits`` (a ``(low, high)`` pair of strings per dof) and ``other`` (extra
+        lines, tuple).
+    hierarchy : sequence of tuple of str
+        ``(parent, child, ...)`` lines.
+    length_scale : float
+        Centimetres per file length unit.
+    angle_unit : str
+        ``"deg"`` or ``"rad"``.
+    """
+    return {
         "format": "asf",
-        "asf_version": sections.header.get("version", "1.10"),
-        "asf_name": sections.header.get("name", ""),
-        "asf_documentation": tuple(" ".join(t) for _, t in sections.body.get("documentation", [])),
-        "asf_units": tuple(stated),
-        "asf_root": {k: root[k] for k in ("order", "axis", "position", "orientation")},
+        "asf_version": version,
+        "asf_name": name,
+        "asf_documentation": tuple(documentation),
+        "asf_units": tuple(units),
+        "asf_root": dict(root),
         "asf_bones": tuple(
             {
                 "id": b["id"],
@@ -256,15 +314,9 @@ def parse_asf(text: str, path: str | Path, units: str | float | None = None) -> 
             for b in bones
         ),
         "asf_hierarchy": tuple(hierarchy),
-        "length_scale": to_cm,
+        "length_scale": length_scale,
         "angle_unit": angle_unit,
     }
-    if given is not None:
-        extras["length_unit_given"] = True
-    try:
-        return _asf_skeleton(order, parent_of, root, bones, to_cm, to_rad, path, extras)
-    except ValueError as error:  # e.g. lengths so large they overflow once in centimetres
-        raise FormatError(str(error), path) from error
 
 
 @dataclass

@@ -5,11 +5,14 @@ range, then unit length), projected by a learned metric ``W``, and put in an HNS
 (:class:`~quatmotion.pose.index.HNSWIndex`). In the projected space the learned distance
 ``sqrt((x - y)^T W W^T (x - y))`` is plain Euclidean distance, so an L2 index answers
 learned-metric queries. :meth:`PoseLibrary.build` learns the metric from the library itself,
-on transition pairs labelled by Kovar's windowed point-cloud distance:
+on transition pairs labelled by Kovar's windowed point-cloud distance (:func:`training_set`),
+by the registered method of that name (``quatmotion.pose.methods.METHODS[metric_name]``,
+whose ``projection_`` the library stores: ``bench pose`` scores that same code, trained on
+the same kind of set, as its ``"pose index default"`` row):
 
-* ``"GPD+LMS"`` (the default: it measures better than the paper's RDSR in ``bench pose``, see
-  docs/performance.md): non-negative least-squares weights per GPD dimension from similar and
-  dissimilar pairs; ``W`` is the diagonal of their square roots, dimensions of weight 0 left out.
+* ``"GPD+LMS"`` (the default; docs/performance.md compares it in ``bench pose``):
+  non-negative least-squares weights per GPD dimension from similar and dissimilar pairs;
+  ``W`` is the diagonal of their square roots, dimensions of weight 0 left out.
 * ``"GPD+RDSR"`` (the GPD paper): RDSR of rank ``rank`` from the similar pairs and an
   unlabeled random sample.
 
@@ -71,11 +74,9 @@ from quatmotion.io.names import match_clip
 from quatmotion.motion import Motion
 from quatmotion.parallel import Failure, Runner, Scheduler, imap_batch
 from quatmotion.pose import labels
-from quatmotion.pose.baselines import LMS
 from quatmotion.pose.data import PoseClip, PoseData
 from quatmotion.pose.index import HNSWIndex
-from quatmotion.pose.metric import RDSR
-from quatmotion.pose.scaler import MinMaxUnitScaler
+from quatmotion.pose.methods import METHODS, project_features
 
 __all__ = [
     "DEFAULT_METRIC",
@@ -519,9 +520,9 @@ class PoseLibrary:
         workers, scheduler
             Where the clips are prepared: :func:`quatmotion.parallel.imap_batch`.
         chunk_size : int, optional
-            Clips per task of the index pass. Each task carries the projection model (about
-            0.7 MB at rank 50), so by default eight clips share one once there are at least
-            64 clips, else every clip is a task. The learn pass sends clips one by one.
+            Clips per task of the index pass. Each task carries the projection model (its
+            size: docs/performance.md), so by default eight clips share one once there are
+            at least 64 clips, else every clip is a task. The learn pass sends clips one by one.
         flush_poses : int
             Vectors per insertion into the HNSW graph.
         index_threads : int
@@ -918,6 +919,31 @@ def _labelled_pairs(
     return both, similar, f"consecutive frames; poses {_FAR_APART_S:g} s apart as dissimilar"
 
 
+def training_set(
+    clips: Sequence[PoseClip],
+    *,
+    n_unlabeled: int,
+    n_pairs: int,
+    seed: int,
+    dissimilar: bool,
+    say: Callable[[str], None] = lambda message: None,
+) -> tuple[IntArray, IntArray, NDArray[np.bool_], str]:
+    """What a library's metric learns from: unlabeled poses (N',), pose pairs (P, 2) (indices
+    into the concatenated clips), whether each pair is similar, and where the pairs came from.
+
+    Transition pairs of Kovar's point-cloud distance across clips; consecutive frames (and poses
+    a second apart as dissimilar, if ``dissimilar``) when the clips yield too few. Seeded:
+    the same clips and seed give the same set.
+    """
+    rng = np.random.default_rng(seed)
+    clip_offsets = labels.ClipOffsets(np.array([len(c) for c in clips]))
+    pairs, similar, pairs_from = _labelled_pairs(
+        clips, clip_offsets, n_pairs, rng, say, dissimilar=dissimilar
+    )
+    unlabeled = rng.permutation(clip_offsets.n_poses)[:n_unlabeled]
+    return unlabeled, pairs, similar, pairs_from
+
+
 def _learn_projection(
     clips: Sequence[PoseClip],
     *,
@@ -943,35 +969,30 @@ def _learn_projection(
     fps, height = clips[0].fps, clips[0].height
     if any(c.fps != fps or c.height != height for c in clips):
         raise ValueError("every clip must be prepared at the same frame rate and height")
-    rng = np.random.default_rng(seed)
     poses = PoseData.concat([c.poses for c in clips])
-    clip_offsets = labels.ClipOffsets(np.array([len(c) for c in clips]))
     t0 = time.perf_counter()
     raw = poses.gpd
     say(f"GPD of {len(poses)} poses: {time.perf_counter() - t0:.1f} s")
-    lms = metric_name == "GPD+LMS"
-    pairs, similar, pairs_from = _labelled_pairs(
-        clips, clip_offsets, n_pairs, rng, say, dissimilar=lms
-    )
-    unlabeled = rng.permutation(len(poses))[:n_unlabeled]
-    scaler = MinMaxUnitScaler(clip=True).fit(raw[np.unique(np.r_[unlabeled, pairs.ravel()])])
-    X = scaler.transform(raw)
-    del raw
+    # The metric is the registered method of that name (one implementation with the benchmark).
+    options: dict[str, Any] = {"random_state": seed}
+    if metric_name == "GPD+RDSR":
+        options["n_components"] = min(rank, raw.shape[1])
+        if metric is not None:
+            options = {"estimator": metric}
+    method = METHODS[metric_name](**options)
+    unlabeled, pairs, similar, pairs_from = training_set(
+        clips, n_unlabeled=n_unlabeled, n_pairs=n_pairs, seed=seed,
+        dissimilar=method.uses_dissimilar, say=say,
+    )  # fmt: skip
     t0 = time.perf_counter()
-    if lms:
-        weights = LMS(power=2).fit(None, X[pairs[:, 0]], X[pairs[:, 1]], similar).weights_
-        kept = np.flatnonzero(weights > 0)
-        W = np.zeros((X.shape[1], kept.size))
-        W[kept, np.arange(kept.size)] = np.sqrt(weights[kept])
-        rank = kept.size
-    else:
-        rank = min(rank, X.shape[1])
-        positive = pairs[similar]
-        learner = RDSR(n_components=rank, random_state=seed) if metric is None else metric
-        learner.fit(X[unlabeled], np.stack([X[positive[:, 0]], X[positive[:, 1]]], axis=1))
-        W = learner.components_.T
+    method.fit_features(raw[unlabeled], raw[pairs[:, 0]], raw[pairs[:, 1]], similar)
+    projection = method.projection_
+    W = projection["W"]
+    rank = W.shape[1]
+    X = method.normalizer_.transform(raw)
+    del raw
     say(f"{metric_name} metric of rank {rank}: {time.perf_counter() - t0:.1f} s")
-    model = {"scale": scaler.scale_, "offset": scaler.offset_, "W": W}
+    model = {"scale": projection["scale"], "offset": projection["offset"], "W": W}
     meta = {
         "fps": fps,
         "height_cm": height,
@@ -1007,12 +1028,8 @@ def project_gpd(raw_gpd: ArrayLike, model: dict[str, FloatArray]) -> FloatArray:
     -------
     ndarray, shape (N, r)
     """
-    x = np.asarray(raw_gpd, dtype=np.float64)
-    # Clipped to the library's range: see the module's conventions.
-    x = np.clip(x * model["scale"] + model["offset"], 0.0, 1.0)
-    norm = np.linalg.norm(x, axis=1, keepdims=True)
-    x = x / np.where(norm > 0, norm, 1.0)
-    return x @ model["W"]
+    # Clipped to the library's range (see the module's conventions), as the method learned it.
+    return project_features(raw_gpd, {**model, "clip": True})
 
 
 @dataclass(frozen=True)

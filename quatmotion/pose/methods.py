@@ -5,8 +5,16 @@
 - ``"F+L"`` for every feature ``F`` in :data:`FEATURES` (``JO``, ``JC``, ``JRF``, ``GPD``) and
   learner ``L`` in :data:`LEARNERS` (``L2``, ``LMS``, ``Xing``, ``SDA``, ``RDSR``): Fig. 6's
   grid. Features are normalised as the paper does for GPD (per-dimension min-max fitted on all
-  training poses, then unit length) so every learner sees comparable inputs. ``JRF+LMS`` is
-  Eq. 44 (weighted absolute differences); the other ``+LMS`` are weighted L2.
+  training poses, clipped to that range, then unit length) so every learner sees comparable
+  inputs. ``JRF+LMS`` is Eq. 44 (weighted absolute differences); the other ``+LMS`` are
+  weighted L2.
+
+One implementation: :class:`~quatmotion.pose.library.PoseLibrary` learns its metric by
+``METHODS[name]`` (:meth:`FeatureMetric.fit_features`) and stores
+:attr:`FeatureMetric.projection_`; :func:`project_features` maps poses to the index space for
+both, so the library's distances and the benchmark's are the same numbers.
+- ``"FEET"``: no learning, Euclidean distance of the two feet in the body frame (the baseline
+  of the blended-transition labels, :mod:`quatmotion.pose.blend_labels`).
 - ``"JOD"``, ``"WJOD"``, ``"LJOD"``, ``"JCD"``, ``"WJCD"``, ``"LJCD"``: Eq. 40-43 on raw joints.
 - Aliases for the learners on GPD: ``"L2"``, ``"L2+LMS"`` / ``"LMS"``, ``"Xing"``, ``"SDA"``,
   ``"RDSR"``.
@@ -46,8 +54,10 @@ __all__ = [
     "LEARNERS",
     "METHODS",
     "FeatureMetric",
+    "FeetDistance",
     "JointDistanceMethod",
     "PoseMethod",
+    "project_features",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -101,12 +111,42 @@ class _L2:
 
         return cdist(Q, B)
 
+    def projection(self, n_features: int) -> FloatArray:
+        return np.eye(n_features)
+
+
+def project_features(raw: ArrayLike, projection: dict[str, Any]) -> FloatArray:
+    """Raw feature rows mapped to a metric's Euclidean space:
+    ``unit(clip(scale * x + offset, 0, 1)) @ W`` (no clip when ``projection["clip"]`` is
+    False; a row all zero after the min-max step stays zero).
+
+    Parameters
+    ----------
+    raw : array_like, shape (N, D)
+    projection : dict
+        ``scale`` and ``offset`` of shape (D,), ``W`` of shape (D, r), optional ``clip``.
+
+    Returns
+    -------
+    ndarray, shape (N, r)
+    """
+    x = np.asarray(raw, dtype=np.float64) * projection["scale"] + projection["offset"]
+    if projection.get("clip", True):
+        np.clip(x, 0.0, 1.0, out=x)
+    norm = np.linalg.norm(x, axis=1, keepdims=True)
+    x /= np.where(norm > 0.0, norm, 1.0)
+    return x @ np.asarray(projection["W"], dtype=np.float64)
+
 
 class _RDSRLearner:
-    """RDSR behind the learner interface: similar pairs only."""
+    """RDSR behind the learner interface: similar pairs only.
 
-    def __init__(self, **kwargs: Any) -> None:
-        self.model = RDSR(**kwargs)
+    ``estimator`` replaces the RDSR model by any object with ``fit(X_unlabeled,
+    positive_pairs)`` and ``components_`` (r, D) (a PCA, say), as the library allows.
+    """
+
+    def __init__(self, estimator: Any = None, **kwargs: Any) -> None:
+        self.model = RDSR(**kwargs) if estimator is None else estimator
 
     def fit(
         self, X_unlabeled: FloatArray, X_a: FloatArray, X_b: FloatArray, labels: ArrayLike
@@ -117,11 +157,8 @@ class _RDSRLearner:
         self.model.fit(X_unlabeled, np.stack((X_a[positive], X_b[positive]), axis=1))
         return self
 
-    def distances(self, A: FloatArray, B: FloatArray) -> FloatArray:
-        return self.model.distances(A, B)
-
-    def pairwise(self, Q: FloatArray, B: FloatArray) -> FloatArray:
-        return self.model.pairwise_distances(Q, B)
+    def projection(self) -> FloatArray:
+        return np.asarray(self.model.components_, dtype=np.float64).T
 
 
 def _make_learner(feature: str, learner: str, kwargs: dict[str, Any]) -> Any:
@@ -143,7 +180,7 @@ def _make_learner(feature: str, learner: str, kwargs: dict[str, Any]) -> Any:
 
 
 class FeatureMetric:
-    """A feature set, the min-max + unit-length scaling, and a metric learner.
+    """A feature set, the min-max (clipped) + unit-length scaling, and a metric learner.
 
     Parameters
     ----------
@@ -151,6 +188,12 @@ class FeatureMetric:
         Key of :data:`FEATURES`.
     learner : str
         One of :data:`LEARNERS`.
+    clip : bool
+        Clip the min-max step to the training range (the library's convention: a pose of
+        another body cannot dominate its unit-length vector by one out-of-range feature).
+    estimator : object, optional
+        RDSR only: a replacement model with ``fit(X_unlabeled, positive_pairs)`` and
+        ``components_``.
     **kwargs
         Learner parameters (and ``random_state``).
 
@@ -160,21 +203,40 @@ class FeatureMetric:
         Min-max + unit-length normalisation fitted on all training poses.
     learner_ : object
         The fitted learner.
+    projection_ : dict or None
+        ``scale``, ``offset`` (D,), ``W`` (D, r) and ``clip``: the metric is
+        ``||project_features(a) - project_features(b)||`` (:func:`project_features`); None for
+        a learner that is no Euclidean projection (``JRF+LMS``'s weighted L1).
+    uses_dissimilar : bool
+        Whether the learner reads dissimilar pairs (L2 and RDSR do not).
     """
 
-    def __init__(self, feature: str, learner: str, **kwargs: Any) -> None:
+    def __init__(
+        self, feature: str, learner: str, clip: bool = True, estimator: Any = None, **kwargs: Any
+    ) -> None:
         if feature not in FEATURES:
             raise ValueError(f"unknown feature {feature!r}; expected one of {sorted(FEATURES)}")
         if learner not in LEARNERS:
             raise ValueError(f"unknown learner {learner!r}; expected one of {LEARNERS}")
+        if estimator is not None and learner != "RDSR":
+            raise TypeError("estimator replaces the RDSR model only")
         self.feature = feature
         self.learner = learner
+        self.clip = clip
         self.kwargs = dict(kwargs)
-        self.learner_ = _make_learner(feature, learner, dict(kwargs))
+        self.uses_dissimilar = learner in ("LMS", "Xing", "SDA")
+        if estimator is not None:
+            self.learner_ = _RDSRLearner(estimator=estimator)
+        else:
+            self.learner_ = _make_learner(feature, learner, dict(kwargs))
+
+    def raw_features(self, data: PoseData) -> FloatArray:
+        """Unscaled feature rows of ``data``, shape (N, D)."""
+        return np.asarray(FEATURES[self.feature](data), dtype=np.float64)
 
     def features(self, data: PoseData) -> FloatArray:
         """Normalised feature rows of ``data``, shape (N, D)."""
-        return self.normalizer_.transform(FEATURES[self.feature](data))
+        return self.normalizer_.transform(self.raw_features(data))
 
     def fit(
         self,
@@ -183,27 +245,103 @@ class FeatureMetric:
         train_b: PoseData,
         train_labels: ArrayLike,
     ) -> FeatureMetric:
+        return self.fit_features(
+            self.raw_features(unlabeled),
+            self.raw_features(train_a),
+            self.raw_features(train_b),
+            train_labels,
+        )
+
+    def fit_features(
+        self, raw_u: ArrayLike, raw_a: ArrayLike, raw_b: ArrayLike, train_labels: ArrayLike
+    ) -> FeatureMetric:
+        """:meth:`fit` on raw feature rows (unlabeled (N', D), pairs (P, D) each)."""
         labels = np.asarray(train_labels, dtype=bool).reshape(-1)
-        if not (len(train_a) == len(train_b) == labels.shape[0]):
+        raw_u, raw_a, raw_b = (np.asarray(x, dtype=np.float64) for x in (raw_u, raw_a, raw_b))
+        if not (len(raw_a) == len(raw_b) == labels.shape[0]):
             raise ValueError(
                 f"train_a, train_b and train_labels disagree: "
-                f"{len(train_a)}, {len(train_b)}, {labels.shape[0]}"
+                f"{len(raw_a)}, {len(raw_b)}, {labels.shape[0]}"
             )
-        extract = FEATURES[self.feature]
-        raw_u, raw_a, raw_b = extract(unlabeled), extract(train_a), extract(train_b)
-        self.normalizer_ = MinMaxUnitScaler().fit(np.concatenate((raw_u, raw_a, raw_b)))
+        self.normalizer_ = MinMaxUnitScaler(clip=self.clip).fit(
+            np.concatenate((raw_u, raw_a, raw_b))
+        )
         norm = self.normalizer_.transform
         self.learner_.fit(norm(raw_u), norm(raw_a), norm(raw_b), labels)
+        W = self._projection_matrix(raw_u.shape[1])
+        self.projection_ = (
+            None
+            if W is None
+            else {
+                "scale": self.normalizer_.scale_,
+                "offset": self.normalizer_.offset_,
+                "W": W,
+                "clip": self.clip,
+            }
+        )
         return self
 
+    def _projection_matrix(self, n_features: int) -> FloatArray | None:
+        learner = self.learner_
+        if isinstance(learner, _L2):
+            return learner.projection(n_features)
+        if isinstance(learner, _RDSRLearner):
+            return learner.projection()
+        if isinstance(learner, LMS):
+            if learner.power != 2:
+                return None
+            kept = np.flatnonzero(learner.weights_ > 0)
+            W = np.zeros((n_features, kept.size))
+            W[kept, np.arange(kept.size)] = np.sqrt(learner.weights_[kept])
+            return W
+        return np.asarray(learner.projection_, dtype=np.float64)
+
+    def transform(self, data: PoseData) -> FloatArray:
+        """Poses in the metric's Euclidean space, shape (N, r) (projection learners only)."""
+        if self.projection_ is None:
+            raise TypeError(f"{self.feature}+{self.learner} is no Euclidean projection")
+        return project_features(self.raw_features(data), self.projection_)
+
     def distances(self, a: PoseData, b: PoseData) -> FloatArray:
-        return self.learner_.distances(self.features(a), self.features(b))
+        if self.projection_ is None:
+            return self.learner_.distances(self.features(a), self.features(b))
+        return np.linalg.norm(self.transform(a) - self.transform(b), axis=1)
 
     def pairwise(self, query: PoseData, base: PoseData) -> FloatArray:
-        return self.learner_.pairwise(self.features(query), self.features(base))
+        if self.projection_ is None:
+            return self.learner_.pairwise(self.features(query), self.features(base))
+        from scipy.spatial.distance import cdist
+
+        return cdist(self.transform(query), self.transform(base))
 
     def __repr__(self) -> str:
         return f"FeatureMetric({self.feature!r}, {self.learner!r}, {self.kwargs!r})"
+
+
+class FeetDistance:
+    """The strong simple baseline of the blended-transition labels: no learning, the Euclidean
+    distance between the two feet's body-local positions (cm), the Hip at the origin."""
+
+    _FEET = (12, 15)  # LFoot, RFoot in JOINTS_16 order
+
+    def __init__(self, random_state: Any = None) -> None:
+        pass
+
+    def fit(
+        self, unlabeled: PoseData, train_a: PoseData, train_b: PoseData, train_labels: ArrayLike
+    ) -> FeetDistance:
+        return self
+
+    def _rows(self, data: PoseData) -> FloatArray:
+        return np.asarray(data.positions)[:, self._FEET].reshape(len(data), -1)
+
+    def distances(self, a: PoseData, b: PoseData) -> FloatArray:
+        return np.linalg.norm(self._rows(a) - self._rows(b), axis=1)
+
+    def pairwise(self, query: PoseData, base: PoseData) -> FloatArray:
+        from scipy.spatial.distance import cdist
+
+        return cdist(self._rows(query), self._rows(base))
 
 
 class JointDistanceMethod(JointDistance):
@@ -235,6 +373,7 @@ def _build_registry() -> dict[str, Callable[..., PoseMethod]]:
     for feature in FEATURES:
         for learner in LEARNERS:
             registry[f"{feature}+{learner}"] = _feature_method(feature, learner)
+    registry["FEET"] = FeetDistance
     registry["L2"] = registry["GPD+L2"]
     registry["LMS"] = registry["L2+LMS"] = registry["GPD+LMS"]
     registry["Xing"] = registry["GPD+Xing"]

@@ -2,9 +2,9 @@
 :mod:`quatmotion.retrieval.distances` validate shapes and dtypes once.
 
 Own kernels rather than a DTW library: the re-rank compares a query with 64 short clips, and
-``dtaidistance``'s compiled multivariate DTW, called once per pair on float64 copies, measured
-several times slower there than one call of this banded float32 kernel that reads the
-library's concatenated frames in place (docs/performance.md).
+``dtaidistance``'s compiled multivariate DTW is called once per pair on float64 copies, where
+this banded float32 kernel reads the library's concatenated frames in place in one call (the
+comparison is in docs/performance.md).
 """
 
 from __future__ import annotations

@@ -24,6 +24,7 @@ Conventions
 
 from __future__ import annotations
 
+import functools
 import ipaddress
 import sys
 import time
@@ -33,7 +34,7 @@ from importlib import resources
 from pathlib import Path, PurePosixPath
 from typing import Annotated, Any, Literal
 
-from fastapi import FastAPI, HTTPException, Query, Request
+from fastapi import APIRouter, Depends, FastAPI, HTTPException, Query, Request
 from fastapi import Path as PathParam
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse
@@ -394,8 +395,10 @@ def create_app(
         app.add_middleware(BodySizeLimit, max_bytes=max_upload)
         app.add_middleware(TrustedHostMiddleware, allowed_hosts=list(allowed_hosts))
         _add_error_handlers(app)
-        _add_pages(app)
-        _add_api(app, catalogue, max_upload)
+        app.state.max_upload = max_upload
+        _mount_assets(app)
+        for router in (pages_router, clips_router, search_router, poses_router):
+            app.include_router(router)
     except BaseException:
         catalogue.close()
         raise
@@ -441,155 +444,193 @@ def _page(layout: str, name: str, fragment: Any) -> str:
     )
 
 
-def _add_pages(app: FastAPI) -> None:
+def _mount_assets(app: FastAPI) -> None:
     pages = resources.files("quatmotion.server").joinpath("static")
     app.mount("/assets/app", StaticFiles(directory=str(pages)), name="app-assets")
     app.mount("/assets/viewer", StaticFiles(directory=str(static_folder())), name="viewer-assets")
 
+
+@functools.cache
+def _page_texts() -> dict[str, str]:
+    """Every page's HTML, made once per process from the packaged fragments and layout."""
+    pages = resources.files("quatmotion.server").joinpath("static")
     layout = pages.joinpath("_layout.html").read_text(encoding="utf-8")
-    texts = {name: _page(layout, name, pages.joinpath(f"{name}.html")) for name in PAGES}
+    return {name: _page(layout, name, pages.joinpath(f"{name}.html")) for name in PAGES}
 
-    def page_endpoint(name: str) -> Any:
-        def endpoint() -> HTMLResponse:
-            return HTMLResponse(texts[name], headers={"content-security-policy": _PAGE_POLICY})
 
-        endpoint.__doc__ = f"The {name} page."
-        return endpoint
+pages_router = APIRouter(include_in_schema=False)
 
-    for name in PAGES:
-        app.add_api_route(
-            "/" if name == "browse" else f"/{name}",
-            page_endpoint(name),
-            methods=["GET"],
-            include_in_schema=False,
-            name=f"page-{name}",
-        )
+
+def _page_endpoint(name: str) -> Any:
+    def endpoint() -> HTMLResponse:
+        return HTMLResponse(_page_texts()[name], headers={"content-security-policy": _PAGE_POLICY})
+
+    endpoint.__doc__ = f"The {name} page."
+    return endpoint
+
+
+for _name in PAGES:
+    pages_router.add_api_route(
+        "/" if _name == "browse" else f"/{_name}",
+        _page_endpoint(_name),
+        methods=["GET"],
+        name=f"page-{_name}",
+    )
 
 
 ClipId = Annotated[str, PathParam(pattern=_CLIP_ID, description="A clip id.")]
 QueryClipId = Annotated[str, Query(pattern=_CLIP_ID, description="A clip id.")]
 
 
-def _add_api(app: FastAPI, catalogue: ClipCatalogue, max_upload: int) -> None:
-    def clip_model(info: Any) -> ClipModel:
-        return ClipModel(**info.as_dict())
+def get_catalogue(request: Request) -> ClipCatalogue:
+    """The catalogue the app serves (a dependency of every API route)."""
+    return request.app.state.catalogue  # type: ignore[no-any-return]
 
-    @app.get("/api/info", response_model=InfoModel, tags=["library"])
-    def info() -> InfoModel:
-        """What the server serves: its files (names only), clip count, search methods, limits."""
-        return InfoModel(
-            version=quatmotion.__version__,
-            library=catalogue.library_path.name if catalogue.library_path else None,
-            index=catalogue.index_path.name if catalogue.index_path else None,
-            poses=catalogue.poses_path.name if catalogue.poses_path else None,
-            clips=len(catalogue),
-            methods=list(catalogue.methods),
-            default_method=catalogue.methods[0] if catalogue.methods else None,
-            max_upload_bytes=max_upload,
-            motion_suffixes=list(MOTION_SUFFIXES),
-        )
 
-    @app.get("/api/clips", response_model=ClipList, tags=["library"])
-    def clips(
-        label: Annotated[str | None, Query(max_length=200, description="Only this label.")] = None,
-        sort: Annotated[
-            Literal[SORT_KEYS],  # type: ignore[valid-type]
-            Query(description="Column to sort by."),
-        ] = "name",
-        order: Annotated[Literal["asc", "desc"], Query()] = "asc",
-    ) -> ClipList:
-        """The clips, filtered by label and sorted by any column (missing values last)."""
-        rows = catalogue.clips(label=label, sort=sort, descending=order == "desc")
-        return ClipList(
-            clips=[clip_model(r) for r in rows], labels=catalogue.labels(), sort=sort, order=order
-        )
+def get_max_upload(request: Request) -> int:
+    """The app's largest request body, bytes."""
+    return int(request.app.state.max_upload)
 
-    @app.get("/api/clips/{clip_id}", response_model=ClipModel, tags=["library"])
-    def clip(clip_id: ClipId) -> ClipModel:
-        """One clip."""
-        return clip_model(catalogue.info(clip_id))
 
-    @app.get("/api/clips/{clip_id}/frames", tags=["viewer"])
-    def frames(
-        clip_id: ClipId,
-        start: Annotated[int | None, Query(ge=0, description="First frame (from 0).")] = None,
-        stop: Annotated[int | None, Query(ge=1, description="Frame after the last.")] = None,
-    ) -> dict[str, Any]:
-        """A clip's frame data for the viewer (``quatmotion-frames/1``: joint and end-site
-        positions, cm, compact), decoded from the library or read from its original file;
-        ``start``/``stop`` select frames. Show it with ``QuatmotionViewer.show(element,
-        {clips: [payload]})``."""
-        return catalogue.frames(clip_id, start, stop)
+Catalogue = Annotated[ClipCatalogue, Depends(get_catalogue)]
+MaxUpload = Annotated[int, Depends(get_max_upload)]
 
-    @app.get("/api/clips/{clip_id}/compare", tags=["viewer"])
-    def compare(clip_id: ClipId) -> dict[str, Any]:
-        """The viewer document of a clip's original file (blue) beside its decoded version
-        (green) with the per-joint error (``quatmotion.viz.view_data``); 404 when the clip is
-        not in the library or its original is not available."""
-        return catalogue.comparison(clip_id)
+# The API by area; create_app includes them.
+clips_router = APIRouter()
+search_router = APIRouter()
+poses_router = APIRouter()
 
-    @app.get("/api/search", response_model=SearchResponse, tags=["search"])
-    def search_clip(
-        clip: QueryClipId,
-        method: Annotated[str | None, Query(max_length=64)] = None,
-        top: Annotated[int, Query(ge=1, le=MAX_TOP)] = 20,
-    ) -> SearchResponse:
-        """Rank the indexed clips by likeness to an indexed clip (left out of its results)."""
-        started = time.perf_counter()
-        used, hits = catalogue.search(clip, method=method, top=top)
-        return SearchResponse(
-            query=catalogue.info(clip).name,
-            query_id=clip,
-            method=used,
-            seconds=time.perf_counter() - started,
-            results=[SearchHitModel(**h.__dict__) for h in hits],
-        )
 
-    @app.post(
-        "/api/search/upload",
-        response_model=SearchResponse,
-        tags=["search"],
-        openapi_extra=_UPLOAD_BODY,
+def clip_model(info: Any) -> ClipModel:
+    """The API model of a :class:`ClipInfo`."""
+    return ClipModel(**info.as_dict())
+
+
+@clips_router.get("/api/info", response_model=InfoModel, tags=["library"])
+def info(catalogue: Catalogue, max_upload: MaxUpload) -> InfoModel:
+    """What the server serves: its files (names only), clip count, search methods, limits."""
+    return InfoModel(
+        version=quatmotion.__version__,
+        library=catalogue.library_path.name if catalogue.library_path else None,
+        index=catalogue.index_path.name if catalogue.index_path else None,
+        poses=catalogue.poses_path.name if catalogue.poses_path else None,
+        clips=len(catalogue),
+        methods=list(catalogue.methods),
+        default_method=catalogue.methods[0] if catalogue.methods else None,
+        max_upload_bytes=max_upload,
+        motion_suffixes=list(MOTION_SUFFIXES),
     )
-    async def search_upload(request: Request) -> SearchResponse:
-        """Rank the indexed clips by likeness to an uploaded clip (multipart form: ``file``,
-        an .amc or .bvh; ``asf``, the skeleton an .amc needs; ``method``; ``top``). The
-        upload is parsed in memory and not kept; a file the parser rejects gets 400 with its
-        message."""
-        form = await _read_form(request)
-        upload = form.get("file")
-        if not isinstance(upload, UploadFile):
-            raise HTTPException(400, "the form needs a 'file' field holding an .amc or .bvh file")
-        asf = form.get("asf")
-        if asf is not None and not isinstance(asf, UploadFile):
-            raise HTTPException(400, "the 'asf' field must be a file (the ASF skeleton)")
-        method = form.get("method") or None
-        top = _form_int(form.get("top"), "top", 20, 1, MAX_TOP)
-        name = _upload_name(upload.filename, MOTION_SUFFIXES)
-        asf_name = _upload_name(asf.filename, (".asf",)) if asf is not None else "skeleton.asf"
-        data = await upload.read()
-        asf_data = await asf.read() if asf is not None else None
-        if name.lower().endswith(".amc") and asf_data is None:
-            raise HTTPException(
-                400,
-                f"{name}: an AMC holds no skeleton; upload its ASF file too (form field 'asf')",
-            )
-        return await run_in_threadpool(
-            _search_upload, catalogue, data, name, asf_data, asf_name, method, top
-        )
 
-    @app.get("/api/poses", response_model=PoseResponse, tags=["search"])
-    def pose_search(
-        clip: QueryClipId,
-        frame: Annotated[int, Query(ge=0, description="Frame of the clip, from 0.")],
-        k: Annotated[int, Query(ge=1, le=MAX_TOP, description="Poses wanted.")] = 10,
-        other_clips: Annotated[bool, Query(description="Leave out the clip's own poses.")] = False,
-    ) -> PoseResponse:
-        """The poses nearest to a frame of a clip, under the pose index's learned distance."""
-        found, hits = catalogue.pose_search(clip, frame, k=k, other_clips=other_clips)
-        return PoseResponse(
-            clip=clip, frame=found, results=[PoseHitModel(**h.__dict__) for h in hits]
+
+@clips_router.get("/api/clips", response_model=ClipList, tags=["library"])
+def clips(
+    catalogue: Catalogue,
+    label: Annotated[str | None, Query(max_length=200, description="Only this label.")] = None,
+    sort: Annotated[
+        Literal[SORT_KEYS],  # type: ignore[valid-type]
+        Query(description="Column to sort by."),
+    ] = "name",
+    order: Annotated[Literal["asc", "desc"], Query()] = "asc",
+) -> ClipList:
+    """The clips, filtered by label and sorted by any column (missing values last)."""
+    rows = catalogue.clips(label=label, sort=sort, descending=order == "desc")
+    return ClipList(
+        clips=[clip_model(r) for r in rows], labels=catalogue.labels(), sort=sort, order=order
+    )
+
+
+@clips_router.get("/api/clips/{clip_id}", response_model=ClipModel, tags=["library"])
+def clip(clip_id: ClipId, catalogue: Catalogue) -> ClipModel:
+    """One clip."""
+    return clip_model(catalogue.info(clip_id))
+
+
+@clips_router.get("/api/clips/{clip_id}/frames", tags=["viewer"])
+def frames(
+    clip_id: ClipId,
+    catalogue: Catalogue,
+    start: Annotated[int | None, Query(ge=0, description="First frame (from 0).")] = None,
+    stop: Annotated[int | None, Query(ge=1, description="Frame after the last.")] = None,
+) -> dict[str, Any]:
+    """A clip's frame data for the viewer (``quatmotion-frames/1``: joint and end-site
+    positions, cm, compact), decoded from the library or read from its original file;
+    ``start``/``stop`` select frames. Show it with ``QuatmotionViewer.show(element,
+    {clips: [payload]})``."""
+    return catalogue.frames(clip_id, start, stop)
+
+
+@clips_router.get("/api/clips/{clip_id}/compare", tags=["viewer"])
+def compare(clip_id: ClipId, catalogue: Catalogue) -> dict[str, Any]:
+    """The viewer document of a clip's original file (blue) beside its decoded version
+    (green) with the per-joint error (``quatmotion.viz.view_data``); 404 when the clip is
+    not in the library or its original is not available."""
+    return catalogue.comparison(clip_id)
+
+
+@search_router.get("/api/search", response_model=SearchResponse, tags=["search"])
+def search_clip(
+    clip: QueryClipId,
+    catalogue: Catalogue,
+    method: Annotated[str | None, Query(max_length=64)] = None,
+    top: Annotated[int, Query(ge=1, le=MAX_TOP)] = 20,
+) -> SearchResponse:
+    """Rank the indexed clips by likeness to an indexed clip (left out of its results)."""
+    started = time.perf_counter()
+    used, hits = catalogue.search(clip, method=method, top=top)
+    return SearchResponse(
+        query=catalogue.info(clip).name,
+        query_id=clip,
+        method=used,
+        seconds=time.perf_counter() - started,
+        results=[SearchHitModel(**h.__dict__) for h in hits],
+    )
+
+
+@search_router.post(
+    "/api/search/upload",
+    response_model=SearchResponse,
+    tags=["search"],
+    openapi_extra=_UPLOAD_BODY,
+)
+async def search_upload(request: Request, catalogue: Catalogue) -> SearchResponse:
+    """Rank the indexed clips by likeness to an uploaded clip (multipart form: ``file``,
+    an .amc or .bvh; ``asf``, the skeleton an .amc needs; ``method``; ``top``). The
+    upload is parsed in memory and not kept; a file the parser rejects gets 400 with its
+    message."""
+    form = await _read_form(request)
+    upload = form.get("file")
+    if not isinstance(upload, UploadFile):
+        raise HTTPException(400, "the form needs a 'file' field holding an .amc or .bvh file")
+    asf = form.get("asf")
+    if asf is not None and not isinstance(asf, UploadFile):
+        raise HTTPException(400, "the 'asf' field must be a file (the ASF skeleton)")
+    method = form.get("method") or None
+    top = _form_int(form.get("top"), "top", 20, 1, MAX_TOP)
+    name = _upload_name(upload.filename, MOTION_SUFFIXES)
+    asf_name = _upload_name(asf.filename, (".asf",)) if asf is not None else "skeleton.asf"
+    data = await upload.read()
+    asf_data = await asf.read() if asf is not None else None
+    if name.lower().endswith(".amc") and asf_data is None:
+        raise HTTPException(
+            400,
+            f"{name}: an AMC holds no skeleton; upload its ASF file too (form field 'asf')",
         )
+    return await run_in_threadpool(
+        _search_upload, catalogue, data, name, asf_data, asf_name, method, top
+    )
+
+
+@poses_router.get("/api/poses", response_model=PoseResponse, tags=["search"])
+def pose_search(
+    clip: QueryClipId,
+    catalogue: Catalogue,
+    frame: Annotated[int, Query(ge=0, description="Frame of the clip, from 0.")],
+    k: Annotated[int, Query(ge=1, le=MAX_TOP, description="Poses wanted.")] = 10,
+    other_clips: Annotated[bool, Query(description="Leave out the clip's own poses.")] = False,
+) -> PoseResponse:
+    """The poses nearest to a frame of a clip, under the pose index's learned distance."""
+    found, hits = catalogue.pose_search(clip, frame, k=k, other_clips=other_clips)
+    return PoseResponse(clip=clip, frame=found, results=[PoseHitModel(**h.__dict__) for h in hits])
 
 
 async def _read_form(request: Request) -> Any:

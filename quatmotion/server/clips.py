@@ -1,4 +1,5 @@
-"""What the web app serves: the clips of a library, an index and a pose index, joined by name.
+"""What the web app serves: the clips of a library, an index and a pose index, joined on the
+clips' content hash.
 
 Conventions
 -----------
@@ -6,10 +7,13 @@ Conventions
   digits, ``_ . -``; ``~2``, ``~3``... when names repeat). Ids are only keys of a dictionary
   built when the catalogue opens: no request value ever becomes a path. The files read are
   the ones the server was started with and the clip sources those files name.
-* A clip of the ``.qmz`` library and a clip of the ``.qidx`` index are the same clip when their
-  names (file stems) match and each name occurs once on each side; the index then gives the
-  label and the original file (for the comparison with the decoded clip). Index clips not in
-  the library are served from their original files.
+* A clip of the ``.qmz`` library, a row of the ``.qidx`` index and a clip of the pose index
+  are the same clip when their :func:`clip_key` (the content SHA-256 of the clip's files,
+  ``ClipRef.sha256``) is the same; each file's clip joins one clip of each other file at most.
+  Where names repeat (two ``take_001`` in two folders), a clip is named by its path relative
+  to the colliding files' folder (``collection.unique_names``). The index gives the label and
+  the original file (for the comparison with the decoded clip). Index clips not in the
+  library are served from their original files.
 * An original file is used only while it is the file that was indexed: its content hash
   (the index's SHA-256 of the motion file, then its ASF) must still match.
 * Frames count from 0, positions in centimetres, durations in seconds.
@@ -24,19 +28,20 @@ import dataclasses
 import re
 import threading
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 from quatmotion import codec
+from quatmotion.collection import content_hash, find_skeleton, unique_names
 from quatmotion.errors import FormatError
 from quatmotion.io import read_motion
 from quatmotion.motion import Motion
 from quatmotion.pose.library import PoseLibrary
 from quatmotion.retrieval.build import skeleton_for
-from quatmotion.retrieval.index import ClipIndex, ClipRow, content_hash
+from quatmotion.retrieval.index import ClipIndex, ClipRow
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS
 from quatmotion.retrieval.search import method_keys, search
 from quatmotion.viz import frame_data, view_data
@@ -49,6 +54,7 @@ __all__ = [
     "UnavailableError",
     "PoseHit",
     "SearchHit",
+    "clip_key",
 ]
 
 SORT_KEYS = (
@@ -156,6 +162,70 @@ class _Entry:
     pose_clip: int | None
 
 
+@dataclass
+class _Slot:
+    """One clip of the catalogue while the files are joined: its place in each file."""
+
+    position: int | None = None
+    library_name: str = ""
+    row: ClipRow | None = None
+    row_name: str = ""
+    pose_clip: int | None = None
+
+
+def clip_key(clip: Any, by_name: Mapping[str, str] | None = None) -> str | None:
+    """The key on which the catalogue joins a clip of a library, an index or a pose index: the
+    content SHA-256 of its motion file then its skeleton (``ClipRef.sha256``); None when unknown.
+
+    ``clip`` is anything with a ``sha256`` (a ``ClipRef``, an index row), a path of a motion
+    file (hashed here, with the ASF an AMC's lookup finds), or a clip known by name only (a
+    library entry written before clip references; a string that names no file): its key is
+    ``by_name[name]`` then.
+    """
+    sha = getattr(clip, "sha256", None)
+    if sha:
+        return str(sha)
+    if isinstance(clip, str | Path):
+        path = Path(clip)
+        if path.is_file():
+            try:
+                skeleton = find_skeleton(path) if path.suffix.lower() == ".amc" else None
+                return content_hash(path, skeleton)
+            except (FormatError, OSError):
+                return None
+        name = str(clip)
+    else:
+        name = str(getattr(clip, "name", ""))
+    return (by_name or {}).get(name) if name else None
+
+
+def _keys_by_name(sides: Sequence[tuple[Sequence[str], Sequence[str | None]]]) -> dict[str, str]:
+    """The key of every name that stands for one clip on each side and one key across them."""
+    keys: dict[str, set[str]] = {}
+    for names, side_keys in sides:
+        count = Counter(names)
+        for name, key in zip(names, side_keys, strict=True):
+            if key and count[name] == 1:
+                keys.setdefault(name, set()).add(key)
+            elif count[name] > 1:
+                keys.setdefault(name, set()).add("")  # ambiguous on this side
+    return {name: next(iter(k)) for name, k in keys.items() if len(k) == 1 and "" not in k}
+
+
+def _display_names(paths: Sequence[str], names: Sequence[str]) -> list[str]:
+    """``names`` as they are where they are unique, else names made from ``paths`` (the path
+    relative to the colliding files' common folder, :func:`collection.unique_names`)."""
+    count = Counter(names)
+    colliding = [i for i, n in enumerate(names) if count[n] > 1]
+    out = list(names)
+    if colliding:
+        for i, made in zip(
+            colliding, unique_names([Path(paths[i]) for i in colliding]), strict=True
+        ):
+            out[i] = made
+    return out
+
+
 class ClipCatalogue:
     """The clips the web app serves, from a ``.qmz`` library, a ``.qidx`` index and a pose
     index (any of them; at least the library or the index).
@@ -222,7 +292,7 @@ class ClipCatalogue:
         """
         if library is None and index is None:
             raise ValueError("nothing to serve: give a library (.qmz), an index (.qidx) or both")
-        archive = codec.open(Path(library)) if library is not None else None
+        archive = codec.Archive.open(Path(library)) if library is not None else None
         try:
             rows: list[ClipRow] = []
             methods: list[str] = []
@@ -259,39 +329,73 @@ class ClipCatalogue:
         self.close()
 
     def _join(self, rows: Sequence[ClipRow]) -> None:
+        """One catalogue clip per content: the library's clips, the index's rows and the pose
+        index's clips joined on :func:`clip_key`; a clip whose key is unknown, or a second clip
+        of one file with a key already joined, gets a row of its own."""
         archive = self._archive
-        library_names = archive.names() if archive is not None else []
-        library_count = Counter(library_names)
-        row_count = Counter(r.name for r in rows)
-        joined: dict[str, ClipRow] = {
-            r.name: r for r in rows if row_count[r.name] == 1 and library_count[r.name] == 1
-        }
-        used: set[str] = set()
-        pose_of = self._pose_clips(rows)
+        row_names = _display_names([r.path for r in rows], [r.name for r in rows])
+        pose_paths = list(self._poses.clip_names) if self._poses is not None else []
+        pose_names = _display_names(pose_paths, [Path(n).stem for n in pose_paths])
+        row_keys = [clip_key(r) for r in rows]
+        pose_keys = [clip_key(n) for n in pose_paths]
+        # The clips whose key is known, by the name a library written before clip references
+        # gives them (names that occur once only).
+        by_name = _keys_by_name([(row_names, row_keys), (pose_names, pose_keys)])
+        slots: list[_Slot] = []
+        by_key: dict[str, list[_Slot]] = {}
+
+        def slot_for(key: str | None, side: str) -> _Slot:
+            for slot in by_key.get(key, []) if key else []:
+                if getattr(slot, side) is None:
+                    return slot
+            slot = _Slot()
+            slots.append(slot)
+            if key:
+                by_key.setdefault(key, []).append(slot)
+            return slot
+
         if archive is not None:
-            for position, clip in enumerate(archive.clips):
-                row = joined.get(clip.name)
-                info = ClipInfo(
-                    id=_unique_id(clip.name, used),
-                    name=clip.name,
-                    label=row.label if row else "",
-                    frames=clip.n_frames,
-                    fps=clip.fps,
-                    compressed_bytes=archive.chunk_bytes(position),
-                    declared_max_error_cm=float(clip.max_error),
-                    declared_arms_cm=float(clip.arms),
-                    in_library=True,
-                    in_index=row is not None,
-                    in_poses=False,
-                    has_original=row is not None and Path(row.path).is_file(),
-                )
-                self._add(info, position, row, pose_of)
-        for row in rows:
-            if joined.get(row.name) is row:
-                continue
+            for position, clip in enumerate(archive.entries):
+                slot = slot_for(clip_key(clip, by_name), "position")
+                slot.position, slot.library_name = position, clip.name
+        for row, name, key in zip(rows, row_names, row_keys, strict=True):
+            slot = slot_for(key, "row")
+            slot.row, slot.row_name = row, name
+        for number, key in enumerate(pose_keys):
+            for slot in by_key.get(key, []) if key else []:
+                if slot.pose_clip is None:
+                    slot.pose_clip = number
+                    break
+        used: set[str] = set()
+        for slot in slots:
+            self._add(slot, used)
+
+    def _add(self, slot: _Slot, used: set[str]) -> None:
+        archive, row, position = self._archive, slot.row, slot.position
+        if position is not None:
+            assert archive is not None
+            clip = archive.entries[position]
+            name = slot.library_name or clip.name
             info = ClipInfo(
-                id=_unique_id(row.name, used),
-                name=row.name,
+                id=_unique_id(name, used),
+                name=name,
+                label=row.label if row else "",
+                frames=clip.n_frames,
+                fps=clip.fps,
+                compressed_bytes=archive.chunk_bytes(position),
+                declared_max_error_cm=float(clip.max_error),
+                declared_arms_cm=float(clip.arms),
+                in_library=True,
+                in_index=row is not None,
+                in_poses=slot.pose_clip is not None,
+                has_original=row is not None and Path(row.path).is_file(),
+            )
+        else:
+            assert row is not None
+            name = slot.row_name or row.name
+            info = ClipInfo(
+                id=_unique_id(name, used),
+                name=name,
                 label=row.label,
                 frames=row.frames,
                 fps=row.fps,
@@ -300,40 +404,14 @@ class ClipCatalogue:
                 declared_arms_cm=None,
                 in_library=False,
                 in_index=True,
-                in_poses=False,
+                in_poses=slot.pose_clip is not None,
                 has_original=Path(row.path).is_file(),
             )
-            self._add(info, None, row, pose_of)
-
-    def _pose_clips(self, rows: Sequence[ClipRow]) -> dict[str, int]:
-        """Pose-index clip number by the name or resolved path it will match."""
-        if self._poses is None:
-            return {}
-        names = self._poses.clip_names
-        stems = Counter(Path(n).stem for n in names)
-        out: dict[str, int] = {}
-        for number, name in enumerate(names):
-            out[f"path:{_resolved(name)}"] = number
-            if stems[Path(name).stem] == 1:
-                out[f"name:{Path(name).stem}"] = number
-        return out
-
-    def _add(
-        self, info: ClipInfo, position: int | None, row: ClipRow | None, pose_of: dict[str, int]
-    ) -> None:
-        pose_clip = None
-        if row is not None:
-            pose_clip = pose_of.get(f"path:{_resolved(row.path)}")
-        if pose_clip is None:
-            pose_clip = pose_of.get(f"name:{info.name}")
-        if pose_clip is not None and pose_clip in self._by_pose_clip:
-            pose_clip = None  # a pose clip answers for one catalogue clip only
-        if pose_clip is not None:
-            info = dataclasses.replace(info, in_poses=True)
-            self._by_pose_clip[pose_clip] = info.id
-        self._entries[info.id] = _Entry(info, position, row, pose_clip)
+        self._entries[info.id] = _Entry(info, position, row, slot.pose_clip)
         if row is not None:
             self._by_row[row.id] = info.id
+        if slot.pose_clip is not None:
+            self._by_pose_clip[slot.pose_clip] = info.id
 
     # ------------------------------------------------------------------ listing
     def __len__(self) -> int:
@@ -549,10 +627,3 @@ def _unique_id(name: str, used: set[str]) -> str:
         candidate = f"{base}~{n}"
     used.add(candidate)
     return candidate
-
-
-def _resolved(path: str) -> str:
-    try:
-        return str(Path(path).resolve())
-    except OSError:
-        return path

@@ -50,7 +50,7 @@ class Method(ABC):
     default_quality: float = 1.0
 
     controls_bound: bool = False
-    """Whether :meth:`encode` meets ``max_error`` itself (else the orchestrator searches
+    """Whether :meth:`encode_clip` meets ``max_error`` itself (else the orchestrator searches
     ``quality`` and repairs)."""
 
     def fit_models(
@@ -112,32 +112,6 @@ class Method(ABC):
         """Clip ``i``'s payload, given its layout's model from :meth:`fit_models`. Pure: it
         reads only clip ``i``, its layout and ``model``, so clips may be coded in any order or
         in other processes with the same bytes."""
-
-    def encode(
-        self,
-        library: PreparedLibrary,
-        *,
-        quality: float,
-        max_error: float | None,
-        seed: int,
-        models: list[Any] | None = None,
-    ) -> EncodedLibrary:
-        """Code every clip of ``library`` in this process: :meth:`fit_models` on every clip,
-        then :meth:`encode_clip` for each. The returned models of given layouts are
-        ignored."""
-        fitted = self.fit_models(
-            library, library.members, quality=quality, max_error=max_error, seed=seed,
-            models=models,
-        )  # fmt: skip
-        payloads = [
-            self.encode_clip(library, i, fitted[clip.layout], quality=quality, max_error=max_error)
-            for i, clip in enumerate(library.clips)
-        ]
-        blobs = [
-            self.model_bytes(m, info) if m is not None else b""
-            for m, info in zip(fitted, library.layouts, strict=True)
-        ]
-        return EncodedLibrary(blobs, payloads)
 
     @abstractmethod
     def load_model(self, data: bytes, layout: LayoutInfo) -> Any:

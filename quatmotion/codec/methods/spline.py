@@ -92,9 +92,9 @@ class SplineSettings:
     compensate: bool = False
 
 
-# Knots every 0.2 s, or 0.27 s where that codes a clip smaller: the second spacing gains 5 % on
-# hdm05 and 6-30 % on bandai1 (30 fps, where tight bounds floor the first at 3 frames) and
-# nothing on the CMU walks, for about twice the encoding time (measured in performance.md).
+# Knots every 0.2 s, or 0.27 s where that codes a clip smaller: the second spacing pays where
+# tight bounds floor the first at few frames (30 fps libraries), for more encoding time; the
+# gains and the cost per library are in docs/performance.md (0.4.0, "knot spacings of best").
 BEST = SplineSettings(
     "metric", "lpc", (24.0, 32.0), True, True, steps_tried=3, gamma=8.0, compensate=True
 )

@@ -1,0 +1,193 @@
+"""Transition decision under labels judged on the blended transition (issue 20).
+
+``run(out, quick, seed)``: for each data set (``hdm05``, ``cmu``, ``bandai``, prepared and split
+as :mod:`quatmotion.bench.pose` does) and each of ``n_seeds`` seeds (``seed`` .. ``seed +
+n_seeds - 1``), good and bad transition pairs of the training and of the test subjects are
+labelled by :func:`quatmotion.pose.blend_labels.blended_transition_labels` (natural percentiles
+fitted on the training clips, reused on the test clips); every registered method of
+:data:`quatmotion.pose.methods.METHODS` (aliases once), the feet-only baseline ``FEET`` among
+them, and the row ``"pose index default"`` (what ``quatmotion pose index`` ships, trained on
+its own pairs) are fitted on the training pairs and scored on the test pairs by transition
+precision (METRICS.md). Reported per method: mean and standard deviation over seeds, the
+share of good labels among decided candidates, and, for comparison, the transition precision
+of the same methods on *near* pairs only (Eq. 35 mean joint distance under 10 cm, the paper's
+tau; candidates reach 25 cm).
+
+Quick mode: one seed, fewer clips and pairs, and the RDSR / Xing learners (minutes per fit on
+a shared machine) left out and listed in ``not_run``.
+"""
+
+from __future__ import annotations
+
+import pathlib
+import time
+import traceback
+from typing import Any
+
+import numpy as np
+
+from quatmotion._atomic import atomic_write_json
+from quatmotion.bench._provenance import provenance
+from quatmotion.bench.pose import (
+    INDEX_DEFAULT,
+    TARGET_FPS,
+    _index_default_entry,
+    _load,
+    _methods,
+    _split,
+)
+from quatmotion.datasets import data_root
+from quatmotion.pose import evaluate, labels
+from quatmotion.pose.blend_labels import GOOD_RATIO, blended_transition_labels
+from quatmotion.pose.data import PoseData
+
+__all__ = ["run"]
+
+NEAR_CM = 10.0  # "near pairs": Eq. 35 mean joint distance under this (the paper's tau)
+_SLOW = ("RDSR", "Xing")
+
+
+def _one_seed(
+    clips: list, train: list[int], test: list[int], methods: dict, quick: bool, seed: int, log: Any
+) -> dict[str, Any]:
+    rng = np.random.default_rng(seed)
+    local = [c.local for c in clips]
+    world = [c.world for c in clips]
+    n_pairs = 150 if quick else 500
+    n_queries = 800 if quick else 2500
+    t0 = time.perf_counter()
+    tr, reference = blended_transition_labels(
+        local, world, TARGET_FPS, clips=train, n_positive=n_pairs, n_negative=n_pairs,
+        n_queries=n_queries, random_state=rng,
+    )  # fmt: skip
+    te, _ = blended_transition_labels(
+        local, world, TARGET_FPS, clips=test, reference=reference, n_positive=n_pairs,
+        n_negative=n_pairs, n_queries=n_queries, random_state=rng,
+    )  # fmt: skip
+    label_s = time.perf_counter() - t0
+    offsets = labels.ClipOffsets(np.array([len(c.local) for c in clips]))
+    all_poses = PoseData.concat([c.poses for c in clips])
+    train_ids = np.concatenate([offsets.starts[c] + np.arange(len(clips[c].local)) for c in train])
+    unlabeled = rng.permutation(train_ids)[: (1500 if quick else 5000)]
+
+    def pair_ids(tp: Any) -> np.ndarray:
+        p = tp.pairs
+        return np.stack([offsets(p[:, 0], p[:, 1]), offsets(p[:, 2], p[:, 3])], 1)
+
+    tr_ids, te_ids = pair_ids(tr), pair_ids(te)
+    test_a, test_b = all_poses[te_ids[:, 0]], all_poses[te_ids[:, 1]]
+    near = te.mean_distance < NEAR_CM
+    out: dict[str, Any] = {
+        "label_seconds": label_s,
+        "natural_reference": reference.tolist(),
+        "train_pairs": len(tr),
+        "test_pairs": len(te),
+        "test_near_pairs": int(near.sum()),
+        "test_good_share_of_decided": float(np.mean(te.cloud_distance <= GOOD_RATIO)),
+        "methods": {},
+    }
+    for name, factory in methods.items():
+        try:
+            t0 = time.perf_counter()
+            method = factory(random_state=seed).fit(
+                all_poses[unlabeled], all_poses[tr_ids[:, 0]], all_poses[tr_ids[:, 1]], tr.labels
+            )
+            fit_s = time.perf_counter() - t0
+            d = np.asarray(method.distances(test_a, test_b), dtype=np.float64)
+            entry = {
+                "precision": evaluate.transition_precision(d, te.labels)[0],
+                "fit_seconds": fit_s,
+            }
+            if near.any() and te.labels[near].any() and (~te.labels[near]).any():
+                entry["near_precision"] = evaluate.transition_precision(d[near], te.labels[near])[0]
+        except Exception as exc:  # one broken method must not sink the benchmark
+            entry = {
+                "error": f"{type(exc).__name__}: {exc}",
+                "trace": traceback.format_exc(limit=3),
+            }
+        out["methods"][name] = entry
+    entry = _index_default_entry(
+        clips, train, train_ids, all_poses, test_a, test_b, te.labels,
+        n_unlabeled=len(unlabeled), n_pairs=n_pairs, seed=seed, near=near,
+    )  # fmt: skip
+    out["methods"][INDEX_DEFAULT] = entry
+    log(
+        f"  seed {seed}: {len(tr)} train / {len(te)} test pairs ({int(near.sum())} near), "
+        f"labels {label_s:.0f} s; FEET {out['methods'].get('FEET', {}).get('precision')}"
+    )
+    return out
+
+
+def _summary(per_seed: list[dict[str, Any]]) -> dict[str, Any]:
+    names = list(per_seed[0]["methods"])
+    summary: dict[str, Any] = {}
+    for name in names:
+        row: dict[str, Any] = {}
+        for key in ("precision", "near_precision"):
+            values = [s["methods"][name].get(key) for s in per_seed]
+            values = [v for v in values if v is not None]
+            if values:
+                row[key] = {
+                    "mean": float(np.mean(values)),
+                    "std": float(np.std(values)),
+                    "n": len(values),
+                }
+        errors = [s["methods"][name]["error"] for s in per_seed if "error" in s["methods"][name]]
+        if errors:
+            row["errors"] = errors[:1]
+        summary[name] = row
+    return summary
+
+
+def run(
+    out: pathlib.Path,
+    quick: bool = False,
+    seed: int = 0,
+    datasets: tuple[str, ...] = ("hdm05", "cmu", "bandai"),
+    n_seeds: int | None = None,
+    verbose: bool = True,
+) -> dict:
+    """Run the benchmark (module docstring), write JSON to ``out``, return it.
+
+    ``n_seeds`` defaults to 1 in quick mode, else 5.
+    """
+    out = pathlib.Path(out)
+    t_start = time.perf_counter()
+
+    def log(msg: str) -> None:
+        if verbose:
+            print(f"[{time.perf_counter() - t_start:7.1f}s] {msg}", flush=True)
+
+    n_seeds = (1 if quick else 5) if n_seeds is None else n_seeds
+    methods = _methods()
+    not_run = [n for n in methods if quick and any(n.endswith(s) for s in _SLOW)]
+    methods = {n: f for n, f in methods.items() if n not in not_run}
+    results: dict[str, Any] = {
+        **provenance("pose_blend", out, quick, seed),
+        "seeds": list(range(seed, seed + n_seeds)),
+        "near_cm": NEAR_CM,
+        "not_run": not_run,
+        "datasets": {},
+        "skipped": {},
+    }
+    root = data_root()
+    for kind in datasets:
+        try:
+            clips = _load(kind, root, quick)
+        except Exception as exc:
+            results["skipped"][kind] = f"{type(exc).__name__}: {exc}"
+            continue
+        train, test = _split(clips)
+        log(f"{kind}: {len(clips)} clips ({len(train)} train, {len(test)} test)")
+        per_seed = []
+        for s in range(seed, seed + n_seeds):
+            try:
+                per_seed.append(_one_seed(clips, train, test, methods, quick, s, log))
+            except Exception as exc:
+                results["skipped"][f"{kind} seed {s}"] = f"{type(exc).__name__}: {exc}"
+        if per_seed:
+            results["datasets"][kind] = {"summary": _summary(per_seed), "per_seed": per_seed}
+        atomic_write_json(out, results)
+    results["seconds"] = time.perf_counter() - t_start
+    atomic_write_json(out, results)
+    return results

@@ -1,0 +1,400 @@
+"""Transition labels judged on the blended transition itself (issue 20), not by a distance.
+
+A candidate transition ``(A, i) -> (B, j)`` (pose ``i`` of clip ``A`` followed by what follows
+pose ``j`` of clip ``B``) is synthesised as a motion-graph system plays it, then judged by what
+a person would see in it, against the same quantities in natural motion of the same data set.
+
+Synthesis (:func:`synthesise`), on the canonical 16-joint body (:mod:`quatmotion.pose.skeleton16`):
+
+1. *Root aligned in position and heading*: ``B``'s root path after ``j`` is rotated about the
+   vertical by ``heading_A(i) - heading_B(j)`` and translated so that ``B_j`` sits where ``A_i``
+   is (pose ``A_i`` is identified with ``B_j``: a transition to the same frame is natural
+   motion, exactly). Heading is the yaw of the hip line (LHip -> RHip).
+2. *A short blend of joint rotations*: every bone's direction in the body frame is ``B``'s
+   rotated by the offset rotation that takes ``B_j``'s bone onto ``A_i``'s, the offset slerped
+   to the identity over ``blend_s`` (0.3 s) with a smoothstep weight; the hip height offset
+   decays alike. Bones keep ``A``'s lengths (the canonical body: every clip has the same).
+3. *Foot contacts kept planted*: a foot is in contact where its source frame has it within
+   ``contact_height_cm`` of the source clip's floor and slower than ``contact_speed_cm_s``. A
+   root-offset clean-up moves the root horizontally, frame by frame, by minus the mean slide of
+   the feet in contact since the previous frame, and vertically so that the feet in contact
+   keep their source height above the floor on average and no foot is below the floor (no
+   IK: what one root offset cannot fix stays as skating, or as root jumps).
+
+Judged quantities (:data:`QUANTITIES`), over the synthesised window of ``context_s`` before
+``i`` to ``blend_s + context_s`` after it:
+
+- ``skate``: largest horizontal speed of a foot in contact after the clean-up, cm/s;
+- ``bone_acc``: largest bone angular acceleration, rad/s^2 (second difference of directions);
+- ``bone_jerk``: largest bone angular jerk, rad/s^3;
+- ``root_jump``: largest change of the root's travel velocity, cm/s^2 (second difference of its
+  floor-plane path; its height is the gait's bounce and the clean-up's);
+- ``penetration``: deepest joint below the floor, cm (floor: the source clip's 2nd percentile
+  of foot heights; the clean-up keeps the feet above it, so this is the rest of the body).
+
+Judgement (:func:`judge`), in the terms of ``../shared/METRICS.md``: every quantity ``q`` is
+divided by its reference ``max(P95 of q over natural windows of the data set, q of the natural
+window of A at i, q of the natural window of B at j)``, with a floor of ``penetration_floor_cm``
+for penetration; the worst of these ratios is the transition's *artefact*. **Good** when the
+artefact is at most ``GOOD_RATIO`` (1.25: nothing a quarter beyond what natural motion of
+the data set, and the two source motions themselves, show; a one-frame skip stays inside),
+**bad** at ``BAD_RATIO`` (2.5) or more, left out in between. Natural windows are identity
+transitions ``(A, i) -> (A, i)`` at random frames.
+
+Conventions
+-----------
+- Positions are centimetres, Y up, :data:`~quatmotion.pose.skeleton16.JOINTS_16` order; clip
+  lists hold ``world`` (T, 16, 3) arrays at one frame rate ``fps``.
+- Frames outside a clip are its edge frame repeated (a transition near a clip's end holds the
+  last pose, as a motion graph would not play it anyway: such pairs are rarely good).
+- Seeded: the same clips, pairs and seed give the same labels.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from quatmotion.pose.labels import TransitionPairs, candidate_pairs
+from quatmotion.pose.skeleton16 import JOINTS_16, PARENTS_16
+
+__all__ = [
+    "BAD_RATIO",
+    "GOOD_RATIO",
+    "QUANTITIES",
+    "BlendSettings",
+    "artefact_quantities",
+    "blended_transition_labels",
+    "candidate_pairs",
+    "judge",
+    "natural_reference",
+    "synthesise",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+QUANTITIES: tuple[str, ...] = ("skate", "bone_acc", "bone_jerk", "root_jump", "penetration")
+GOOD_RATIO = 1.25
+BAD_RATIO = 2.5
+_FEET = (JOINTS_16.index("LFoot"), JOINTS_16.index("RFoot"))
+_HIPS = (JOINTS_16.index("LHip"), JOINTS_16.index("RHip"))
+_PARENTS = np.asarray(PARENTS_16)
+
+
+@dataclass(frozen=True)
+class BlendSettings:
+    """How transitions are synthesised and judged (module docstring).
+
+    Attributes
+    ----------
+    blend_s : float
+        Seconds over which the rotation offset decays to the identity.
+    context_s : float
+        Seconds judged before the transition and after the blend.
+    contact_height_cm, contact_speed_cm_s : float
+        A foot within this height of its clip's floor and slower than this is in contact.
+    penetration_floor_cm : float
+        Smallest penetration reference (natural motion rarely goes below its floor).
+    natural_percentile : float
+        Percentile of natural windows each quantity is referred to.
+    """
+
+    blend_s: float = 0.3
+    context_s: float = 0.2
+    contact_height_cm: float = 6.0
+    contact_speed_cm_s: float = 40.0
+    penetration_floor_cm: float = 1.0
+    natural_percentile: float = 95.0
+
+    def __post_init__(self) -> None:
+        for name in ("blend_s", "context_s", "contact_height_cm", "contact_speed_cm_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        if not 50 <= self.natural_percentile < 100:
+            raise ValueError(
+                f"natural_percentile must be in [50, 100), got {self.natural_percentile}"
+            )
+
+
+def _heading(world: FloatArray) -> FloatArray:
+    """Yaw of the hip line, (...,) radians, from positions (..., 16, 3)."""
+    d = world[..., _HIPS[1], :] - world[..., _HIPS[0], :]
+    return np.arctan2(-d[..., 2], d[..., 0])
+
+
+def _rot_y(yaw: FloatArray) -> FloatArray:
+    """Rotation matrices (..., 3, 3) about +Y by ``yaw`` (x -> z is -yaw, right-handed)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    z, o = np.zeros_like(c), np.ones_like(c)
+    return np.stack(
+        [np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2
+    )
+
+
+def _unit(v: FloatArray) -> FloatArray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 1e-12, n, 1.0)
+
+
+def _rotate_towards(d: FloatArray, src: FloatArray, dst: FloatArray, w: FloatArray) -> FloatArray:
+    """``d`` rotated by fraction ``w`` of the shortest rotation taking ``src`` onto ``dst``
+    (Rodrigues; all unit vectors (..., 3), ``w`` broadcast (..., 1))."""
+    axis = np.cross(src, dst)
+    sin = np.linalg.norm(axis, axis=-1, keepdims=True)
+    cos = np.sum(src * dst, axis=-1, keepdims=True)
+    angle = np.arctan2(sin, cos) * w
+    k = axis / np.where(sin > 1e-9, sin, 1.0)
+    c, s = np.cos(angle), np.sin(angle)
+    return d * c + np.cross(k, d) * s + k * np.sum(k * d, axis=-1, keepdims=True) * (1 - c)
+
+
+def _frames(world: FloatArray, start: int, n: int) -> FloatArray:
+    idx = np.clip(np.arange(start, start + n), 0, len(world) - 1)
+    return world[idx]
+
+
+def _floor(world: FloatArray) -> float:
+    return float(np.percentile(world[:, _FEET, 1], 2))
+
+
+def synthesise(
+    world_a: ArrayLike,
+    i: int,
+    world_b: ArrayLike,
+    j: int,
+    fps: float,
+    settings: BlendSettings = BlendSettings(),
+) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
+    """The transition ``(A, i) -> (B, j)`` as played, with its foot contacts, cleaned up.
+
+    Parameters
+    ----------
+    world_a, world_b : array_like, shape (T, 16, 3)
+        World positions of the two clips, centimetres, Y up.
+    i, j : int
+        Frames of the transition (``A_i`` is identified with ``B_j``).
+    fps : float
+
+    Returns
+    -------
+    motion : ndarray, shape (F, 16, 3)
+        ``context`` frames of A up to ``A_i``, then ``blend + context`` frames of B, in A's
+        world frame, root-offset cleaned.
+    contact : ndarray of bool, shape (F, 2)
+        Left and right foot contacts.
+    floors : ndarray, shape (F,)
+        Floor height under each frame, cm (the source clip's).
+    """
+    A = np.asarray(world_a, dtype=np.float64)
+    B = np.asarray(world_b, dtype=np.float64)
+    c = max(2, int(round(settings.context_s * fps)))
+    n_blend = max(1, int(round(settings.blend_s * fps)))
+    before = _frames(A, i - c, c + 1)  # A_{i-c} .. A_i
+    after = _frames(B, j, n_blend + c + 1)  # B_j .. (B_j is A_i: dropped below)
+    # 1. root: B's path relative to B_j, turned into A_i's heading and placed at A_i
+    turn = _heading(A[i]) - _heading(B[j])
+    R = _rot_y(np.asarray(turn))
+    centre = after[0, 0] * np.array([1.0, 0.0, 1.0])  # B_j's root on the floor plane
+    out_after = (after - centre) @ R.T  # turned about B_j's root, B's own heights kept
+    out_after[..., [0, 2]] += before[-1, 0, [0, 2]]
+    # 2. blend of bone directions: B's bones offset onto A_i's, the offset decaying
+    k = np.arange(len(after), dtype=np.float64) / n_blend
+    w = 1.0 - np.clip(3 * k**2 - 2 * k**3, 0.0, 1.0)  # 1 at B_j (= A_i), 0 after the blend
+    w[k >= 1] = 0.0
+    bones_a = _unit(before[-1, 1:] - before[-1, _PARENTS[1:]])  # A_i's bones (15, 3)
+    bones_b = _unit(out_after[:, 1:] - out_after[:, _PARENTS[1:]])  # (n, 15, 3)
+    length = np.linalg.norm(before[-1, 1:] - before[-1, _PARENTS[1:]], axis=-1)
+    bones = _rotate_towards(bones_b, bones_b[0][None], bones_a[None], w[:, None, None])
+    root = out_after[:, 0].copy()
+    root[:, 1] += w * (before[-1, 0, 1] - out_after[0, 0, 1])
+    blended = np.empty_like(out_after)
+    blended[:, 0] = root
+    for joint in range(1, 16):  # parents come first
+        blended[:, joint] = blended[:, _PARENTS[joint]] + bones[:, joint - 1] * length[joint - 1]
+    motion = np.concatenate((before, blended[1:]))
+    # 3. contacts from the sources, planted by a root offset
+    floor_a, floor_b = _floor(A), _floor(B)
+    src = np.concatenate((before, after[1:]))
+    floors = np.r_[np.full(len(before), floor_a), np.full(len(after) - 1, floor_b)]
+    speed = np.zeros((len(src), 2))
+    speed[1:] = np.linalg.norm(np.diff(src[:, _FEET][..., [0, 2]], axis=0), axis=-1) * fps
+    speed[0] = speed[1]
+    contact = (src[:, _FEET, 1] - floors[:, None] < settings.contact_height_cm) & (
+        speed < settings.contact_speed_cm_s
+    )
+    offset = np.zeros(2)  # horizontal root offset so far
+    for f in range(len(before), len(motion)):
+        motion[f, :, 0] += offset[0]
+        motion[f, :, 2] += offset[1]
+        planted = [_FEET[m] for m in np.flatnonzero(contact[f] & contact[f - 1])]
+        if planted:
+            step = motion[f, planted] - motion[f - 1, planted]
+            slide = step[:, [0, 2]].mean(axis=0)
+            motion[f, :, 0] -= slide[0]
+            motion[f, :, 2] -= slide[1]
+            offset -= slide
+        on = [_FEET[m] for m in np.flatnonzero(contact[f])]
+        if on:  # feet in contact keep their source height above the floor
+            lift = (src[f, on, 1] - floors[f]) - (motion[f, on, 1] - floors[f])
+            motion[f, :, 1] += lift.mean()
+        depth = floors[f] - motion[f, list(_FEET), 1].min()
+        if depth > 0:  # and no foot goes below the floor
+            motion[f, :, 1] += depth
+    return motion, contact, floors
+
+
+def artefact_quantities(
+    motion: ArrayLike, contact: ArrayLike, floors: ArrayLike, fps: float
+) -> dict[str, float]:
+    """The judged quantities of a played window (module docstring, :data:`QUANTITIES`).
+
+    Parameters
+    ----------
+    motion : array_like, shape (F, 16, 3)
+    contact : array_like of bool, shape (F, 2)
+    floors : array_like, shape (F,)
+        Floor height under each frame, cm.
+    fps : float
+    """
+    m = np.asarray(motion, dtype=np.float64)
+    on = np.asarray(contact, dtype=bool)
+    feet = m[:, _FEET]
+    speed = np.linalg.norm(np.diff(feet[..., [0, 2]], axis=0), axis=-1) * fps  # (F-1, 2)
+    planted = on[1:] & on[:-1]
+    bones = _unit(m[:, 1:] - m[:, _PARENTS[1:]])
+    acc = np.linalg.norm(np.diff(bones, 2, axis=0), axis=-1) * fps**2
+    jerk = np.linalg.norm(np.diff(bones, 3, axis=0), axis=-1) * fps**3
+    root_jump = np.linalg.norm(np.diff(m[:, 0, ::2], 2, axis=0), axis=-1) * fps**2
+    depth = np.asarray(floors, dtype=np.float64)[:, None] - m[..., 1]  # any joint
+    return {
+        "skate": float(np.max(speed[planted], initial=0.0)),
+        "bone_acc": float(acc.max(initial=0.0)),
+        "bone_jerk": float(jerk.max(initial=0.0)),
+        "root_jump": float(root_jump.max(initial=0.0)),
+        "penetration": float(max(0.0, depth.max(initial=0.0))),
+    }
+
+
+def _quantities(
+    world: Sequence[FloatArray], pairs: IntArray, fps: float, settings: BlendSettings
+) -> FloatArray:
+    """(P, 5) quantities of the played transitions ``(clip_a, frame_a, clip_b, frame_b)``."""
+    out = np.empty((len(pairs), len(QUANTITIES)))
+    for p, (ca, fa, cb, fb) in enumerate(pairs):
+        motion, contact, floors = synthesise(world[ca], fa, world[cb], fb, fps, settings)
+        q = artefact_quantities(motion, contact, floors, fps)
+        out[p] = [q[name] for name in QUANTITIES]
+    return out
+
+
+def judge(
+    world: Sequence[ArrayLike],
+    pairs: ArrayLike,
+    fps: float,
+    natural_reference: ArrayLike,
+    settings: BlendSettings = BlendSettings(),
+) -> tuple[FloatArray, FloatArray]:
+    """Artefact ratio of each transition (module docstring) and its quantities.
+
+    Parameters
+    ----------
+    world : sequence of array_like, each (T_c, 16, 3)
+    pairs : array_like of int, shape (P, 4)
+        ``(clip_a, frame_a, clip_b, frame_b)``.
+    fps : float
+    natural_reference : array_like, shape (5,)
+        The data set's natural percentile of every quantity (:func:`natural_reference`).
+
+    Returns
+    -------
+    artefact : ndarray, shape (P,)
+        Worst quantity over its reference: at most :data:`GOOD_RATIO` is good, from
+        :data:`BAD_RATIO` bad.
+    quantities : ndarray, shape (P, 5)
+    """
+    world = [np.asarray(w, dtype=np.float64) for w in world]
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 4)
+    ref = np.asarray(natural_reference, dtype=np.float64).reshape(len(QUANTITIES))
+    q = _quantities(world, pairs, fps, settings)
+    # the natural windows of the sources, each pose once
+    ends, where = np.unique(
+        np.concatenate((pairs[:, :2], pairs[:, 2:])), axis=0, return_inverse=True
+    )
+    own = _quantities(world, ends[:, [0, 1, 0, 1]], fps, settings)[where.reshape(-1)]
+    own_a, own_b = own[: len(pairs)], own[len(pairs) :]
+    scale = np.maximum(np.maximum(own_a, own_b), ref[None])
+    scale[:, QUANTITIES.index("penetration")] = np.maximum(
+        scale[:, QUANTITIES.index("penetration")], settings.penetration_floor_cm
+    )
+    scale = np.maximum(scale, 1e-9)
+    return (q / scale).max(axis=1), q
+
+
+def natural_reference(
+    world: Sequence[ArrayLike],
+    fps: float,
+    clips: ArrayLike | None = None,
+    n_windows: int = 400,
+    settings: BlendSettings = BlendSettings(),
+    random_state: int | np.random.Generator | None = 0,
+) -> FloatArray:
+    """The natural percentile of every quantity over ``n_windows`` identity transitions at
+    random frames of ``clips`` (default all), shape (5,)."""
+    rng = np.random.default_rng(random_state)
+    world = [np.asarray(w, dtype=np.float64) for w in world]
+    clips = np.arange(len(world)) if clips is None else np.asarray(clips, dtype=np.int64)
+    c = rng.choice(clips, n_windows)
+    f = np.array([rng.integers(0, len(world[k])) for k in c])
+    q = _quantities(world, np.stack([c, f, c, f], axis=1), fps, settings)
+    return np.percentile(q, settings.natural_percentile, axis=0)
+
+
+def blended_transition_labels(
+    local: Sequence[FloatArray],
+    world: Sequence[FloatArray],
+    fps: float,
+    clips: ArrayLike | None = None,
+    reference: ArrayLike | None = None,
+    n_positive: int = 500,
+    n_negative: int = 500,
+    max_mean_distance: float = 25.0,
+    n_queries: int = 4000,
+    settings: BlendSettings = BlendSettings(),
+    random_state: int | np.random.Generator | None = 0,
+) -> tuple[TransitionPairs, FloatArray]:
+    """Balanced good/bad transition pairs of ``clips`` judged on their blended transitions.
+
+    Candidates are :func:`~quatmotion.pose.labels.candidate_pairs` (cross-clip, Eq. 35 under
+    ``max_mean_distance``: 25 cm, wider than the point-cloud labels' 10 cm, since few pairs
+    that close play badly once blended and cleaned up); each is played and judged
+    (:func:`judge`). ``reference`` (the natural percentiles) is computed on ``clips`` unless
+    given (fit it on training clips, reuse on test clips). Returns the pairs (positives first;
+    ``cloud_distance`` holds the artefact ratio) and the reference used.
+    """
+    if fps <= 0:
+        raise ValueError(f"fps must be positive, got {fps}")
+    if len(local) != len(world):
+        raise ValueError("local and world must list the same clips")
+    rng = np.random.default_rng(random_state)
+    if reference is None:
+        reference = natural_reference(world, fps, clips, settings=settings, random_state=rng)
+    cand, mean_d = candidate_pairs(
+        local, clips, max_mean_distance, n_queries=n_queries, random_state=rng
+    )
+    if len(cand) == 0:
+        raise ValueError(f"no pose pairs from different clips are within {max_mean_distance} cm")
+    artefact, _ = judge(world, cand, fps, reference, settings)
+    pos = np.flatnonzero(artefact <= GOOD_RATIO)
+    neg = np.flatnonzero(artefact >= BAD_RATIO)
+    if n_positive == n_negative:
+        n_positive = n_negative = min(n_positive, len(pos), len(neg))
+    pos = rng.permutation(pos)[:n_positive]
+    neg = rng.permutation(neg)[:n_negative]
+    keep = np.r_[pos, neg]
+    labels = np.r_[np.ones(len(pos), bool), np.zeros(len(neg), bool)]
+    pairs = TransitionPairs(cand[keep], labels, artefact[keep], mean_d[keep])
+    return pairs, np.asarray(reference, dtype=np.float64)
