@@ -244,6 +244,37 @@ def test_an_unknown_benchmark_renders_from_its_json_alone(tmp_path):
     assert page.count("not recorded") == 2  # neither command nor machine in this file
 
 
+def test_a_benchmark_describes_its_headline_figures_and_the_report_reads_them(tmp_path):
+    """The report knows no key of a new benchmark: it reads the figures its JSON names."""
+    result = {
+        "benchmark": "made_up",
+        "jobs": {"codec": {"overhead": 0.083, "seconds": 4.25}},
+        "headlines": [
+            {"name": "codec overhead", "path": ["jobs", "codec", "overhead"], "unit": "",
+             "better": "lower", "format": "percent"},
+            {"name": "codec time", "path": ["jobs", "codec", "seconds"], "unit": "s",
+             "better": "lower", "format": ""},
+            {"name": "a figure this run lacks", "path": ["jobs", "index", "seconds"],
+             "unit": "s", "better": "lower", "format": ""},
+        ],
+    }  # fmt: skip
+    table = report.headline_table(result)
+    assert table is not None
+    assert table.rows == (
+        ("codec overhead", "8.3%", "", "lower"),
+        ("codec time", report._fmt(4.25), "s", "lower"),
+        ("a figure this run lacks", "missing", "s", "lower"),
+    )
+    path = tmp_path / "made_up.json"
+    path.write_text(json.dumps(result), encoding="utf-8")
+    page = report.render_report([report.load_result(path)])
+    assert "Headline figures" in page and "8.3%" in page
+    bad = dict(result, headlines=[{"name": "x", "path": "jobs.codec", "better": "lower"}])
+    with pytest.raises(ValueError, match=r"headlines\[0\] \(x\): path must be a list"):
+        report.headline_table(bad)
+    assert report.headline_table({"benchmark": "old"}) is None
+
+
 def test_report_names_bad_and_missing_files(tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text('{"benchmark": "io",\n "parse": }', encoding="utf-8")

@@ -194,6 +194,44 @@ def _get(data: Any, *keys: str, default: Any = None) -> Any:
     return node
 
 
+_BETTER = ("higher", "lower", "")
+
+
+def headline_table(data: Mapping[str, Any]) -> Table | None:
+    """The headline figures a benchmark publishes about itself, or None if it publishes none.
+
+    A benchmark's JSON may carry ``headlines``: a list of ``{"name", "path", "unit", "better",
+    "format"}`` (``path`` the list of keys down to the value; ``better`` ``"higher"``,
+    ``"lower"`` or ``""``; ``format`` ``"percent"`` or ``""``). The report reads figures through
+    it, so a benchmark describes its own schema and the report names no key of it. A headline
+    whose value is missing shows as missing; a malformed entry raises ``ValueError`` naming it.
+    """
+    listed = data.get("headlines")
+    if listed is None:
+        return None
+    if not isinstance(listed, list):
+        raise ValueError(f"headlines: expected a list, found {type(listed).__name__}")
+    rows = []
+    for number, entry in enumerate(listed):
+        if not isinstance(entry, Mapping) or not isinstance(entry.get("name"), str):
+            raise ValueError(f"headlines[{number}]: expected an object with a name")
+        path = entry.get("path")
+        if not isinstance(path, list) or not all(isinstance(k, str) for k in path):
+            raise ValueError(f"headlines[{number}] ({entry['name']}): path must be a list of keys")
+        better = entry.get("better", "")
+        if better not in _BETTER:
+            raise ValueError(
+                f"headlines[{number}] ({entry['name']}): better must be one of {_BETTER}"
+            )
+        value = _get(data, *path)
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            shown = f"{value:.1%}" if entry.get("format") == "percent" else _fmt(value)
+        else:
+            shown = "missing" if value is None else str(value)
+        rows.append((entry["name"], shown, str(entry.get("unit", "")), better))
+    return Table("Headline figures", ("figure", "value", "unit", "better"), tuple(rows))
+
+
 SUMMARIES: dict[str, Callable[[Mapping[str, Any]], list[Table]]] = {}
 """Summary tables of the benchmarks this module knows, by benchmark name."""
 
@@ -501,6 +539,13 @@ def render_report(results: Sequence[BenchmarkResult], title: str = "quatmotion b
             f'<p class="note">{html.escape(str(result.path))}</p>',
             _provenance_html(result.data),
         ]
+        try:
+            headlines = headline_table(result.data)
+        except ValueError as error:
+            headlines = None
+            parts.append(f'<p class="missing">{html.escape(str(error))}</p>')
+        if headlines is not None and headlines.rows:
+            parts.append(_table_html(headlines))
         summary = SUMMARIES.get(result.name)
         if summary is not None:
             try:
