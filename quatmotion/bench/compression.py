@@ -27,10 +27,13 @@
 ``quick`` uses four clips per set (not ``walk``), two bounds, three dictionary iterations and
 one decoding run: a smoke run of every code path in a few minutes, not numbers to quote.
 
-Compression runs where :func:`quatmotion.codec.compress` runs by default (the local process
-pool, or ``QUATMOTION_SCHEDULER``); its times are per frame of wall time, so a single-process
-figure comparable between codecs needs ``QUATMOTION_SCHEDULER=inline``. The bytes are the same
-either way.
+The data sets (and the collection-size curves) are the items of a
+:class:`quatmotion.parallel.Runner` (by default a local pool on the available cores, or
+``QUATMOTION_SCHEDULER``); each item's compressions run inline in its worker, so compression
+times are single-process per frame on every runner, and the bytes are the same on every one.
+The ARMS search tries the x0.7 steps of the knob in the order :func:`search_quality_step` picks
+(the same step as trying them in turn, in fewer encodes), and the sparse codecs learn each
+layout's dictionary once per data set (the codec's fit cache), reused by every later try.
 """
 
 from __future__ import annotations
@@ -40,14 +43,17 @@ import statistics
 import time
 from typing import Any
 
+import numpy as np
+
 from quatmotion._atomic import atomic_write_json
 from quatmotion.codec import Archive, compress
 from quatmotion.codec.methods import METHODS, SparseMethod
-from quatmotion.codec.methods.sparse import clear_fit_cache
+from quatmotion.codec.methods.sparse import cached_fit_seconds, clear_fit_cache
 from quatmotion.codec.metrics import collection_errors
 from quatmotion.datasets import catalogue, data_root
 from quatmotion.io import read_motion
 from quatmotion.motion import forward_kinematics
+from quatmotion.parallel import Runner
 from quatmotion.viz import pyplot, save_figure
 
 ORDER = ("best", "spline", "naive", "qssd", "ksvd")
@@ -109,33 +115,91 @@ def _row(result, source_bytes: int, decode_runs: int) -> dict[str, Any]:
     }
 
 
-def _lossy_point(motions, sources, method, arms_target, seed, decode_runs) -> dict[str, Any]:
-    """5 cm bound; the quality knob lowered (x0.7) until the ARMS target holds."""
-    quality = METHODS[method].default_quality
+QUALITY_STEP = 0.7
+"""The lossy point's knob is ``default * QUALITY_STEP ** k``, ``k`` below :data:`QUALITY_STEPS`."""
+QUALITY_STEPS = 8
+
+
+def search_quality_step(arms_of, arms_target: float, steps: int = QUALITY_STEPS) -> tuple[int, int]:
+    """The first step ``k`` (knob ``default * QUALITY_STEP ** k``) whose ARMS holds the target,
+    as trying ``k = 0, 1, 2...`` in turn would find it where the ARMS grows with the knob, in
+    fewer tries: ``k = 0`` first, then a secant on log-ARMS against log-knob (slope 1 until two
+    steps are measured) names the next step inside the bracket of a miss and a hit, until they
+    are adjacent (at most one try more than the fixed steps when they stop within two steps,
+    fewer when they go further). ``arms_of(k)`` encodes once; ``steps - 1`` when no step holds.
+
+    Returns ``(k, tries)``."""
+    measured: dict[int, float] = {}
+
+    def arms(k: int) -> float:
+        if k not in measured:
+            measured[k] = float(arms_of(k))
+        return measured[k]
+
+    if arms(0) <= arms_target:
+        return 0, 1
+    miss, hit = 0, steps  # ``steps``: no step has held (yet)
+    while hit - miss > 1:
+        below = [k for k in measured if k <= miss]
+        above = [k for k in measured if k >= hit]
+        a = max(below)
+        others = sorted(k for k in below if k != a)
+        b = min(above) if above else (others[-1] if others else None)
+        la = np.log(max(measured[a], 1e-12))
+        if b is None:
+            slope = 1.0  # ARMS proportional to the knob
+        else:
+            lb = np.log(max(measured[b], 1e-12))
+            slope = (la - lb) / ((a - b) * np.log(QUALITY_STEP)) if la != lb else 1.0
+            if not np.isfinite(slope) or slope <= 0:
+                slope = 1.0
+        # log ARMS(k) ~ la + slope * (k - a) * log(step): the first k predicted to hold
+        predicted = a + (np.log(arms_target) - la) / (slope * np.log(QUALITY_STEP))
+        k = int(min(max(np.ceil(predicted - 1e-9), miss + 1), hit - 1))
+        if arms(k) <= arms_target:
+            hit = k
+        else:
+            miss = k
+    return (hit if hit < steps else steps - 1), len(measured)
+
+
+def _lossy_point(motions, sources, method, arms_target, seed, decode_runs, scheduler=None):
+    """5 cm bound; the quality knob lowered in steps of x0.7 (:func:`search_quality_step`) to
+    the first step whose ARMS target holds."""
+    q0 = METHODS[method].default_quality
     source_bytes = sum(s for s, _ in sources)
-    row = None
     sparse = isinstance(METHODS[method], SparseMethod)
     if sparse:
-        clear_fit_cache()  # the first try learns the dictionary; its time is counted below
-    # The sparse codecs' coarse (1 in 8 frames) model floors their ARMS: two tries only.
-    tries = 0
-    for _ in range(2 if sparse else 8):
-        tries += 1
+        clear_fit_cache()  # the first try learns the dictionaries; their time is counted below
+    results: dict[int, tuple] = {}
+
+    def arms_of(k: int) -> float:
         result = compress(
-            motions, max_error=5.0, method=method, quality=quality, seed=seed, sources=sources
+            motions,
+            max_error=5.0,
+            method=method,
+            quality=q0 * QUALITY_STEP**k,
+            seed=seed,
+            sources=sources,
+            scheduler=scheduler,
         )
-        errors = collection_errors(result.clip_errors)
-        row = (result, errors)
-        if errors.arms <= arms_target:
-            break
-        quality *= 0.7
-    out = _row(row[0], source_bytes, decode_runs)
+        results[k] = (result, collection_errors(result.clip_errors))
+        return results[k][1].arms
+
+    # The sparse codecs' coarse (1 in 8 frames) model floors their ARMS: two steps only.
+    k, tries = search_quality_step(arms_of, arms_target, 2 if sparse else QUALITY_STEPS)
+    if k not in results:  # no step held and the last was never tried
+        arms_of(k)
+        tries += 1
+    result, errors = results[k]
+    out = _row(result, source_bytes, decode_runs)
     if sparse:
-        out["dictionary_seconds"] = METHODS[method].fit_seconds
-        if tries > 1:  # the reported try reused the first try's dictionary: count its learning
-            out["compress_ms_per_frame"] += 1e3 * METHODS[method].fit_seconds / out["frames"]
+        out["dictionary_seconds"] = cached_fit_seconds()
+        if k > 0:  # the reported try reused the first try's dictionaries: count their learning
+            out["compress_ms_per_frame"] += 1e3 * out["dictionary_seconds"] / out["frames"]
     out["arms_target_cm"] = arms_target
-    out["arms_target_met"] = bool(row[1].arms <= arms_target)
+    out["arms_target_met"] = bool(errors.arms <= arms_target)
+    out["encodes"] = tries
     return out
 
 
@@ -184,94 +248,155 @@ def _figure_sizes(sizes: dict[str, dict[str, list[dict]]], path: pathlib.Path) -
     save_figure(fig, path)
 
 
-def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
-    out = pathlib.Path(out)
-    root = data_root()
-    t_start = time.perf_counter()
+def _configure(quick: bool) -> None:
+    """The sparse codecs' dictionary options for this run (in every worker process)."""
+    for name in ("qssd", "ksvd"):
+        METHODS[name] = SparseMethod(name, max_iter=3) if quick else SparseMethod(name)
+
+
+def _datasets(quick: bool) -> tuple[str, ...]:
     if quick:
-        for name in ("qssd", "ksvd"):
-            METHODS[name] = SparseMethod(name, max_iter=3)
-    else:
-        for name in ("qssd", "ksvd"):
-            METHODS[name] = SparseMethod(name)
+        return ("walk_amc", "mixed", "hdm05", "bandai1")
+    return ("walk_amc", "walk", "mixed", "hdm05", "bandai1")
+
+
+def _sources(paths, sizes) -> list[tuple[int, str]]:
+    return [(s, p.suffix.lower().lstrip(".")) for s, p in zip(sizes, paths, strict=True)]
+
+
+def _dataset_entry(name: str, quick: bool, seed: int, out: pathlib.Path, scheduler) -> dict:
+    """One data set's Table 3 rows, rate-distortion curves (and figure) and bounded points."""
+    _configure(quick)
     decode_runs = 1 if quick else 5
     bounds = (10.0, 2.0) if quick else (20.0, 10.0, 5.0, 2.0, 1.0)
-    result: dict[str, Any] = {"quick": quick, "seed": seed, "paper_table3": PAPER, "datasets": {}}
-    names = (
-        ("walk_amc", "mixed", "hdm05", "bandai1")
-        if quick
-        else ("walk_amc", "walk", "mixed", "hdm05", "bandai1")
-    )
-    for name in names:
-        paths = _paths(root, name, quick)
-        motions, sizes = _load(paths)
-        source = sum(sizes)
-        entry: dict[str, Any] = {
-            "clips": len(motions),
-            "frames": sum(m.n_frames for m in motions),
-            "source_bytes": source,
-            "table3": {},
-            "rd": {},
-        }
-        sources = [(s, p.suffix.lower().lstrip(".")) for s, p in zip(sizes, paths, strict=True)]
-        for method in ORDER:
-            entry["table3"][method] = _lossy_point(
-                motions, sources, method, ARMS_TARGET[name], seed, decode_runs
-            )
-            curve = []
-            if method in ("best", "spline"):
-                for bound in bounds:
-                    r = compress(
-                        motions, max_error=bound, method=method, seed=seed, sources=sources
-                    )
-                    row = _row(r, source, 1)
-                    row["bound_cm"] = bound
-                    curve.append(row)
-            else:
-                q0 = METHODS[method].default_quality
-                for factor in (4.0, 1.0) if quick else (4.0, 2.0, 1.0, 0.5, 0.25):
-                    r = compress(
-                        motions, method=method, quality=q0 * factor, seed=seed, sources=sources
-                    )
-                    row = _row(r, source, 1)
-                    row["quality"] = q0 * factor
-                    curve.append(row)
-            entry["rd"][method] = curve
-        _figure_rd(name, entry["rd"], out.with_name(f"{out.stem}_rd_{name}.png"))
-        if name == "walk_amc":
-            bounded = {}
-            for label, kwargs in (
-                ("joints_1cm", {"max_error": 1.0}),
-                ("joints_0.1cm", {"max_error": 0.1}),
-                ("vertices_0.02cm", {"max_error": 0.02, "bound_on": "vertices"}),
-            ):
-                bounded[label] = {
-                    method: _row(
-                        compress(motions, method=method, seed=seed, sources=sources, **kwargs),
-                        source,
-                        1,
-                    )
-                    for method in ("best", "spline")
-                }
-            entry["bounded"] = bounded
-        result["datasets"][name] = entry
-        atomic_write_json(out, result)  # partial results survive an interrupted run
-    sizes_curves: dict[str, dict[str, list[dict]]] = {}
-    for name in ("mixed",) if quick else ("walk", "mixed"):
-        paths = _paths(root, name, quick)
-        motions, sizes = _load(paths)
-        sources = [(s, p.suffix.lower().lstrip(".")) for s, p in zip(sizes, paths, strict=True)]
-        counts = [n for n in (1, 2, 4, 8, 16, 32) if n < len(paths)] + [len(paths)]
-        curves: dict[str, list[dict]] = {}
-        for method in ("best", "spline", "naive"):
-            pts = []
-            for n in counts:
+    paths = _paths(data_root(), name, quick)
+    motions, sizes = _load(paths)
+    source = sum(sizes)
+    entry: dict[str, Any] = {
+        "clips": len(motions),
+        "frames": sum(m.n_frames for m in motions),
+        "source_bytes": source,
+        "table3": {},
+        "rd": {},
+    }
+    sources = _sources(paths, sizes)
+    for method in ORDER:
+        entry["table3"][method] = _lossy_point(
+            motions, sources, method, ARMS_TARGET[name], seed, decode_runs, scheduler
+        )
+        curve = []
+        if method in ("best", "spline"):
+            for bound in bounds:
                 r = compress(
-                    motions[:n], max_error=5.0, method=method, seed=seed, sources=sources[:n]
+                    motions,
+                    max_error=bound,
+                    method=method,
+                    seed=seed,
+                    sources=sources,
+                    scheduler=scheduler,
                 )
-                pts.append(_row(r, sum(sizes[:n]), 1))
-            curves[method] = pts
-        sizes_curves[name] = curves
+                row = _row(r, source, 1)
+                row["bound_cm"] = bound
+                curve.append(row)
+        else:
+            # the sparse codecs reuse the dictionaries their lossy point learned
+            q0 = METHODS[method].default_quality
+            for factor in (4.0, 1.0) if quick else (4.0, 2.0, 1.0, 0.5, 0.25):
+                r = compress(
+                    motions,
+                    method=method,
+                    quality=q0 * factor,
+                    seed=seed,
+                    sources=sources,
+                    scheduler=scheduler,
+                )
+                row = _row(r, source, 1)
+                row["quality"] = q0 * factor
+                curve.append(row)
+        entry["rd"][method] = curve
+    _figure_rd(name, entry["rd"], out.with_name(f"{out.stem}_rd_{name}.png"))
+    if name == "walk_amc":
+        bounded = {}
+        for label, kwargs in (
+            ("joints_1cm", {"max_error": 1.0}),
+            ("joints_0.1cm", {"max_error": 0.1}),
+            ("vertices_0.02cm", {"max_error": 0.02, "bound_on": "vertices"}),
+        ):
+            bounded[label] = {
+                method: _row(
+                    compress(
+                        motions,
+                        method=method,
+                        seed=seed,
+                        sources=sources,
+                        scheduler=scheduler,
+                        **kwargs,
+                    ),
+                    source,
+                    1,
+                )
+                for method in ("best", "spline")
+            }
+        entry["bounded"] = bounded
+    clear_fit_cache()  # a worker's next data set learns its own
+    return entry
+
+
+def _size_curves(name: str, quick: bool, seed: int, scheduler) -> dict[str, list[dict]]:
+    """Ratio against collection size (the first 1, 2, 4... clips) at the 5 cm bound."""
+    paths = _paths(data_root(), name, quick)
+    motions, sizes = _load(paths)
+    sources = _sources(paths, sizes)
+    counts = [n for n in (1, 2, 4, 8, 16, 32) if n < len(paths)] + [len(paths)]
+    curves: dict[str, list[dict]] = {}
+    for method in ("best", "spline", "naive"):
+        pts = []
+        for n in counts:
+            r = compress(
+                motions[:n],
+                max_error=5.0,
+                method=method,
+                seed=seed,
+                sources=sources[:n],
+                scheduler=scheduler,
+            )
+            pts.append(_row(r, sum(sizes[:n]), 1))
+        curves[method] = pts
+    return curves
+
+
+def _part(item: tuple[str, str], context: tuple) -> dict:
+    """One item of the run (``("dataset" | "sizes", name)``), in a worker of the run's
+    runner; its compressions run in that process (the data sets are the parallel unit)."""
+    kind, name = item
+    quick, seed, out = context
+    if kind == "dataset":
+        return _dataset_entry(name, quick, seed, pathlib.Path(out), "inline")
+    return _size_curves(name, quick, seed, "inline")
+
+
+def run(
+    out: pathlib.Path, quick: bool = False, seed: int = 0, runner: Runner | None = None
+) -> dict:
+    """Every part of the benchmark on ``runner`` (default :meth:`Runner.resolve`: a local
+    process pool on the available cores, or ``QUATMOTION_SCHEDULER``), one data set per item:
+    the same JSON (but for the times) and figures on every runner."""
+    out = pathlib.Path(out)
+    t_start = time.perf_counter()
+    runner = runner or Runner.resolve()
+    result: dict[str, Any] = {"quick": quick, "seed": seed, "paper_table3": PAPER, "datasets": {}}
+    items = [("dataset", name) for name in _datasets(quick)]
+    items += [("sizes", name) for name in (("mixed",) if quick else ("walk", "mixed"))]
+    sizes_curves: dict[str, dict[str, list[dict]]] = {}
+    for outcome in runner.map(_part, items, context=(quick, seed, str(out))):
+        kind, name = outcome.item
+        if not outcome.ok:
+            raise RuntimeError(f"compression bench, {kind} {name}: {outcome.failure}")
+        if kind == "dataset":
+            result["datasets"][name] = outcome.value
+            atomic_write_json(out, result)  # partial results survive an interrupted run
+        else:
+            sizes_curves[name] = outcome.value
     result["collection_size"] = sizes_curves
     _figure_sizes(sizes_curves, out.with_name(f"{out.stem}_size.png"))
     result["seconds"] = time.perf_counter() - t_start
