@@ -259,3 +259,29 @@ def studio_walk() -> Callable[[float, float], tuple[Any, Any]]:
         return truth, studio
 
     return make
+
+
+@pytest.fixture(scope="session")
+def v030(tmp_path_factory) -> Path:
+    """A copy of ``tests/data/v0.3.0`` with the generated clips its 0.3.0 index and pose library
+    were built from written back beside them (the same calls as
+    ``tests/data/make_v030_index_fixtures.py``: generated clips are bit-identical by contract,
+    so they are made here instead of committed as motion files)."""
+    import shutil
+
+    from quatmotion.io import write_motion
+    from quatmotion.synthetic import generate_clip
+
+    source = Path(__file__).parent / "data" / "v0.3.0"
+    folder = tmp_path_factory.mktemp("v030") / "v0.3.0"
+    shutil.copytree(source, folder)
+    clips = folder / "index_clips"
+    for sub, name, kind, seed in (
+        ("s1", "take_001", "walk", 0),
+        ("s2", "take_001", "squat", 1),
+        ("s1", "punch", "punch", 2),
+    ):
+        (clips / sub).mkdir(parents=True, exist_ok=True)
+        motion = generate_clip(kind, seed, n_frames=40, fps=30.0)
+        write_motion(motion, clips / sub / f"{name}.bvh")
+    return folder

@@ -20,7 +20,6 @@ from quatmotion.retrieval import ClipIndex, IndexSettings
 from quatmotion.synthetic import generate_clip
 
 runner = CliRunner()
-V030 = Path(__file__).parent / "data" / "v0.3.0"
 
 
 @pytest.fixture(scope="module")
@@ -38,9 +37,9 @@ def _build(*args: str):
     return runner.invoke(app, ["index", "build", *args, "--kinds", "motion", "--workers", "1"])
 
 
-def test_the_0_3_0_index_opens_with_the_same_values_and_references():
-    expected = json.loads((V030 / "index_pose_v030.json").read_text())["index"]
-    with ClipIndex.open(V030 / "index_v030.qidx") as index:
+def test_the_0_3_0_index_opens_with_the_same_values_and_references(v030):
+    expected = json.loads((v030 / "index_pose_v030.json").read_text())["index"]
+    with ClipIndex.open(v030 / "index_v030.qidx") as index:
         assert index.version == 1 and index.format.version == 1
         rows = index.rows()
         _, library = index.load(("frames", "embedding"))
@@ -56,12 +55,12 @@ def test_the_0_3_0_index_opens_with_the_same_values_and_references():
     assert [r.name for r in refs] == ["punch", "s1/take_001", "s2/take_001"]
     assert all(Path(r.path).is_absolute() and Path(r.path).is_file() for r in refs)
     with pytest.raises(FormatError, match="read-only"):
-        ClipIndex.open(V030 / "index_v030.qidx", write=True)
+        ClipIndex.open(v030 / "index_v030.qidx", write=True)
 
 
-def test_the_0_3_0_index_searches_from_any_folder(tmp_path, monkeypatch):
+def test_the_0_3_0_index_searches_from_any_folder(v030, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    index = str(V030 / "index_v030.qidx")
+    index = str(v030 / "index_v030.qidx")
     result = runner.invoke(app, ["search", "punch", "--index", index, "--json", "--top", "2"])
     assert result.exit_code == 0, result.output
     paths = [r["path"] for r in json.loads(result.stdout)["results"]]

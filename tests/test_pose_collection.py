@@ -17,13 +17,12 @@ from quatmotion.pose.library import FORMAT, PoseLibrary, PoseSettings
 from quatmotion.synthetic import generate_clip
 
 runner = CliRunner()
-V030 = Path(__file__).parent / "data" / "v0.3.0"
 SMALL = {"metric": "GPD+RDSR", "rank": 2, "n_unlabeled": 100, "n_pairs": 20, "fit_poses": 200}
 
 
-def test_the_0_3_0_pose_library_opens_and_answers_as_it_did():
-    expected = json.loads((V030 / "index_pose_v030.json").read_text())["pose"]
-    library = PoseLibrary.open(V030 / "pose_v030.npz")
+def test_the_0_3_0_pose_library_opens_and_answers_as_it_did(v030):
+    expected = json.loads((v030 / "index_pose_v030.json").read_text())["pose"]
+    library = PoseLibrary.open(v030 / "pose_v030.npz")
     assert library.version == 2 and library.format.version == 2 and FORMAT.version == 3
     assert library.clip_names == expected["clip_names"]
     assert library.frame_of.tolist() == expected["frame_of"]
@@ -32,7 +31,7 @@ def test_the_0_3_0_pose_library_opens_and_answers_as_it_did():
     assert got == expected["first_match"]
     refs = library.clips()  # 0.3.0 stored none: from the paths, found beside the file
     assert [r.name for r in refs] == ["punch", "s1/take_001", "s2/take_001"]
-    clip_files = V030 / "index_clips"
+    clip_files = v030 / "index_clips"
     assert refs[0].sha256 == content_hash(clip_files / "s1" / "punch.bvh")
     assert library.settings is None
 
