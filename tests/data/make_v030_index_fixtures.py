@@ -9,9 +9,10 @@ It writes three small generated BVH clips (two of them with one stem, in two fol
 labels CSV, a clip index of them (``index_v030.qidx``: motion features only, to stay small)
 and a pose library (``pose_v030.npz``, RDSR of rank 2 to stay small) with the commands of
 that release, then the values the tests compare against (``index_pose_v030.json``). The
-files are committed except the three clips, which the tests' ``v030`` fixture (conftest.py)
-writes again with the same calls (no motion files in the repository; generated clips are
-bit-identical, and the tests check their hashes against the stored ones); the tests check that the current code opens them and reads the same
+files are committed except the three clips, which the tests' ``v030`` fixture
+(conftest.py) writes again with the same calls (no motion files in the repository;
+generated clips are bit-identical, and the tests check their hashes against the stored
+ones); the tests check that the current code opens them and reads the same
 values. Do not run it again with a newer quatmotion: the point of the files is that an older
 release wrote them.
 """
