@@ -278,7 +278,8 @@ def _check_context_results(outcomes: list, n: int, *, most_loads: int = 1) -> No
         if pid != os.getpid():
             # each worker process unpickled the context once (not once per task)
             assert 1 <= loads <= most_loads
-    assert all(len(copies) == 1 for copies in by_process.values())  # one copy per process
+    # one copy per process (a loaded Dask worker may fetch the broadcast twice: most_loads)
+    assert all(1 <= len(copies) <= most_loads for copies in by_process.values())
 
 
 @pytest.mark.parametrize("runner", [Runner.inline(), Runner.local(workers=2)], ids=str)
