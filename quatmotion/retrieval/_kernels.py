@@ -79,11 +79,8 @@ def squared_distances(embeddings, query):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, fastmath=True, nogil=True)
-def subsequence_dtw(query, take):  # pragma: no cover - compiled
-    """Best match of ``query`` (n, d) anywhere in ``take`` (m, d): free start and end in the
-    take, step pattern symmetricP1 (steps (1,1) weight 2; (1,2) and (2,1) weights 2 + 1), so a
-    path's weight is n + matched length and the matched length lies between n/2 and 2n.
-    Euclidean local cost. Returns (cost per unit weight, first take frame, last + 1)."""
+def frame_distances(query, take):  # pragma: no cover - compiled
+    """Euclidean distance of every query frame to every take frame, ``(n, m)``."""
     n, m, d = query.shape[0], take.shape[0], query.shape[1]
     dist = np.empty((n, m))
     for i in range(n):
@@ -93,6 +90,17 @@ def subsequence_dtw(query, take):  # pragma: no cover - compiled
                 t = query[i, k] - take[j, k]
                 s += t * t
             dist[i, j] = np.sqrt(s)
+    return dist
+
+
+@nb.njit(cache=True, fastmath=True, nogil=True)
+def subsequence_dtw(dist):  # pragma: no cover - compiled
+    """Best match of the query anywhere in the take, from their frame distances ``dist``
+    (n, m): free start and end in the take, step pattern symmetricP1 (steps (1,1) weight 2;
+    (1,2) and (2,1) weights 2 + 1), so a path's weight is n + matched length and the matched
+    length lies between n/2 and 2n. Returns (cost per unit weight, first take frame,
+    last + 1)."""
+    n, m = dist.shape
     C = np.full((n, m), _INF)
     start = np.zeros((n, m), dtype=np.int64)
     for j in range(m):

@@ -203,18 +203,66 @@ def atom_matching_distances(
     return cost[:, np.arange(5)[None, :], _PERMUTATIONS].sum(-1).min(-1)
 
 
-def find_within(query: ArrayLike, take: ArrayLike) -> tuple[float, int, int]:
+# How far the refined ends may reach: take frames at most this many times the matched frames'
+# 90th-percentile distance to their nearest query frame still belong to the match.
+_REFINE_FACTOR = 2.0
+_REFINE_QUANTILE = 90.0
+
+
+def find_within(
+    query: ArrayLike, take: ArrayLike, *, refine: bool = True
+) -> tuple[float, int, int]:
     """Where ``query`` ``(n, d)`` matches best inside ``take`` ``(m, d)`` (subsequence DTW).
+
+    The match is the warping path of least Euclidean cost per unit path weight (step pattern
+    symmetricP1, module conventions), its length in the take between ``n/2`` and ``2n``. A
+    periodic motion at another tempo aligns whole cycles with fewer or more of the take's, so
+    its path can stop short of the segment; ``refine`` then re-aligns the ends on what each
+    take frame looks like: a take frame belongs to the match when its distance to its nearest
+    query frame is at most twice the 90th percentile of that distance over the matched frames.
+    The ends first move inward past matched frames that do not belong, then outward over
+    neighbours that do (so a take doing the query's motion for longer than the query is
+    matched whole).
+
+    Parameters
+    ----------
+    query, take : array_like, shapes (n, d) and (m, d)
+    refine : bool
+        Re-align the ends as above (default); False: the warping path's ends.
 
     Returns
     -------
     cost : float
-        Euclidean cost per unit path weight (``inf`` when the take is under half the query).
+        The path's Euclidean cost per unit path weight (``inf`` when the take is under half
+        the query); not changed by ``refine``.
     start, stop : int
         Frames of ``take``, ``stop`` exclusive.
     """
     q, x = _as_frames(query, "query"), _as_frames(take, "take")
     if q.shape[1] != x.shape[1]:
         raise ValueError(f"query has {q.shape[1]} columns, take {x.shape[1]}")
-    cost, start, stop = _kernels.subsequence_dtw(q, x)
-    return float(cost) if cost < 1e29 else float("inf"), int(start), int(stop)
+    frame_cost = _kernels.frame_distances(q, x)
+    cost, start, stop = _kernels.subsequence_dtw(frame_cost)
+    if cost >= 1e29:
+        return float("inf"), 0, 0
+    start, stop = int(start), int(stop)
+    if refine:
+        start, stop = _refine_ends(frame_cost.min(axis=0), start, stop)
+    return float(cost), start, stop
+
+
+def _refine_ends(nearest: FloatArray, start: int, stop: int) -> tuple[int, int]:
+    """The ends of a match ``[start, stop)`` re-aligned on ``nearest`` ``(m,)``, each take
+    frame's distance to its nearest query frame (see :func:`find_within`)."""
+    limit = _REFINE_FACTOR * float(np.percentile(nearest[start:stop], _REFINE_QUANTILE))
+    belongs = nearest <= limit
+    while stop - start > 1 and not belongs[stop - 1]:
+        stop -= 1
+    while stop - start > 1 and not belongs[start]:
+        start += 1
+    m = nearest.shape[0]
+    while stop < m and belongs[stop]:
+        stop += 1
+    while start > 0 and belongs[start - 1]:
+        start -= 1
+    return start, stop
