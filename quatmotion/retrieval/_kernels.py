@@ -178,3 +178,152 @@ def dtw_euclidean_to_candidates(query, frames, offsets, candidates, weights):
         c = candidates[t]
         out[t] = dtw_euclidean(query, frames[offsets[c] : offsets[c + 1]], weights, np.inf)
     return out
+
+
+_INF32 = np.float32(1e30)
+
+
+@nb.njit(cache=True, fastmath=True, nogil=True)
+def band_radius(n, m, radius):  # pragma: no cover - compiled
+    """The Sakoe-Chiba radius of :func:`dtw_band32` for lengths ``n``, ``m``: ``radius``
+    frames, at least half the slope plus one (so that a path exists)."""
+    slope = (m - 1) / max(n - 1, 1)
+    return max(float(radius), 0.5 * slope + 1.0)
+
+
+@nb.njit(cache=True, fastmath=True, nogil=True)
+def dtw_band32(a, b, r, cutoff):  # pragma: no cover - compiled
+    """DTW of float32 ``a`` (n, d) and ``b`` (m, d): Euclidean frame cost, steps (1,0), (0,1),
+    (1,1), a band of radius ``r`` frames around the diagonal rescaled to the two lengths,
+    path cost divided by ``n + m``, float32 sums. Returns ``inf`` (abandoned) once every cell
+    of a row exceeds ``cutoff`` (cost per ``n + m``; inf: never)."""
+    n, m, d = a.shape[0], b.shape[0], a.shape[1]
+    slope = (m - 1) / max(n - 1, 1)
+    limit = np.float32(cutoff * (n + m) * (1.0 + 1e-5)) if cutoff < 1e29 else _INF32
+    prev = np.full(m + 1, _INF32, dtype=np.float32)
+    cur = np.full(m + 1, _INF32, dtype=np.float32)
+    prev[0] = 0.0
+    for i in range(1, n + 1):
+        centre = (i - 1) * slope + 1
+        lo = max(1, int(np.floor(centre - r)))
+        hi = min(m, int(np.ceil(centre + r)))
+        cur[lo - 1] = _INF32
+        row_min = _INF32
+        for j in range(lo, hi + 1):
+            s = np.float32(0.0)
+            for k in range(d):
+                t = a[i - 1, k] - b[j - 1, k]
+                s += t * t
+            best = prev[j - 1]
+            if prev[j] < best:
+                best = prev[j]
+            if cur[j - 1] < best:
+                best = cur[j - 1]
+            v = np.float32(np.sqrt(s)) + best
+            cur[j] = v
+            if v < row_min:
+                row_min = v
+        if row_min > limit:
+            return np.inf
+        prev, cur = cur, prev
+    return float(prev[m]) / (n + m)
+
+
+@nb.njit(cache=True, nogil=True)
+def envelopes(frames, offsets, radius):  # pragma: no cover - compiled
+    """Upper and lower envelopes of every clip of ``frames`` (float32, concatenated): per
+    column, the max and min over frames ``j - radius .. j + radius`` of the same clip."""
+    upper = np.empty_like(frames)
+    lower = np.empty_like(frames)
+    d = frames.shape[1]
+    for c in range(offsets.shape[0] - 1):
+        a, b = offsets[c], offsets[c + 1]
+        for j in range(a, b):
+            lo = max(a, j - radius)
+            hi = min(b, j + radius + 1)
+            for k in range(d):
+                u = frames[lo, k]
+                w = u
+                for t in range(lo + 1, hi):
+                    x = frames[t, k]
+                    if x > u:
+                        u = x
+                    if x < w:
+                        w = x
+                upper[j, k] = u
+                lower[j, k] = w
+    return upper, lower
+
+
+@nb.njit(cache=True, fastmath=True, nogil=True)
+def lb_keogh(qp, upper, lower, a, m, r_env):  # pragma: no cover - compiled
+    """LB_Keogh of the projected query ``qp`` (n, p) against one clip's envelopes (rows
+    ``a .. a + m`` of ``upper``/``lower``, radius ``r_env``): the distance of each query frame
+    to the box of the frames its band row can reach, summed, over ``n + m``."""
+    n, p = qp.shape[0], qp.shape[1]
+    slope = (m - 1) / max(n - 1, 1)
+    total = 0.0
+    for i in range(n):
+        j = a + min(m - 1, int(np.floor(i * slope + 0.5)))
+        s = 0.0
+        for k in range(p):
+            x = qp[i, k]
+            if x > upper[j, k]:
+                t = x - upper[j, k]
+                s += t * t
+            elif x < lower[j, k]:
+                t = lower[j, k] - x
+                s += t * t
+        total += np.sqrt(s)
+    return total / (n + m)
+
+
+@nb.njit(cache=True, nogil=True)
+def fused_search(q, qp, frames, projected, upper, lower, offsets, radius, k, exclude):
+    """Exact ``k`` nearest clips under :func:`dtw_band32` (radius ``radius``), pruned.
+
+    ``q`` (n, D) and ``qp`` (n, p) are the query's stream and its projection on orthonormal
+    directions; ``frames``/``projected`` the library's, ``upper``/``lower`` the envelopes of
+    ``projected`` at radius ``radius + 1``. With ``k`` below the number of candidates, clips
+    are visited by increasing LB_Keogh (valid where the pair's band radius is ``radius``; 0
+    otherwise), skipped when the bound, or the DTW of the projections, exceeds the ``k``-th
+    best distance so far, and the full DTW abandons above it. Returns the distance of every
+    clip: exact where computed, ``inf`` where pruned (never one of the ``k`` nearest) or
+    ``exclude``; and the number of full DTWs computed."""
+    C = offsets.shape[0] - 1
+    n = q.shape[0]
+    out = np.full(C, np.inf)
+    candidates = C - (1 if 0 <= exclude < C else 0)
+    prune = k < candidates
+    order = np.arange(C)
+    lbs = np.zeros(C)
+    if prune:
+        for c in range(C):
+            m = offsets[c + 1] - offsets[c]
+            if band_radius(n, m, radius) <= radius:
+                lbs[c] = lb_keogh(qp, upper, lower, offsets[c], m, radius + 1)
+        order = np.argsort(lbs)
+    best = np.full(max(k, 1), np.inf)  # the k smallest distances so far, ascending
+    full = 0
+    slack = 1.0 + 1e-5
+    for t in range(C):
+        c = order[t]
+        if c == exclude:
+            continue
+        kth = best[k - 1] if prune else np.inf
+        if lbs[c] > kth * slack:
+            break  # every later clip's bound is larger
+        a, b = offsets[c], offsets[c + 1]
+        r = band_radius(n, b - a, radius)
+        if prune and kth < np.inf and dtw_band32(qp, projected[a:b], r, kth) > kth * slack:
+            continue
+        full += 1
+        d = dtw_band32(q, frames[a:b], r, kth)
+        out[c] = d
+        if prune and d < best[k - 1]:
+            pos = k - 1
+            while pos > 0 and best[pos - 1] > d:
+                best[pos] = best[pos - 1]
+                pos -= 1
+            best[pos] = d
+    return out, full

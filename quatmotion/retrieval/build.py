@@ -35,6 +35,7 @@ from quatmotion.io.labels import read_labels_csv
 from quatmotion.parallel import Failure, Runner, Scheduler
 from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
 from quatmotion.retrieval.index import ClipIndex, ClipRecord, IndexSettings
+from quatmotion.retrieval.methods import store_models
 
 __all__ = [
     "ClipJob",
@@ -250,6 +251,8 @@ def _run(
         on_doubt=on_doubt,
     )
     report.labels_changed = changed
+    if "motion" in settings.kinds:
+        store_models(index)
     if labels is not None:  # new clips labelled by the given mapping count as set
         given = match_keys(labels, todo).labels
         report.labels_changed += sum(1 for r in report.added if given.get(r.name))

@@ -440,7 +440,15 @@ class ClipIndex:
             ):
                 arrays[int(clip)][key] = _from_blob(data)
         rows = [r for r in rows if all(k in arrays[r.id] for k in keys)]
-        library = Library([arrays[r.id] for r in rows], [r.rotation_key for r in rows])
+        stored = {}
+        if self.version != 1:
+            stored = {
+                str(key): bytes(data)
+                for key, data in self._db.execute(
+                    "SELECT key, data FROM blobs WHERE key LIKE 'model:%'"
+                )
+            }
+        library = Library([arrays[r.id] for r in rows], [r.rotation_key for r in rows], stored)
         return rows, library
 
     def blob(self, key: str) -> bytes | None:

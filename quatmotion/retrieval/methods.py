@@ -17,10 +17,15 @@ features of every method it was built for.
   16 joints relative to the Hip and the Hip's trajectory, in the first frame's heading, in leg
   lengths), Euclidean frame cost, path cost divided by ``n + m``, every clip.
 - ``"pooled"``: Euclidean distance of the pooled embeddings (blind to temporal order).
-- ``"dtw-fused"`` (the default, :data:`DEFAULT_METHOD`): ``dtw-motion``'s distance (band 0.2,
-  at most :data:`MAX_WARP_S`) and ``dtw-heading``'s, each divided by its median over the
-  library, added with weights 1 and 2 (:class:`FusedDTW`): an exact ranking of every clip
-  that sees posture, rhythm, path and the sense of a turn.
+- ``"dtw-fused"`` (the default, :data:`DEFAULT_METHOD`): one DTW over the fused stream of
+  :mod:`quatmotion.retrieval.features_fused` (posture and travel in each frame's heading,
+  body and route in the first frame's, each part over a scale fixed per library), Euclidean
+  frame cost, band :data:`FUSED_RADIUS` frames
+  (:class:`FusedDTW`): it sees posture, rhythm, path and the sense of a turn. Exact over every
+  clip: with ``k`` given, LB_Keogh on the model's projection and the projection's DTW prune
+  clips that cannot be among the ``k`` nearest, the full DTW abandons early; ``k=None``
+  computes every distance. The model (scales, projection) is stored in an index
+  (:func:`store_models`) and refitted when missing, damaged or of other parameters.
 - ``"pooled+dtw"`` (the default before 0.4.0): the pooled embedding shortlists
   ``K = 64`` clips, DTW over the motion frames (band 0.2, at most :data:`MAX_WARP_S`)
   re-ranks them, and the two distances, each
@@ -36,8 +41,10 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from quatmotion.retrieval import _kernels
 from quatmotion.retrieval import distances as dist
 from quatmotion.retrieval.features import FEATURE_FPS, POSITION_DIM
+from quatmotion.retrieval.features_fused import MODEL_KEY, FusedModel, fit_fused_model
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -47,6 +54,7 @@ __all__ = [
     "QueryFeatures",
     "Ranking",
     "RetrievalMethod",
+    "store_models",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -85,10 +93,13 @@ class Library:
         methods that will rank it).
     fingerprints : list of str
         Per clip, its skeleton fingerprint.
+    stored : dict of str to bytes
+        What an index stores for the whole library (its ``blobs``: models by key).
     """
 
     features: list[dict[str, np.ndarray]]
     fingerprints: list[str]
+    stored: dict[str, bytes] = field(default_factory=dict)
     _cache: dict[str, object] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -151,15 +162,18 @@ class RetrievalMethod(Protocol):
     name: str
     kinds: tuple[str, ...]
 
-    def rank(self, library: Library, query: QueryFeatures, exclude: int = -1) -> Ranking:
-        """The library's clips best first (``exclude``: a clip number left out, e.g. the query)."""
+    def rank(
+        self, library: Library, query: QueryFeatures, exclude: int = -1, k: int | None = None
+    ) -> Ranking:
+        """The library's clips best first (``exclude``: a clip number left out, e.g. the
+        query; ``k``: the first ``k`` only, None: every clip)."""
         ...
 
 
-def _sorted(ids: NDArray[np.int64], d: FloatArray, exclude: int) -> Ranking:
+def _sorted(ids: NDArray[np.int64], d: FloatArray, exclude: int, k: int | None = None) -> Ranking:
     keep = ids != exclude
     ids, d = ids[keep], d[keep]
-    order = np.argsort(d, kind="stable")
+    order = np.argsort(d, kind="stable")[:k]
     return Ranking(ids[order], d[order])
 
 
@@ -174,14 +188,16 @@ class DictionaryMatching:
     def kinds(self) -> tuple[str, ...]:
         return (self.kind,)
 
-    def rank(self, library: Library, query: QueryFeatures, exclude: int = -1) -> Ranking:
+    def rank(
+        self, library: Library, query: QueryFeatures, exclude: int = -1, k: int | None = None
+    ) -> Ranking:
         ids, stack = library.atoms(self.kind, query.fingerprint)
         if ids.size == 0:
             return Ranking(np.zeros(0, dtype=np.int64), np.zeros(0))
         d = dist.atom_matching_distances(
             query.arrays[self.kind], stack, quaternion=self.kind == "qssd"
         )
-        return _sorted(ids, d, exclude)
+        return _sorted(ids, d, exclude, k)
 
 
 @dataclass(frozen=True)
@@ -193,12 +209,14 @@ class SequenceDTW:
     band: float
     kinds: tuple[str, ...] = ("motion",)
 
-    def rank(self, library: Library, query: QueryFeatures, exclude: int = -1) -> Ranking:
+    def rank(
+        self, library: Library, query: QueryFeatures, exclude: int = -1, k: int | None = None
+    ) -> Ranking:
         frames, offsets = library.frames
         d = dist.dtw_to_library(
             query.arrays["frames"], frames, offsets, band=self.band, dims=self.dims
         )
-        return _sorted(np.arange(len(library), dtype=np.int64), d, exclude)
+        return _sorted(np.arange(len(library), dtype=np.int64), d, exclude, k)
 
 
 @dataclass(frozen=True)
@@ -210,39 +228,106 @@ class PathDTW:
     kinds: tuple[str, ...] = ("motion",)
     keys: tuple[str, ...] = ("path",)
 
-    def rank(self, library: Library, query: QueryFeatures, exclude: int = -1) -> Ranking:
+    def rank(
+        self, library: Library, query: QueryFeatures, exclude: int = -1, k: int | None = None
+    ) -> Ranking:
         frames, offsets = library.packed("path")
         d = dist.dtw_euclidean_to_library(query.arrays["path"], frames, offsets)
-        return _sorted(np.arange(len(library), dtype=np.int64), d, exclude)
+        return _sorted(np.arange(len(library), dtype=np.int64), d, exclude, k)
+
+
+FUSED_RADIUS = 11
+"""Sakoe-Chiba radius of the default's DTW, frames at :data:`FEATURE_FPS` (1.1 s): at least
+half the length ratio plus one, so that a path exists."""
+
+
+def fused_model(library: Library) -> FusedModel:
+    """The library's :class:`FusedModel`: the one its index stores, or (missing, damaged or of
+    other parameters) fitted on the library, once per :class:`Library`."""
+    if "fused:model" not in library._cache:
+        model = None
+        data = library.stored.get(MODEL_KEY)
+        if data is not None:
+            try:
+                model = FusedModel.from_bytes(data)
+            except ValueError:  # FormatError included: refit
+                model = None
+        if model is None:
+            model = fit_fused_model(library._need("frames"), library._need("path"))
+        library._cache["fused:model"] = model
+    return library._cache["fused:model"]  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)
 class FusedDTW:
-    """Two exact DTW distances over every clip, each divided by its median over the library
-    and added: banded DTW over the motion frames (posture in each frame's own heading, the
-    Hip's velocity and the yaw rate) and unbanded DTW over the path frames (the first frame's
-    heading: where the body went and which way it turned). The first is blind to the path,
-    the second to the body's heading within a turn; the sum keeps both."""
+    """One banded Euclidean DTW over the fused stream (module docstring), exact over every
+    clip; with ``k``, pruned by lower bounds."""
 
     name: str
-    band: float = 0.2
-    max_radius: float = 0.0
-    path_weight: float = 2.0
+    radius: int = FUSED_RADIUS
     kinds: tuple[str, ...] = ("motion",)
     keys: tuple[str, ...] = ("frames", "path")
 
-    def rank(self, library: Library, query: QueryFeatures, exclude: int = -1) -> Ranking:
-        frames, offsets = library.frames
-        d_motion = dist.dtw_to_library(
-            query.arrays["frames"], frames, offsets, band=self.band, max_radius=self.max_radius
+    def _packed(self, library: Library) -> tuple[np.ndarray, ...]:
+        key = f"fused:{self.radius}"
+        if key not in library._cache:
+            model = fused_model(library)
+            streams = [
+                model.stream(f, p)
+                for f, p in zip(library._need("frames"), library._need("path"), strict=True)
+            ]
+            frames, offsets = dist.pack_sequences(streams)
+            if len(streams):
+                projected = model.project(frames)
+                upper, lower = _kernels.envelopes(projected, offsets, self.radius + 1)
+            else:
+                projected = upper = lower = np.zeros((0, model.projection.shape[0]), np.float32)
+            library._cache[key] = (frames, projected, upper, lower, offsets)
+        return library._cache[key]  # type: ignore[return-value]
+
+    def distances(
+        self, library: Library, query: QueryFeatures, exclude: int = -1, k: int | None = None
+    ) -> tuple[FloatArray, int]:
+        """Every clip's distance (``inf``: pruned, never one of the ``k`` nearest, or
+        ``exclude``) and the number of full DTWs computed."""
+        frames, projected, upper, lower, offsets = self._packed(library)
+        model = fused_model(library)
+        q = dist._as_frames(model.stream(query.arrays["frames"], query.arrays["path"]), "query")
+        kk = len(library) if k is None else max(1, int(k))
+        return _kernels.fused_search(
+            q, model.project(q), frames, projected, upper, lower, offsets, self.radius, kk, exclude
         )
-        paths, path_offsets = library.packed("path")
-        d_path = dist.dtw_euclidean_to_library(query.arrays["path"], paths, path_offsets)
-        keep = np.arange(len(library)) != exclude
-        fused = d_motion / _positive_median(d_motion[keep]) + self.path_weight * (
-            d_path / _positive_median(d_path[keep])
-        )
-        return _sorted(np.arange(len(library), dtype=np.int64), fused, exclude)
+
+    def rank(
+        self, library: Library, query: QueryFeatures, exclude: int = -1, k: int | None = None
+    ) -> Ranking:
+        if len(library) == 0:
+            return Ranking(np.zeros(0, dtype=np.int64), np.zeros(0))
+        d, _ = self.distances(library, query, exclude, k)
+        ids = np.arange(len(library), dtype=np.int64)
+        keep = np.isfinite(d) if k is not None else ids != exclude
+        return _sorted(ids[keep], d[keep], exclude, k)
+
+
+def store_models(index: object, seed: int = 0) -> bool:
+    """Fit and store in ``index`` (a writable :class:`~quatmotion.retrieval.index.ClipIndex`)
+    the default's model when it is missing, damaged, of other parameters, or fitted on fewer
+    clips than it would be now; returns whether it wrote one."""
+    from quatmotion.retrieval.features_fused import FIT_CLIPS
+
+    data = index.blob(MODEL_KEY)  # type: ignore[attr-defined]
+    _, library = index.load(("frames", "path"))  # type: ignore[attr-defined]
+    if len(library) == 0:
+        return False
+    if data is not None:
+        try:
+            if FusedModel.from_bytes(data).fitted_clips >= min(FIT_CLIPS, len(library)):
+                return False
+        except ValueError:
+            pass
+    model = fit_fused_model(library._need("frames"), library._need("path"), seed)
+    index.set_blob(MODEL_KEY, model.to_bytes())  # type: ignore[attr-defined]
+    return True
 
 
 @dataclass(frozen=True)
@@ -252,9 +337,11 @@ class PooledEmbedding:
     name: str
     kinds: tuple[str, ...] = ("motion",)
 
-    def rank(self, library: Library, query: QueryFeatures, exclude: int = -1) -> Ranking:
+    def rank(
+        self, library: Library, query: QueryFeatures, exclude: int = -1, k: int | None = None
+    ) -> Ranking:
         d = dist.embedding_distances(library.embeddings, query.arrays["embedding"])
-        return _sorted(np.arange(len(library), dtype=np.int64), d, exclude)
+        return _sorted(np.arange(len(library), dtype=np.int64), d, exclude, k)
 
 
 @dataclass(frozen=True)
@@ -268,7 +355,9 @@ class ShortlistThenDTW:
     dtw_weight: float = 1.0
     kinds: tuple[str, ...] = ("motion",)
 
-    def rank(self, library: Library, query: QueryFeatures, exclude: int = -1) -> Ranking:
+    def rank(
+        self, library: Library, query: QueryFeatures, exclude: int = -1, k: int | None = None
+    ) -> Ranking:
         d_emb = dist.embedding_distances(library.embeddings, query.arrays["embedding"])
         if 0 <= exclude < len(d_emb):
             d_emb[exclude] = np.inf
@@ -296,8 +385,8 @@ class ShortlistThenDTW:
         rest = np.flatnonzero(rest_mask)
         rest = rest[np.argsort(d_emb[rest], kind="stable")]
         return Ranking(
-            np.concatenate((short[order], rest)).astype(np.int64),
-            np.concatenate((fused[order], np.full(rest.size, np.nan))),
+            np.concatenate((short[order], rest)).astype(np.int64)[:k],
+            np.concatenate((fused[order], np.full(rest.size, np.nan)))[:k],
         )
 
 
@@ -319,7 +408,7 @@ METHODS: dict[str, RetrievalMethod] = {
     "dtw-motion": SequenceDTW("dtw-motion", dims=52, band=0.2),
     "dtw-heading": PathDTW("dtw-heading"),
     "pooled": PooledEmbedding("pooled"),
-    DEFAULT_METHOD: FusedDTW(DEFAULT_METHOD, max_radius=MAX_WARP_S * FEATURE_FPS),
+    DEFAULT_METHOD: FusedDTW(DEFAULT_METHOD),
     "pooled+dtw": ShortlistThenDTW("pooled+dtw", max_radius=MAX_WARP_S * FEATURE_FPS),
 }
 """Name -> method; every method the benchmark scores."""

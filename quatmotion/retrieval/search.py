@@ -143,7 +143,7 @@ def search(
     if method is None:
         method = default_method(index)
     rows, library, features, own = _query(index, query, method)
-    ranking = METHODS[method].rank(library, features, exclude=own)  # type: ignore[arg-type]
+    ranking = METHODS[method].rank(library, features, exclude=own, k=k)  # type: ignore[arg-type]
     if ranking.clips.size == 0 and len(rows):
         raise ValueError(
             f"no indexed clip compares with the query under {method}: it compares joint "

@@ -1,0 +1,218 @@
+"""The default method's per-frame streams and the per-library model that scales them.
+
+Conventions
+-----------
+* Built from the stored motion frames and path frames
+  (:mod:`quatmotion.retrieval.features`), so an index of the ``motion`` kind needs nothing
+  new. Four parts per frame (:data:`PARTS`):
+
+  - ``posture`` (48): the 16 joints in each frame's own body frame (the motion frames' first
+    columns, cm): what the body does, blind to where it faces;
+  - ``travel`` (4): the Hip's velocity in the body frame and the yaw rate (the motion frames'
+    last columns): the gait and the *sense* of a turn (the yaw rate's sign);
+  - ``body`` (48): the 16 joints relative to the Hip in the *first* frame's heading, in leg
+    lengths (the path frames' first columns): the posture as it turns during the clip;
+  - ``route`` (3): the Hip's trajectory from its first-frame position in that heading, in
+    leg lengths: the path travelled, a turn left against a turn right.
+* Invariances: the clip's start heading and position (every part is relative to the first
+  frame or to the body's own frame), body size (``body`` and ``route`` divided by the leg
+  length; ``posture`` and ``travel`` on a body scaled to one stature). *Not* invariant, on
+  purpose: left against right (a mirror changes the sign of the X coordinates), the sense of
+  a turn (the yaw rate's sign, the trajectory's X), the order and rhythm of frames (DTW).
+* The **fused stream** ``(T, 103)``: each part over its scale, times its weight
+  (:data:`WEIGHTS`). ``posture`` and ``travel`` (centimetres) are divided by a scale fixed
+  per library (:func:`fit_fused_model`): the median, over the frames of at most
+  :data:`FIT_CLIPS` clips drawn with a seeded generator, of the Euclidean norm of the part
+  minus its clip's mean (its spread within a clip; the raw norm is mostly the body's size).
+  ``body`` and ``route`` are in leg lengths already and keep scale 1: a library median of
+  the route measured unstable (how many clips stand still decides it: 0.04 to 0.9 leg
+  lengths on bandai1 by sample). Fixed scales make a distance independent of the query, and
+  one DTW compares the parts.
+* The model also holds :data:`N_COMPONENTS` principal directions of the fused frames
+  (orthonormal rows): the projection on which the exact search's lower bounds are computed
+  (an orthonormal projection never lengthens a difference, so a bound on the projection
+  bounds the full distance).
+* Stored in an index's ``blobs`` table under :data:`MODEL_KEY` as ``.npz`` bytes (no pickles):
+  a JSON header (format version, scales, weights, the number of clips fitted on, a SHA-256
+  digest of the header and the projection) and the projection. Bytes that do not read or
+  fail the digest raise :class:`~quatmotion.errors.FormatError`, another version or other
+  weights ``ValueError``; the method then refits (:meth:`FusedModel.from_bytes`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quatmotion.errors import FormatError
+
+__all__ = [
+    "FIT_CLIPS",
+    "FUSED_DIM",
+    "MODEL_KEY",
+    "N_COMPONENTS",
+    "PARTS",
+    "WEIGHTS",
+    "FusedModel",
+    "fit_fused_model",
+    "stream_parts",
+]
+
+MODEL_KEY = "model:dtw-fused"
+MODEL_VERSION = 1
+FIT_CLIPS = 48
+"""Clips the scales and the projection are fitted on, at most."""
+N_COMPONENTS = 16
+"""Principal directions of the projection the lower bounds use."""
+PARTS: tuple[tuple[str, int], ...] = (("posture", 48), ("travel", 4), ("body", 48), ("route", 3))
+"""The fused stream's parts and their widths, in order."""
+WEIGHTS: tuple[float, ...] = (1.0, 0.3, 2.0, 2.0)
+"""Weight of each part after its scale (docs/performance.md, 0.4.0, gives the trials)."""
+FUSED_DIM = sum(w for _, w in PARTS)
+_FITTED = (True, True, False, False)
+"""Which parts get a library scale (the others are in leg lengths: scale 1)."""
+
+
+def stream_parts(
+    frames: NDArray[np.floating], path: NDArray[np.floating]
+) -> list[NDArray[np.float64]]:
+    """The four parts (:data:`PARTS`) of a clip's motion frames ``(T, 52)`` and path frames
+    ``(T, 51)``."""
+    f = np.asarray(frames, dtype=np.float64)
+    p = np.asarray(path, dtype=np.float64)
+    return [f[:, :48], f[:, 48:], p[:, :48], p[:, 48:]]
+
+
+def _positive(x: float) -> float:
+    return x if np.isfinite(x) and x > 0 else 1.0
+
+
+@dataclass(frozen=True)
+class FusedModel:
+    """Scales and projection of the fused stream, fitted on one library."""
+
+    scales: tuple[float, ...]
+    projection: NDArray[np.float32]  # (N_COMPONENTS, FUSED_DIM), orthonormal rows
+    fitted_clips: int
+    weights: tuple[float, ...] = WEIGHTS
+
+    def stream(
+        self, frames: NDArray[np.floating], path: NDArray[np.floating]
+    ) -> NDArray[np.float32]:
+        """Fused stream ``(T, FUSED_DIM)`` float32 of a clip's motion and path frames."""
+        parts = stream_parts(frames, path)
+        out = np.concatenate(
+            [x * (w / s) for x, w, s in zip(parts, self.weights, self.scales, strict=True)], axis=1
+        )
+        return np.ascontiguousarray(out, dtype=np.float32)
+
+    def project(self, stream: NDArray[np.float32]) -> NDArray[np.float32]:
+        """The stream on the principal directions ``(T, N_COMPONENTS)``."""
+        return np.ascontiguousarray(stream @ self.projection.T, dtype=np.float32)
+
+    def _header(self) -> dict[str, object]:
+        return {
+            "version": MODEL_VERSION,
+            "scales": [float(x) for x in self.scales],
+            "weights": [float(x) for x in self.weights],
+            "fitted_clips": int(self.fitted_clips),
+            "shape": list(self.projection.shape),
+        }
+
+    def _digest(self) -> str:
+        h = hashlib.sha256(json.dumps(self._header(), sort_keys=True).encode())
+        h.update(np.ascontiguousarray(self.projection, dtype="<f4").tobytes())
+        return h.hexdigest()
+
+    def to_bytes(self) -> bytes:
+        """``.npz`` bytes: the header (with its digest) as JSON and the projection."""
+        header = dict(self._header(), digest=self._digest())
+        buf = io.BytesIO()
+        np.savez(
+            buf,
+            header=np.frombuffer(json.dumps(header, sort_keys=True).encode(), dtype=np.uint8),
+            projection=np.ascontiguousarray(self.projection, dtype="<f4"),
+        )
+        return buf.getvalue()
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> FusedModel:
+        """Read :meth:`to_bytes`'s bytes.
+
+        Raises
+        ------
+        FormatError
+            Bytes that do not read, or whose digest does not match (damaged).
+        ValueError
+            Another model version, other weights or shape than this code's (mismatched).
+        """
+        try:
+            with np.load(io.BytesIO(data), allow_pickle=False) as z:
+                header = json.loads(bytes(z["header"]).decode())
+                projection = np.array(z["projection"], dtype=np.float32)
+            model = cls(
+                tuple(float(x) for x in header["scales"]),
+                projection,
+                int(header["fitted_clips"]),
+                tuple(float(x) for x in header["weights"]),
+            )
+            version, digest = header["version"], header["digest"]
+        except Exception as exc:  # noqa: BLE001 - any damage reads as a format error
+            raise FormatError(f"{MODEL_KEY}: unreadable model ({exc})") from exc
+        if version != MODEL_VERSION:
+            raise ValueError(f"{MODEL_KEY}: version {version}, this code reads {MODEL_VERSION}")
+        if model._digest() != digest:
+            raise FormatError(f"{MODEL_KEY}: digest mismatch (damaged model)")
+        if (
+            projection.shape != (N_COMPONENTS, FUSED_DIM)
+            or len(model.scales) != len(PARTS)
+            or model.weights != WEIGHTS
+        ):
+            raise ValueError(f"{MODEL_KEY}: fitted with other parameters than this code's")
+        return model
+
+
+def fit_fused_model(
+    frames: list[NDArray[np.floating]],
+    paths: list[NDArray[np.floating]],
+    seed: int = 0,
+    weights: tuple[float, ...] = WEIGHTS,
+) -> FusedModel:
+    """Fit the scales and the projection on at most :data:`FIT_CLIPS` clips of a library
+    (their motion ``frames`` and ``paths`` frames), drawn with ``seed``; an empty library
+    gives unit scales. Other ``weights`` than :data:`WEIGHTS` read back as mismatched."""
+    rng = np.random.default_rng(seed)
+    picks = (
+        np.sort(rng.choice(len(paths), FIT_CLIPS, replace=False))
+        if len(paths) > FIT_CLIPS
+        else np.arange(len(paths))
+    )
+    eye = np.eye(N_COMPONENTS, FUSED_DIM, dtype=np.float32)
+    if not len(picks):
+        return FusedModel((1.0,) * len(PARTS), eye, 0, tuple(weights))
+    clips = [stream_parts(frames[int(i)], paths[int(i)]) for i in picks]
+    scales = tuple(
+        1.0
+        if not _FITTED[p]
+        else _positive(
+            float(
+                np.median(
+                    np.linalg.norm(np.concatenate([c[p] - c[p].mean(0) for c in clips]), axis=1)
+                )
+            )
+        )
+        for p in range(len(PARTS))
+    )
+    model = FusedModel(scales, eye, len(picks), tuple(weights))
+    X = np.concatenate([model.stream(frames[int(i)], paths[int(i)]) for i in picks]).astype(
+        np.float64
+    )
+    X = X - X.mean(axis=0)
+    # principal directions; with fewer frames than components, completed to an orthonormal set
+    _, _, vt = np.linalg.svd(np.concatenate((X, np.zeros((N_COMPONENTS, FUSED_DIM)))), False)
+    return FusedModel(scales, vt[:N_COMPONENTS].astype(np.float32), len(picks), tuple(weights))
