@@ -184,3 +184,20 @@ def test_learners_find_the_discriminative_axis() -> None:
         Xing().fit(U, A, B, np.ones(len(A), dtype=bool))
     with pytest.raises(ValueError, match="power"):
         LMS(power=3)
+
+
+def test_pair_logistic_weights_the_feature_that_separates_good_from_bad() -> None:
+    from quatmotion.pose.metric import PairLogistic
+
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(400, 5))
+    b = a + rng.normal(scale=0.5, size=a.shape)  # every feature differs by noise
+    good = np.arange(400) < 200
+    b[~good, 2] += rng.choice([-3.0, 3.0], size=200)  # bad pairs differ in feature 2
+    model = PairLogistic().fit(np.zeros((0, 5)), a, b, good)
+    assert np.argmax(model.weights_) == 2 and np.all(model.weights_ >= 0)
+    d = model.distances(a, b)
+    assert d[~good].min() > np.median(d[good])
+    np.testing.assert_allclose(model.pairwise(a[:3], b[:3]).diagonal(), d[:3])
+    with pytest.raises(ValueError, match="both"):
+        PairLogistic().fit(None, a, b, np.ones(400, bool))

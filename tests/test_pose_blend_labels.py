@@ -93,3 +93,29 @@ def test_settings_refuse_nonsense() -> None:
         bl.BlendSettings(blend_s=0)
     with pytest.raises(ValueError, match="natural_percentile"):
         bl.BlendSettings(natural_percentile=100)
+
+
+def test_batched_quantities_equal_pair_by_pair(clips: list[PoseClip]) -> None:
+    local = [c.local for c in clips]
+    world = [c.world for c in clips]
+    cand, _ = bl.candidate_pairs(local, n_queries=60, random_state=3)
+    rng = np.random.default_rng(3)
+    edges = np.array([[0, 0, 1, len(world[1]) - 1], [2, len(world[2]) - 1, 3, 0], [4, 5, 4, 5]])
+    pairs = np.concatenate((cand[rng.permutation(len(cand))[:150]], edges))
+    settings = bl.BlendSettings()
+    one = bl._quantities_one_by_one(world, pairs, FPS, settings)
+    np.testing.assert_allclose(
+        bl._quantities(world, pairs, FPS, settings), one, rtol=1e-9, atol=1e-9
+    )
+    ref = bl.natural_reference(world, FPS, n_windows=60, random_state=0)
+    artefact, _ = bl.judge(world, pairs, FPS, ref)
+    own_pairs = np.concatenate((pairs[:, [0, 1, 0, 1]], pairs[:, [2, 3, 2, 3]]))
+    own = bl._quantities_one_by_one(world, own_pairs, FPS, settings)
+    scale = np.maximum(np.maximum(own[: len(pairs)], own[len(pairs) :]), ref[None])
+    p = bl.QUANTITIES.index("penetration")
+    scale[:, p] = np.maximum(scale[:, p], settings.penetration_floor_cm)
+    expected = (one / np.maximum(scale, 1e-9)).max(axis=1)
+    good = lambda a: a <= bl.GOOD_RATIO  # noqa: E731
+    bad = lambda a: a >= bl.BAD_RATIO  # noqa: E731
+    np.testing.assert_array_equal(good(artefact), good(expected))
+    np.testing.assert_array_equal(bad(artefact), bad(expected))

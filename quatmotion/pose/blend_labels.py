@@ -279,10 +279,149 @@ def artefact_quantities(
     }
 
 
+_BATCH = 1024  # transitions played at once (memory: ~9 MB per 1,024 at 30 fps)
+
+
+def _synthesise_batch(
+    flat: FloatArray,
+    starts: IntArray,
+    lengths: IntArray,
+    floors_of: FloatArray,
+    pairs: IntArray,
+    fps: float,
+    settings: BlendSettings,
+) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
+    """:func:`synthesise` of many transitions at once, the same arithmetic per pair.
+
+    ``flat`` is every clip's world positions concatenated ((sum T, 16, 3)), ``starts`` and
+    ``lengths`` each clip's rows, ``floors_of`` each clip's floor; ``pairs`` (P, 4). Returns
+    ``motion`` (P, F, 16, 3), ``contact`` (P, F, 2), ``floors`` (P, F).
+    """
+    c = max(2, int(round(settings.context_s * fps)))
+    n_blend = max(1, int(round(settings.blend_s * fps)))
+    ca, fa, cb, fb = pairs.T
+    idx_a = starts[ca, None] + np.clip(fa[:, None] + np.arange(-c, 1), 0, lengths[ca, None] - 1)
+    idx_b = starts[cb, None] + np.clip(
+        fb[:, None] + np.arange(n_blend + c + 1), 0, lengths[cb, None] - 1
+    )
+    before = flat[idx_a]  # (P, c+1, 16, 3)
+    after = flat[idx_b]  # (P, n+c+1, 16, 3)
+    P = len(pairs)
+    # 1. root
+    turn = _heading(flat[starts[ca] + fa]) - _heading(flat[starts[cb] + fb])
+    R = _rot_y(turn)  # (P, 3, 3)
+    centre = after[:, 0, 0] * np.array([1.0, 0.0, 1.0])
+    out_after = np.matmul(after - centre[:, None, None], np.swapaxes(R, 1, 2)[:, None])
+    out_after[..., [0, 2]] += before[:, -1, 0, [0, 2]][:, None, None]
+    # 2. blend of bone directions
+    k = np.arange(after.shape[1], dtype=np.float64) / n_blend
+    w = 1.0 - np.clip(3 * k**2 - 2 * k**3, 0.0, 1.0)
+    w[k >= 1] = 0.0
+    last = before[:, -1]
+    bones_a = _unit(last[:, 1:] - last[:, _PARENTS[1:]])  # (P, 15, 3)
+    bones_b = _unit(out_after[:, :, 1:] - out_after[:, :, _PARENTS[1:]])  # (P, n, 15, 3)
+    length = np.linalg.norm(last[:, 1:] - last[:, _PARENTS[1:]], axis=-1)  # (P, 15)
+    bones = _rotate_towards(bones_b, bones_b[:, :1], bones_a[:, None], w[None, :, None, None])
+    root = out_after[:, :, 0].copy()
+    root[:, :, 1] += w[None] * (last[:, 0, 1] - out_after[:, 0, 0, 1])[:, None]
+    blended = np.empty_like(out_after)
+    blended[:, :, 0] = root
+    for joint in range(1, 16):
+        blended[:, :, joint] = (
+            blended[:, :, _PARENTS[joint]]
+            + bones[:, :, joint - 1] * length[:, None, joint - 1, None]
+        )
+    motion = np.concatenate((before, blended[:, 1:]), axis=1)
+    # 3. contacts and the root-offset clean-up
+    nb, na = before.shape[1], after.shape[1] - 1
+    src = np.concatenate((before, after[:, 1:]), axis=1)
+    floors = np.concatenate(
+        (np.repeat(floors_of[ca, None], nb, 1), np.repeat(floors_of[cb, None], na, 1)), axis=1
+    )
+    feet = list(_FEET)
+    speed = np.zeros((P, src.shape[1], 2))
+    speed[:, 1:] = np.linalg.norm(np.diff(src[:, :, feet][..., [0, 2]], axis=1), axis=-1) * fps
+    speed[:, 0] = speed[:, 1]
+    contact = (src[:, :, feet, 1] - floors[:, :, None] < settings.contact_height_cm) & (
+        speed < settings.contact_speed_cm_s
+    )
+    offset = np.zeros((P, 2))
+    for f in range(nb, motion.shape[1]):
+        motion[:, f, :, 0] += offset[:, 0, None]
+        motion[:, f, :, 2] += offset[:, 1, None]
+        planted = contact[:, f] & contact[:, f - 1]  # (P, 2)
+        n_planted = planted.sum(axis=1)
+        step = (motion[:, f, feet] - motion[:, f - 1, feet])[..., [0, 2]]  # (P, 2, 2)
+        slide = np.where(
+            planted[..., None], step, 0.0
+        ).sum(axis=1) / np.maximum(n_planted, 1)[:, None]  # fmt: skip
+        slide[n_planted == 0] = 0.0
+        motion[:, f, :, 0] -= slide[:, 0, None]
+        motion[:, f, :, 2] -= slide[:, 1, None]
+        offset -= slide
+        on = contact[:, f]
+        n_on = on.sum(axis=1)
+        fl = floors[:, f, None]
+        lift = (src[:, f, feet, 1] - fl) - (motion[:, f, feet, 1] - fl)  # (P, 2)
+        lift = np.where(on, lift, 0.0).sum(axis=1) / np.maximum(n_on, 1)
+        motion[:, f, :, 1] += np.where(n_on > 0, lift, 0.0)[:, None]
+        depth = floors[:, f] - motion[:, f, feet, 1].min(axis=1)
+        motion[:, f, :, 1] += np.where(depth > 0, depth, 0.0)[:, None]
+    return motion, contact, floors
+
+
+def _artefact_batch(
+    motion: FloatArray, contact: NDArray[np.bool_], floors: FloatArray, fps: float
+) -> FloatArray:
+    """:func:`artefact_quantities` of a batch: (P, F, 16, 3) windows -> (P, 5)."""
+    feet = motion[:, :, list(_FEET)]
+    speed = np.linalg.norm(np.diff(feet[..., [0, 2]], axis=1), axis=-1) * fps  # (P, F-1, 2)
+    planted = contact[:, 1:] & contact[:, :-1]
+    bones = _unit(motion[:, :, 1:] - motion[:, :, _PARENTS[1:]])
+    acc = np.linalg.norm(np.diff(bones, 2, axis=1), axis=-1) * fps**2
+    jerk = np.linalg.norm(np.diff(bones, 3, axis=1), axis=-1) * fps**3
+    root_jump = np.linalg.norm(np.diff(motion[:, :, 0, ::2], 2, axis=1), axis=-1) * fps**2
+    depth = floors[:, :, None] - motion[..., 1]
+    return np.stack(
+        [
+            np.where(planted, speed, 0.0).max(axis=(1, 2)),
+            acc.max(axis=(1, 2)),
+            jerk.max(axis=(1, 2)),
+            root_jump.max(axis=1),
+            np.maximum(0.0, depth.max(axis=(1, 2))),
+        ],
+        axis=1,
+    )
+
+
 def _quantities(
     world: Sequence[FloatArray], pairs: IntArray, fps: float, settings: BlendSettings
 ) -> FloatArray:
-    """(P, 5) quantities of the played transitions ``(clip_a, frame_a, clip_b, frame_b)``."""
+    """(P, 5) quantities of the played transitions ``(clip_a, frame_a, clip_b, frame_b)``,
+    :data:`_BATCH` at a time (:func:`_synthesise_batch`; equal to :func:`synthesise` and
+    :func:`artefact_quantities` pair by pair, tested)."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 4)
+    out = np.empty((len(pairs), len(QUANTITIES)))
+    if not len(pairs):
+        return out
+    lengths = np.array([len(w) for w in world], dtype=np.int64)
+    starts = np.r_[0, np.cumsum(lengths)[:-1]]
+    flat = np.concatenate(world)
+    floors_of = np.array([_floor(w) for w in world])
+    for s in range(0, len(pairs), _BATCH):
+        batch = pairs[s : s + _BATCH]
+        motion, contact, floors = _synthesise_batch(
+            flat, starts, lengths, floors_of, batch, fps, settings
+        )
+        out[s : s + len(batch)] = _artefact_batch(motion, contact, floors, fps)
+    return out
+
+
+def _quantities_one_by_one(
+    world: Sequence[FloatArray], pairs: IntArray, fps: float, settings: BlendSettings
+) -> FloatArray:
+    """:func:`_quantities` pair by pair through :func:`synthesise` (the reference the batch is
+    tested against)."""
     out = np.empty((len(pairs), len(QUANTITIES)))
     for p, (ca, fa, cb, fb) in enumerate(pairs):
         motion, contact, floors = synthesise(world[ca], fa, world[cb], fb, fps, settings)

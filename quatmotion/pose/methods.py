@@ -4,10 +4,11 @@
 
 - ``"F+L"`` for every feature ``F`` in :data:`FEATURES` (``JO``, ``JC``, ``JRF``, ``GPD``) and
   learner ``L`` in :data:`LEARNERS` (``L2``, ``LMS``, ``Xing``, ``SDA``, ``RDSR``): Fig. 6's
-  grid. Features are normalised as the paper does for GPD (per-dimension min-max fitted on all
-  training poses, clipped to that range, then unit length) so every learner sees comparable
-  inputs. ``JRF+LMS`` is Eq. 44 (weighted absolute differences); the other ``+LMS`` are
-  weighted L2.
+  grid; and ``LOGIT`` (:class:`~quatmotion.pose.metric.PairLogistic`: a weighted L2 learned
+  by logistic regression on good and bad pairs, issue 20). Features are normalised as the
+  paper does for GPD (per-dimension min-max fitted on all training poses, clipped to that
+  range, then unit length) so every learner sees comparable inputs. ``JRF+LMS`` is Eq. 44
+  (weighted absolute differences); the other ``+LMS`` are weighted L2.
 
 One implementation: :class:`~quatmotion.pose.library.PoseLibrary` learns its metric by
 ``METHODS[name]`` (:meth:`FeatureMetric.fit_features`) and stores
@@ -24,7 +25,7 @@ sweep); ``random_state`` is accepted by every method.
 
 Pairs are two aligned :class:`~quatmotion.pose.data.PoseData` and a boolean label per pair
 (True = similar / a good transition). Unsupervised methods ignore the labels; RDSR uses only the
-similar pairs; LMS, Xing and SDA use both.
+similar pairs; LMS, Xing, SDA and LOGIT use both.
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ from quatmotion.pose.baselines import (
     joint_relative_features,
 )
 from quatmotion.pose.data import PoseData
-from quatmotion.pose.metric import RDSR
+from quatmotion.pose.metric import RDSR, PairLogistic
 from quatmotion.pose.scaler import MinMaxUnitScaler
 
 __all__ = [
@@ -94,7 +95,7 @@ FEATURES: dict[str, Callable[[PoseData], FloatArray]] = {
     "GPD": lambda data: np.asarray(data.gpd),
 }
 
-LEARNERS: tuple[str, ...] = ("L2", "LMS", "Xing", "SDA", "RDSR")
+LEARNERS: tuple[str, ...] = ("L2", "LMS", "Xing", "SDA", "RDSR", "LOGIT")
 
 
 class _L2:
@@ -176,6 +177,8 @@ def _make_learner(feature: str, learner: str, kwargs: dict[str, Any]) -> Any:
         return SDA(**kwargs)
     if learner == "RDSR":
         return _RDSRLearner(random_state=random_state, **kwargs)
+    if learner == "LOGIT":
+        return PairLogistic(**kwargs)
     raise ValueError(f"unknown learner {learner!r}")
 
 
@@ -224,7 +227,7 @@ class FeatureMetric:
         self.learner = learner
         self.clip = clip
         self.kwargs = dict(kwargs)
-        self.uses_dissimilar = learner in ("LMS", "Xing", "SDA")
+        self.uses_dissimilar = learner in ("LMS", "Xing", "SDA", "LOGIT")
         if estimator is not None:
             self.learner_ = _RDSRLearner(estimator=estimator)
         else:
@@ -287,7 +290,7 @@ class FeatureMetric:
             return learner.projection(n_features)
         if isinstance(learner, _RDSRLearner):
             return learner.projection()
-        if isinstance(learner, LMS):
+        if isinstance(learner, (LMS, PairLogistic)):
             if learner.power != 2:
                 return None
             kept = np.flatnonzero(learner.weights_ > 0)

@@ -36,6 +36,7 @@ import numba
 import numpy as np
 import scipy.linalg
 import scipy.sparse
+import scipy.special
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.distance import cdist
 from sklearn.base import BaseEstimator, TransformerMixin
@@ -43,6 +44,7 @@ from sklearn.utils.validation import check_is_fitted
 from threadpoolctl import threadpool_limits
 
 __all__ = [
+    "PairLogistic",
     "RDSR",
     "sparse_codes",
     "trace_ratio",
@@ -595,3 +597,85 @@ class RDSR(TransformerMixin, BaseEstimator):
     def distances(self, A: ArrayLike, B: ArrayLike) -> FloatArray:
         """Learned distances between aligned rows of A and B, both (P, D): (P,)."""
         return np.linalg.norm(self.transform(A) - self.transform(B), axis=1)
+
+
+# ------------------------------------------------------------------------------------------
+# Learning from good and bad pairs
+# ------------------------------------------------------------------------------------------
+class PairLogistic:
+    """A weighted L2 distance learned by logistic regression on good *and* bad pairs.
+
+    The squared distance ``sum_k w_k (a_k - b_k)^2`` (``w >= 0``) minus a threshold ``c`` is
+    the log-odds that a pair is bad (a transition that plays badly): ``w`` and ``c`` minimise
+    the mean logistic loss over the labelled pairs plus ``alpha / 2 * ||v||^2``, ``v`` the
+    weights in units of each feature's mean squared difference over the pairs (so ``alpha``
+    does not depend on the features' scale). Bounded L-BFGS; convex, so deterministic.
+
+    Parameters
+    ----------
+    alpha : float
+        Ridge penalty (on the standardised weights), > 0.
+    max_iter : int
+
+    Attributes
+    ----------
+    weights_ : ndarray, shape (D,)
+        ``w`` (non-negative).
+    threshold_ : float
+        ``c``: pairs with a squared distance above it are more likely bad than good.
+    power : int
+        2 (the distance is Euclidean after scaling each feature by ``sqrt(w)``).
+    """
+
+    power = 2
+
+    def __init__(self, alpha: float = 1e-3, max_iter: int = 500) -> None:
+        if not alpha > 0:
+            raise ValueError(f"alpha must be positive, got {alpha}")
+        if max_iter < 1:
+            raise ValueError(f"max_iter must be at least 1, got {max_iter}")
+        self.alpha = alpha
+        self.max_iter = max_iter
+
+    def fit(
+        self, X_unlabeled: ArrayLike, X_a: ArrayLike, X_b: ArrayLike, labels: ArrayLike
+    ) -> PairLogistic:
+        """Fit on pairs ``(X_a[i], X_b[i])`` (P, D), labels True = similar (a good pair)."""
+        from scipy.optimize import minimize
+
+        similar = np.asarray(labels, dtype=bool).reshape(-1)
+        if similar.all() or not similar.any():
+            raise ValueError("PairLogistic needs both similar and dissimilar pairs")
+        d2 = (np.asarray(X_a, dtype=np.float64) - np.asarray(X_b, dtype=np.float64)) ** 2
+        unit = d2.mean(axis=0)
+        unit = np.where(unit > 0, unit, 1.0)
+        Z = d2 / unit
+        sign = np.where(similar, -1.0, 1.0)  # +1: bad
+        n, d = Z.shape
+
+        def loss(theta: FloatArray) -> tuple[float, FloatArray]:
+            v, c = theta[:d], theta[d]
+            m = sign * (Z @ v - c)  # margin: positive when right
+            loss = np.logaddexp(0.0, -m).mean() + 0.5 * self.alpha * v @ v
+            g = -sign * scipy.special.expit(-m) / n  # d loss / d logit
+            grad = np.r_[Z.T @ g + self.alpha * v, -g.sum()]
+            return float(loss), grad
+
+        theta0 = np.r_[np.full(d, 1.0 / d), 1.0]
+        bounds = [(0.0, None)] * d + [(None, None)]
+        result = minimize(
+            loss, theta0, jac=True, method="L-BFGS-B", bounds=bounds,
+            options={"maxiter": self.max_iter},
+        )  # fmt: skip
+        self.weights_ = np.maximum(result.x[:d], 0.0) / unit
+        self.threshold_ = float(result.x[d])
+        self.n_iter_ = int(result.nit)
+        return self
+
+    def distances(self, A: ArrayLike, B: ArrayLike) -> FloatArray:
+        diff = np.asarray(A, dtype=np.float64) - np.asarray(B, dtype=np.float64)
+        return np.sqrt(diff**2 @ self.weights_)
+
+    def pairwise(self, Q: ArrayLike, B: ArrayLike) -> FloatArray:
+        s = np.sqrt(self.weights_)
+        return cdist(np.asarray(Q) * s, np.asarray(B) * s)
