@@ -16,6 +16,8 @@ Conventions
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba
 import numpy as np
 from numpy.typing import NDArray
@@ -23,7 +25,10 @@ from scipy.interpolate import make_lsq_spline
 
 __all__ = [
     "MIN_SPLINE_FRAMES",
+    "SegmentTables",
+    "evaluate_channels",
     "evaluate_segments",
+    "segment_tables",
     "fit_segments",
     "knot_vector",
     "n_rows",
@@ -104,6 +109,181 @@ def _evaluate(t, c, L, out, row0):  # pragma: no cover - compiled
                     d[q, ch] = (1.0 - alpha) * d[q - 1, ch] + alpha * d[q, ch]
         for ch in range(C):
             out[row0 + f, ch] = d[3, ch]
+
+
+@dataclass(frozen=True)
+class SegmentTables:
+    """A clip's segments flattened for the compiled evaluators (:func:`segment_tables`).
+
+    ``first[s]``, ``length[s]`` and ``rows[s]`` are segment ``s``'s first frame, frames and
+    first coefficient row; ``spline[s]`` whether it is a spline (else one row per frame);
+    ``knots[knot_start[s] : knot_start[s + 1]]`` its clamped knot vector (empty for frames).
+    """
+
+    first: NDArray[np.int64]
+    length: NDArray[np.int64]
+    rows: NDArray[np.int64]
+    spline: NDArray[np.bool_]
+    knots: NDArray[np.float64]
+    knot_start: NDArray[np.int64]
+    n_rows: int
+
+
+def segment_tables(
+    n_frames: int, breaks, spacing: float, inserted: dict[int, tuple[int, ...]] | None = None
+) -> SegmentTables:
+    """The :class:`SegmentTables` of a clip's segments (each knot vector built once)."""
+    inserted = inserted or {}
+    bounds = segment_bounds(n_frames, breaks)
+    S = len(bounds)
+    first = np.empty(S, dtype=np.int64)
+    length = np.empty(S, dtype=np.int64)
+    rows = np.empty(S, dtype=np.int64)
+    spline = np.zeros(S, dtype=np.bool_)
+    knot_start = np.zeros(S + 1, dtype=np.int64)
+    knots = []
+    pos = 0
+    for s, (a, b) in enumerate(bounds):
+        L = b - a
+        first[s], length[s], rows[s] = a, L, pos
+        if L < MIN_SPLINE_FRAMES or spacing < 2:
+            pos += L
+            knot_start[s + 1] = knot_start[s]
+            continue
+        t = _knots(L, float(spacing), tuple(inserted.get(s, ())))
+        spline[s] = True
+        knots.append(t)
+        knot_start[s + 1] = knot_start[s] + len(t)
+        pos += len(t) - 4
+    flat = np.concatenate(knots) if knots else np.zeros(0)
+    return SegmentTables(first, length, rows, spline, flat, knot_start, pos)
+
+
+_KNOTS: dict[tuple, NDArray[np.float64]] = {}
+
+
+def _knots(length: int, spacing: float, inserted: tuple) -> NDArray[np.float64]:
+    """:func:`knot_vector`, cached (clips of a library share their few segment lengths)."""
+    key = (length, spacing, inserted)
+    t = _KNOTS.get(key)
+    if t is None:
+        if len(_KNOTS) > 4096:
+            _KNOTS.clear()
+        t = _KNOTS[key] = knot_vector(length, spacing, inserted)
+        t.flags.writeable = False
+    return t
+
+
+@numba.njit(inline="always", cache=True)
+def cubic_basis(knots, t0, n, x):  # pragma: no cover - compiled
+    """The knot interval ``i`` of ``x`` (the last in ``[3, n - 1]`` with ``t[i] <= x``) and the
+    four cubic B-spline values at ``x`` of rows ``i - 3 .. i`` (Cox-de Boor)."""
+    lo = 3
+    hi = n - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if x >= knots[t0 + mid]:
+            lo = mid
+        else:
+            hi = mid - 1
+    N0, N1, N2, N3 = _basis_at(knots, t0, lo, x)
+    return lo, N0, N1, N2, N3
+
+
+@numba.njit(inline="always", cache=True)
+def _basis_at(knots, t0, i, x):  # pragma: no cover - compiled
+    N0, N1, N2, N3 = 1.0, 0.0, 0.0, 0.0
+    # degree 1
+    l1 = x - knots[t0 + i]
+    r1 = knots[t0 + i + 1] - x
+    den = r1 + l1
+    tmp = N0 / den if den > 0.0 else 0.0
+    N0 = r1 * tmp
+    N1 = l1 * tmp
+    # degree 2
+    l2 = x - knots[t0 + i - 1]
+    r2 = knots[t0 + i + 2] - x
+    den = r1 + l2
+    tmp = N0 / den if den > 0.0 else 0.0
+    N0 = r1 * tmp
+    saved = l2 * tmp
+    den = r2 + l1
+    tmp = N1 / den if den > 0.0 else 0.0
+    N1 = saved + r2 * tmp
+    N2 = l1 * tmp
+    # degree 3
+    l3 = x - knots[t0 + i - 2]
+    r3 = knots[t0 + i + 3] - x
+    den = r1 + l3
+    tmp = N0 / den if den > 0.0 else 0.0
+    N0 = r1 * tmp
+    saved = l3 * tmp
+    den = r2 + l2
+    tmp = N1 / den if den > 0.0 else 0.0
+    N1 = saved + r2 * tmp
+    saved = l2 * tmp
+    den = r3 + l1
+    tmp = N2 / den if den > 0.0 else 0.0
+    N2 = saved + r3 * tmp
+    N3 = l1 * tmp
+    return N0, N1, N2, N3
+
+
+@numba.njit(cache=True)
+def _evaluate_channels(first, length, rows, spl, knots, ks, P, cols, scale, X):  # pragma: no cover
+    C = cols.shape[0]
+    alpha = np.empty(6)
+    for s in range(first.shape[0]):
+        a = first[s]
+        r0 = rows[s]
+        if not spl[s]:
+            for f in range(length[s]):
+                for ch in range(C):
+                    X[a + f, cols[ch]] = P[r0 + f, ch] / scale[ch]
+            continue
+        t0 = ks[s]
+        n = ks[s + 1] - t0 - 4
+        interval = 3
+        for f in range(length[s]):
+            x = float(f)
+            while interval < n - 1 and x >= knots[t0 + interval + 1]:
+                interval += 1
+            # _evaluate's de Boor steps with the weights shared by every channel (the same
+            # arithmetic, so the same bits)
+            k = 0
+            for r in range(1, 4):
+                for q in range(3, r - 1, -1):
+                    i = interval - 3 + q
+                    den = knots[t0 + i + 4 - r] - knots[t0 + i]
+                    alpha[k] = (x - knots[t0 + i]) / den if den > 0.0 else 0.0
+                    k += 1
+            b = r0 + interval - 3
+            for ch in range(C):
+                d0, d1, d2, d3 = P[b, ch], P[b + 1, ch], P[b + 2, ch], P[b + 3, ch]
+                d3 = (1.0 - alpha[0]) * d2 + alpha[0] * d3
+                d2 = (1.0 - alpha[1]) * d1 + alpha[1] * d2
+                d1 = (1.0 - alpha[2]) * d0 + alpha[2] * d1
+                d3 = (1.0 - alpha[3]) * d2 + alpha[3] * d3
+                d2 = (1.0 - alpha[4]) * d1 + alpha[4] * d2
+                d3 = (1.0 - alpha[5]) * d2 + alpha[5] * d3
+                X[a + f, cols[ch]] = d3 / scale[ch]
+
+
+def evaluate_channels(
+    tables: SegmentTables,
+    P: NDArray[np.float64],
+    cols: NDArray[np.int64],
+    scale: NDArray[np.float64],
+    X: NDArray[np.float64],
+) -> None:
+    """Every segment's spline (coefficient rows ``P`` ``(n, c)``, weighted units) at its
+    frames, divided by ``scale`` ``(c,)``, into the columns ``cols`` of ``X`` ``(T, C)``: one
+    compiled pass over every channel's control points, the same values as
+    :func:`evaluate_segments` to the bit."""
+    _evaluate_channels(
+        tables.first, tables.length, tables.rows, tables.spline, tables.knots,
+        tables.knot_start, P, cols, scale, X,
+    )  # fmt: skip
 
 
 def evaluate_segments(

@@ -49,11 +49,12 @@ from quatmotion.codec.metrics import frame_errors
 from quatmotion.codec.spline import (
     MIN_SPLINE_FRAMES,
     SplineBasis,
-    evaluate_segments,
+    evaluate_channels,
     fit_segments,
     knot_vector,
     n_rows,
     segment_bounds,
+    segment_tables,
 )
 from quatmotion.errors import FormatError
 from quatmotion.quat import conjugate, multiply
@@ -231,9 +232,12 @@ def _residuals(
 
 
 @numba.njit(cache=True)
-def _unpredict_kernel(R, starts, mean, a1, a2):  # pragma: no cover - compiled
+def _unpredict_kernel(R, starts, mean, a1, a2, step):  # pragma: no cover - compiled
+    """Inverse of :func:`_residuals`, the rows ``Q`` returned as ``Q step`` (weighted units):
+    ``(n, c)`` float."""
     n, c = R.shape
-    Q = np.empty_like(R)
+    Q = np.empty((n, c), dtype=np.int64)
+    P = np.empty((n, c))
     for i in range(n):
         for k in range(c):
             if starts[i]:
@@ -242,21 +246,8 @@ def _unpredict_kernel(R, starts, mean, a1, a2):  # pragma: no cover - compiled
                 Q[i, k] = R[i, k] + np.int64(np.round(a1[k] * Q[i - 1, k] + a2[k] * Q[i - 2, k]))
             else:
                 Q[i, k] = R[i, k] + Q[i - 1, k]
-    return Q
-
-
-def _unpredict(
-    R: NDArray[np.int64], starts, model: SplineModel, step: float, cols
-) -> NDArray[np.int64]:
-    """Inverse of :func:`_residuals` (a compiled loop: it runs at every decode)."""
-    mean = np.round(model.start_mean[cols] / step).astype(np.int64)
-    return _unpredict_kernel(
-        np.ascontiguousarray(R, dtype=np.int64),
-        np.asarray(starts, dtype=np.bool_),
-        mean,
-        np.ascontiguousarray(model.a1[cols]),
-        np.ascontiguousarray(model.a2[cols]),
-    )
+            P[i, k] = Q[i, k] * step
+    return P
 
 
 class SplineMethod(Method):
@@ -513,40 +504,66 @@ class SplineMethod(Method):
     def load_model(self, data: bytes, layout: LayoutInfo) -> Any:
         return SplineModel.from_bytes(data, layout.layout.n_channels)
 
-    def decode_segments(
-        self, model: Any, payload: bytes, context: ClipContext
-    ) -> tuple[ClipPlan, list[NDArray[np.float64]], NDArray[np.int64], NDArray[np.float64]]:
-        """A clip's plan, each segment's coefficient rows ``(n_s, c)`` in weighted units, the
-        ``c`` active channel indices and their scales (channel = weighted / scale): the spline
-        itself, for sampling between frames."""
+    def decode_coefficients(self, model: Any, payload: bytes, context: ClipContext) -> tuple:
+        """A clip's plan, its :class:`~quatmotion.codec.spline.SegmentTables`, the coefficient
+        rows ``P`` ``(n, c)`` in weighted units, the ``c`` active channels and their scales
+        (channel = weighted / scale): what the frames
+        and the spline between them are evaluated from (no frame evaluated yet)."""
         r = Reader(payload, what=f"{self.name} clip")
         T = context.n_frames
         plan = ClipPlan.read(r, T)
         step = step_value(plan.step)
-        cols = np.flatnonzero(context.active)
-        starts = _segment_starts(T, plan)
+        tables = segment_tables(T, plan.breaks, plan.spacing, plan.inserted)
+        starts = np.zeros(tables.n_rows, dtype=np.bool_)
+        starts[tables.rows[tables.length > 0]] = True
+        cols, initial, start_scale, a1, a2, scale, start_mean = _columns(model, context.active)
         try:
             R = entropy.decode_rows(
-                r.take(r.remaining),
-                len(starts),
-                model.initial[cols] / step,
-                model.start_scale[cols] / step,
-                starts,
+                r.take(r.remaining), len(starts), initial / step, start_scale / step, starts
             )
         except ValueError as error:
             raise FormatError(f"{self.name} clip: {error}") from None
-        Q = _unpredict(R, starts, model, step, cols)
-        rows = []
-        pos = 0
-        for s, (a, b) in enumerate(segment_bounds(T, plan.breaks)):
-            n = n_rows(b - a, plan.spacing, plan.inserted.get(s, ()))
-            rows.append(Q[pos : pos + n] * step)
-            pos += n
-        return plan, rows, cols, model.scale[cols]
+        mean = np.round(start_mean / step).astype(np.int64)
+        P = _unpredict_kernel(R, starts, mean, a1, a2, step)
+        return plan, tables, P, cols, scale
+
+    def decode_segments(
+        self, model: Any, payload: bytes, context: ClipContext
+    ) -> tuple[ClipPlan, list[NDArray[np.float64]], NDArray[np.int64], NDArray[np.float64]]:
+        """A clip's plan, each segment's coefficient rows ``(n_s, c)`` in weighted units, the
+        ``c`` active channel indices and their scales (channel = weighted / scale)."""
+        plan, tables, P, cols, scale = self.decode_coefficients(model, payload, context)
+        rows = [
+            P[a : a + n]
+            for a, n in zip(tables.rows, np.diff(np.r_[tables.rows, tables.n_rows]), strict=True)
+        ]
+        return plan, rows, cols, scale
 
     def decode(self, model: Any, payload: bytes, context: ClipContext) -> NDArray[np.float64]:
         T = context.n_frames
-        plan, rows, cols, scale = self.decode_segments(model, payload, context)
+        _, tables, P, cols, scale = self.decode_coefficients(model, payload, context)
         X = np.zeros((T, context.layout.layout.n_channels))
-        X[:, cols] = evaluate_segments(rows, T, plan.breaks, plan.spacing, plan.inserted) / scale
+        evaluate_channels(tables, P, cols, scale, X)
         return X
+
+
+_COLUMNS: dict[tuple, tuple] = {}
+
+
+def _columns(model: SplineModel, active: NDArray[np.bool_]) -> tuple:
+    """The model's tables restricted to the active channels, contiguous (cached per model and
+    active set: a library's clips share a few)."""
+    key = (id(model), active.tobytes())
+    hit = _COLUMNS.get(key)
+    if hit is not None and hit[0] is model:
+        return hit[1]
+    cols = np.flatnonzero(active)
+    out = (cols,) + tuple(
+        np.ascontiguousarray(a[cols], dtype=np.float64)
+        for a in (model.initial, model.start_scale, model.a1, model.a2, model.scale,
+                  model.start_mean)
+    )  # fmt: skip
+    if len(_COLUMNS) > 256:
+        _COLUMNS.clear()
+    _COLUMNS[key] = (model, out)
+    return out
