@@ -1,26 +1,30 @@
-"""Dask overhead against the local pool, on the codec job and the index job, with the shared
-models in every task and as the batch's context.
+"""Dask overhead against the local pool, on the codec job and the index job: the shared
+models in every task or sent once as the batch's context, one clip or several per task.
 
 ``run(out, quick, seed)`` measures, on generated clips (no data folder needed), the wall time
 of one batch of each job on 2 workers: a local process pool (kept warm from a first batch) and
 a Dask ``LocalCluster`` of 2 single-threaded worker processes on loopback (warm likewise), the
 fastest of 3 batches each. Jobs:
 
-* ``index``: the per-clip job of ``quatmotion index build`` (read a BVH file, its motion
-  features); it needs no shared model.
+* ``index`` / ``index_chunked``: the per-clip job of ``quatmotion index build`` (read a BVH
+  file, its motion features), one clip and :data:`CHUNK` clips per task.
 * ``codec_models_in_tasks``: the per-clip job of ``quatmotion compress``
-  (:func:`quatmotion.codec.compress.code_clip`) with the layout's encoder and decoder models
-  in every task, as 0.3.0 sends them.
-* ``codec_context``: the same job with the models taken out of the tasks and sent once per
-  batch as its context (:meth:`quatmotion.parallel.Runner.map`, ``context=``).
+  (:func:`quatmotion.codec.compress.code_clip`: read the clip, encode, decode, repair) with
+  the shared models in every task, as 0.3.0 sent them.
+* ``codec_context`` / ``codec_context_chunked``: the same job with the models sent to each
+  worker once as the batch's context (:meth:`quatmotion.parallel.Runner.map`, ``context=``;
+  Dask ``Client.scatter(broadcast=True)``), as ``compress`` runs it; one clip and
+  :data:`CHUNK` clips per task.
 
-The overhead is ``dask / local - 1`` of the wall times. Timings on a shared machine are noisy;
-the minimum of the repeats is the least disturbed.
+The overhead is ``dask / local - 1`` of the wall times; ``work_s`` is the time the
+job itself ran in the workers (the rest of the wall time is the scheduler's). Timings on a
+shared machine are noisy; the minimum of the repeats is the least disturbed.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import pathlib
 import tempfile
 import time
@@ -29,13 +33,21 @@ from typing import Any
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench import provenance
 from quatmotion.bench.scale import _write_clips, codec_clip_jobs, retrieval_features
-from quatmotion.codec.compress import ClipJob, CodedClip, code_clip
+from quatmotion.codec.compress import code_clip
 from quatmotion.parallel import Runner, shutdown_pools
 
 REPEATS = 3
 WORKERS = 2
+CHUNK = 4
 
 HEADLINES = [
+    {
+        "name": "Dask overhead, codec job (models as context, 4 clips a task)",
+        "path": ["jobs", "codec_context_chunked", "overhead"],
+        "unit": "",
+        "better": "lower",
+        "format": "percent",
+    },
     {
         "name": "Dask overhead, codec job (models as context)",
         "path": ["jobs", "codec_context", "overhead"],
@@ -51,6 +63,13 @@ HEADLINES = [
         "format": "percent",
     },
     {
+        "name": "Dask overhead, index job (4 clips a task)",
+        "path": ["jobs", "index_chunked", "overhead"],
+        "unit": "",
+        "better": "lower",
+        "format": "percent",
+    },
+    {
         "name": "Dask overhead, index job",
         "path": ["jobs", "index", "overhead"],
         "unit": "",
@@ -60,33 +79,18 @@ HEADLINES = [
 ]
 
 
-def code_clip_with_models(job: ClipJob, models: dict[int, tuple[Any, Any]]) -> CodedClip:
-    """:func:`code_clip` of a job sent without its models, which come from the batch's
-    context (``layout -> (encoder model, decoder model)``)."""
-    model, decoder_model = models[job.library.clips[0].layout]
-    return code_clip(dataclasses.replace(job, model=model, decoder_model=decoder_model))
-
-
-def split_models(jobs: list[ClipJob]) -> tuple[list[ClipJob], dict[int, tuple[Any, Any]]]:
-    """The jobs without their models, and the models by layout (one per layout)."""
-    models: dict[int, tuple[Any, Any]] = {}
-    light = []
-    for job in jobs:
-        models.setdefault(job.library.clips[0].layout, (job.model, job.decoder_model))
-        light.append(dataclasses.replace(job, model=None, decoder_model=None))
-    return light, models
-
-
-def _fastest(runner: Runner, func: Any, items: list, context: Any) -> dict[str, Any]:
+def _fastest(runner: Runner, func: Any, items: list, context: Any, chunk: int) -> dict[str, Any]:
+    runner = dataclasses.replace(runner, chunk_size=chunk)
     runner.run(func, items[: 2 * WORKERS], context=context)  # warm: imports, compiled kernels
-    walls = []
+    walls, work = [], []
     for _ in range(REPEATS):
         start = time.perf_counter()
         result = runner.run(func, items, context=context)
         walls.append(time.perf_counter() - start)
+        work.append(result.stats.work_seconds)
         if not result.ok:
-            raise RuntimeError(f"{func.__name__}: {result.failures[0]}")
-    return {"wall_s": min(walls), "walls_s": walls}
+            raise RuntimeError(f"{getattr(func, '__name__', func)}: {result.failures[0]}")
+    return {"wall_s": min(walls), "walls_s": walls, "work_s": work}
 
 
 def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
@@ -100,17 +104,19 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     result["headlines"] = HEADLINES
     with tempfile.TemporaryDirectory() as folder:
         paths, frames = _write_clips(pathlib.Path(folder), n_clips, seed)
-        heavy = codec_clip_jobs(paths, seed=seed)
-        light, models = split_models(heavy)
+        tasks, models = codec_clip_jobs(paths, seed=seed)
+        in_tasks = functools.partial(code_clip, models=models)
         jobs = {
-            "index": (retrieval_features, paths, None),
-            "codec_models_in_tasks": (code_clip, heavy, None),
-            "codec_context": (code_clip_with_models, light, models),
+            "index": (retrieval_features, paths, None, 1),
+            "index_chunked": (retrieval_features, paths, None, CHUNK),
+            "codec_models_in_tasks": (in_tasks, tasks, None, 1),
+            "codec_context": (code_clip, tasks, models, 1),
+            "codec_context_chunked": (code_clip, tasks, models, CHUNK),
         }
-        rows: dict[str, Any] = {name: {} for name in jobs}
+        rows: dict[str, Any] = {name: {"clips_per_task": job[3]} for name, job in jobs.items()}
         local = Runner.local(workers=WORKERS)
-        for name, (func, items, context) in jobs.items():
-            rows[name]["local"] = _fastest(local, func, items, context)
+        for name, (func, items, context, chunk) in jobs.items():
+            rows[name]["local"] = _fastest(local, func, items, context, chunk)
         shutdown_pools()
         with LocalCluster(
             n_workers=WORKERS,
@@ -121,8 +127,8 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
             dashboard_address=None,
         ) as cluster:
             dask = Runner.dask(cluster.scheduler_address)
-            for name, (func, items, context) in jobs.items():
-                rows[name]["dask"] = _fastest(dask, func, items, context)
+            for name, (func, items, context, chunk) in jobs.items():
+                rows[name]["dask"] = _fastest(dask, func, items, context, chunk)
         for row in rows.values():
             row["overhead"] = row["dask"]["wall_s"] / row["local"]["wall_s"] - 1.0
     result["frames"] = frames

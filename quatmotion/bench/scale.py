@@ -65,13 +65,16 @@ import numpy as np
 
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench import provenance
-from quatmotion.codec.compress import ClipJob as CodecJob
-from quatmotion.codec.compress import code_clip, plan_clip_jobs
-from quatmotion.codec.library import prepare_library
-from quatmotion.codec.methods import get_method
+from quatmotion.codec import CompressSettings
+from quatmotion.codec.compress import ClipTask, SharedModels, code_clip, plan_clip_tasks
 from quatmotion.collection import ReadSettings, find_clips
-from quatmotion.io import read_motion
-from quatmotion.parallel import available_cpus, imap_batch, run_batch, shutdown_pools
+from quatmotion.parallel import (
+    Runner,
+    available_cpus,
+    imap_batch,
+    run_batch,
+    shutdown_pools,
+)
 from quatmotion.pose.data import PoseClip
 from quatmotion.pose.library import PoseLibrary, load_pose_clip, project_gpd, projected_clip
 from quatmotion.retrieval.build import ClipJob, index_clip
@@ -95,17 +98,15 @@ def retrieval_features(path: str) -> ClipRecord:
     return index_clip(ClipJob(source, ("motion",), ReadSettings(strict=False)))
 
 
-def codec_clip_jobs(paths: list, *, max_error: float = 1.0, seed: int = 0) -> list[CodecJob]:
-    """The per-clip jobs ``compress`` hands to :mod:`quatmotion.parallel` for the clips of
-    ``paths`` with the default method (shared models fitted, every clip prepared):
-    :func:`~quatmotion.codec.compress.code_clip` over them is the batch step on its own."""
-    method = get_method("best")
-    motions = [read_motion(p) for p in paths]
-    library = prepare_library(motions, [(0, "")] * len(motions))
-    jobs, _, _ = plan_clip_jobs(
-        method, library, method.default_quality, max_error, seed, [], verify=True
-    )
-    return jobs
+def codec_clip_jobs(
+    paths: list, *, max_error: float = 1.0, seed: int = 0
+) -> tuple[list[ClipTask], SharedModels]:
+    """The per-clip tasks ``compress`` hands to :mod:`quatmotion.parallel` for the clips of
+    ``paths`` with the default method, and their shared models (fitted on the sample):
+    :func:`~quatmotion.codec.compress.code_clip` over them, the models as the batch's context,
+    is the batch step on its own."""
+    settings = CompressSettings(max_error=max_error, seed=seed)
+    return plan_clip_tasks(paths, settings, runner=Runner.inline())
 
 
 def generated_pose_clip(spec: tuple[str, int, int], *, fps: float, height: float) -> PoseClip:
@@ -541,11 +542,12 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
             load=functools.partial(load_pose_clip, fps=FPS, height=HEIGHT_CM),
             model=_model(gpd_dim, seed),
         )
+        tasks, models = codec_clip_jobs(paths, seed=seed)
         result["throughput"] = {
             "pose_features": _throughput(job, paths, n_frames, dask_ok),
             "retrieval_index_build": _throughput(retrieval_features, paths, n_frames, dask_ok),
             "codec_compress": _throughput(
-                code_clip, codec_clip_jobs(paths, seed=seed), n_frames, dask_ok
+                functools.partial(code_clip, models=models), tasks, n_frames, dask_ok
             ),
         }
     result["throughput_clips"] = {"clips": n_clips, "frames_per_clip": 480, "file_fps": 120}

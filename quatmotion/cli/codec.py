@@ -54,13 +54,12 @@ def _reporter(progress):
     return report
 
 
-def _summary(details: dict) -> str:
+def _summary(details: dict, size: int) -> str:
     from quatmotion.codec.metrics import collection_errors
 
     errors = collection_errors(details["clip_errors"])
     source = sum(details["source_bytes"])
     raw = sum(details["raw_bytes"])
-    size = len(details["data"])
     parts = [f"{size:,} bytes"]
     if source:
         parts.append(f"{source / size:.0f}:1 against the source text")
@@ -213,7 +212,7 @@ def compress(
                 inputs, out, settings, runner=runner_of(workers, scheduler),
                 progress=_reporter(progress), on_doubt=doubt_reporter(progress),
             )  # fmt: skip
-        with Archive.open(report.details["data"]) as archive:
+        with Archive.open(out) as archive:
             rows = _clip_rows(archive)
             doc = _library_doc(out, archive, rows)
     failed = [(str(f.item), f.message) for f in report.failures]
@@ -228,7 +227,8 @@ def compress(
             }
         )
     else:
-        console.print(f"wrote {out}: {len(report.added)} clip(s), {_summary(report.details)}")
+        summary = _summary(report.details, Path(out).stat().st_size)
+        console.print(f"wrote {out}: {len(report.added)} clip(s), {summary}")
         console.print(_units_line(rows), markup=False, highlight=False)
         if failed:
             console.print(f"{len(failed)} input(s) failed")

@@ -15,7 +15,7 @@ import json
 import os
 import zlib
 from collections import OrderedDict
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO
@@ -403,6 +403,19 @@ class Archive:
             [read_chunk(self._file, ref, self._name) for ref in refs]
             for refs in (self._record_chunks, self._layout_chunks, self._clip_chunks)
         )
+
+    def shared_payloads(self) -> tuple[list[bytes], list[bytes]]:
+        """The payloads of the ``S`` and ``L`` chunks, CRC checked (for appending)."""
+        return tuple(
+            [read_chunk(self._file, ref, self._name) for ref in refs]
+            for refs in (self._record_chunks, self._layout_chunks)
+        )
+
+    def clip_payloads(self) -> Iterator[bytes]:
+        """The payloads of the ``C`` chunks in clip order, CRC checked, read one at a time
+        (streamed into a file appended to)."""
+        for ref in self._clip_chunks:
+            yield read_chunk(self._file, ref, self._name)
 
     def _record_text(self, k: int) -> str:
         if k not in self._records:

@@ -1,11 +1,15 @@
 """Compression: clips in, a ``.qmz`` library out (the orchestrator, as named steps).
 
-:func:`build_library` (:meth:`quatmotion.codec.Archive.build`) reads as the steps it takes:
-read the clips (:func:`quatmotion.collection.read_clip`, every clip named by
-:func:`quatmotion.collection.unique_names`), store their skeletons, prepare the library
-(layouts, channels, weights), fit the shared models on a bounded seeded sample, encode every
-clip (searching the method's quality knob for ``ratio``), decode every clip back and repair the
-frames over ``max_error``, assemble the header and write the container
+:func:`build_library` (:meth:`quatmotion.codec.Archive.build`) reads as the steps it takes,
+none of which holds every clip in the caller's memory: scan the clips in the workers
+(:func:`scan_clip`: reference, layout key, length, skeleton; every clip named by
+:func:`quatmotion.collection.unique_names`), store their skeletons, plan the layouts and read
+a seeded sample of at most ``fit_sample`` clips of each to fit the layouts and the shared
+models (:class:`SharedModels`), code every clip in a worker that reads it itself
+(:func:`code_clip` of a :class:`ClipTask`, the models sent to each worker once as the batch's
+context; searching the method's quality knob for ``ratio``; decoding every clip back and
+repairing the frames over ``max_error``), spool the chunks to a temporary file, then write the
+header and stream the chunks into the container
 (:func:`quatmotion.codec.container.write_container`) atomically. :func:`add_to_library`
 (:meth:`Archive.add`) adds clips to an existing file without re-encoding the clips already in
 it (their chunks are copied byte for byte). :func:`compress` and :func:`append` are the names
@@ -15,19 +19,23 @@ before 0.4.0, kept as thin wrappers.
 from __future__ import annotations
 
 import io
+import itertools
 import json
 import time
 import zlib
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from quatmotion._atomic import atomic_write_bytes
+from quatmotion._atomic import atomic_output
 from quatmotion.codec.archive import Archive
+from quatmotion.codec.binary import Writer
+from quatmotion.codec.channels import layout_key, to_channels
 from quatmotion.codec.container import (
+    MAGIC,
     ClipEntry,
     Header,
     LayoutEntry,
@@ -35,7 +43,7 @@ from quatmotion.codec.container import (
     SkeletonEntry,
     write_container,
 )
-from quatmotion.codec.library import PreparedLibrary, prepare_library
+from quatmotion.codec.library import LayoutInfo, PreparedClip, PreparedLibrary, prepare_library
 from quatmotion.codec.methods import ClipContext, EncodedLibrary, Method, get_method
 from quatmotion.codec.metrics import ClipErrors, clip_errors
 from quatmotion.codec.repair import (
@@ -49,28 +57,32 @@ from quatmotion.codec.skeletons import deflate_text, same_skeleton, skeleton_rec
 from quatmotion.collection import (
     BuildReport,
     ClipRef,
+    ClipSource,
     ReadSettings,
     find_clips,
     read_clip,
 )
 from quatmotion.errors import FormatError
 from quatmotion.io import Doubt
-from quatmotion.motion import Motion, Skeleton
+from quatmotion.motion import Motion, Skeleton, forward_kinematics
 from quatmotion.parallel import Failure, Runner, Scheduler
 
 __all__ = [
     "DEFAULT_MAX_ERROR_CM",
     "FIT_SAMPLE_CLIPS",
-    "ClipJob",
+    "ClipTask",
     "CodedClip",
     "CompressionResult",
+    "ScannedClip",
+    "SharedModels",
     "add_to_library",
     "append",
     "build_library",
     "code_clip",
     "compress",
-    "plan_clip_jobs",
+    "plan_clip_tasks",
     "runner_of",
+    "scan_clip",
 ]
 
 Progress = Callable[[str, int, int], None]
@@ -122,49 +134,131 @@ class CompressionResult:
     @classmethod
     def from_report(cls, report: BuildReport) -> CompressionResult:
         d = report.details
+        data = d["data"] if "data" in d else Path(report.path).read_bytes()
         return cls(
-            d["data"], report.path, d["method"], d["clip_errors"], d["clip_bytes"],
+            data, report.path, d["method"], d["clip_errors"], d["clip_bytes"],
             d["source_bytes"], d["raw_bytes"], d["seconds"], d["quality"], d["corrections"],
             [(str(f.item), f.message) for f in report.failures],
         )  # fmt: skip
 
 
-# ---------------------------------------------------------------------------------- reading
+# ---------------------------------------------------------------------------------- scanning
+@dataclass(frozen=True)
+class ScannedClip:
+    """What the caller keeps of one clip: :func:`scan_clip`'s result, read in a worker.
+
+    Small (no frames): the reference, the layout key and the skeleton, the clip's length and
+    its source's size and format, so that a library of any number of clips is planned in the
+    caller's memory while the workers read the frames.
+
+    Attributes
+    ----------
+    ref : ClipRef
+    name : str
+        The clip's name (the collection's rule, :func:`quatmotion.collection.unique_names`).
+    key : tuple
+        :func:`quatmotion.codec.channels.layout_key` of its skeleton.
+    skeleton : Skeleton
+    n_frames : int
+    fps : float
+    source : (int, str)
+        The source file's size in bytes and its format (``(0, "")`` for a clip in memory).
+    text_bytes : int
+        The size of the AMC or BVH text the writers would produce (only when asked: a
+        ``ratio`` target of a clip without a source size), else 0.
+    doubts : tuple of Doubt
+    """
+
+    ref: ClipRef
+    name: str
+    key: tuple
+    skeleton: Skeleton
+    n_frames: int
+    fps: float
+    source: tuple[int, str]
+    text_bytes: int = 0
+    doubts: tuple[Doubt, ...] = ()
+
+    @property
+    def raw_bytes(self) -> int:
+        """``4 * dofs * frames``: the clip as float32 channels."""
+        return 4 * sum(len(ch) for ch in self.skeleton.channels) * self.n_frames
+
+
+@dataclass(frozen=True)
+class _Unread:
+    """A clip :func:`scan_clip` could not read: the reason in one line (the caller reads it
+    again to raise the error itself, or notes the failure)."""
+
+    message: str
+
+
+@dataclass(frozen=True)
+class _ScanOptions:
+    read: ReadSettings
+    text_bytes: bool = False
+
+
+def scan_clip(source: ClipSource, options: _ScanOptions) -> ScannedClip | _Unread:
+    """Read one clip and keep what planning the library needs (a worker's job: the frames
+    stay in the worker)."""
+    try:
+        motion, ref, doubts = read_clip(source, options.read)
+        size = (0, "") if source.path is None else _source_size(source.path)
+        text = _text_bytes(motion) if options.text_bytes and not size[0] else 0
+    except (FormatError, OSError, ValueError) as error:
+        return _Unread(_one_line(error))
+    return ScannedClip(
+        ref, motion.name, layout_key(motion.skeleton), motion.skeleton, motion.n_frames,
+        motion.fps, size, text, tuple(doubts),
+    )  # fmt: skip
+
+
+def _one_line(error: BaseException) -> str:
+    message = getattr(error, "reason", None) or str(error) or type(error).__name__
+    if isinstance(error, FormatError):
+        message = str(error)
+    return str(message).splitlines()[0]
+
+
 @dataclass
 class _Inputs:
-    """The clips read (step 1), each with its reference and its source's size and format."""
+    """The clips scanned (step 1): each clip's source (what a worker reads) and its scan."""
 
-    motions: list[Motion] = field(default_factory=list)
-    refs: list[ClipRef] = field(default_factory=list)
-    sources: list[tuple[int, str]] = field(default_factory=list)
+    sources: list[ClipSource] = field(default_factory=list)
+    scans: list[ScannedClip] = field(default_factory=list)
     failures: list[Failure] = field(default_factory=list)
     doubts: list[tuple[ClipRef, str]] = field(default_factory=list)
 
-    def keep(self, motion: Motion, ref: ClipRef, source: tuple[int, str]) -> None:
-        self.motions.append(motion)
-        self.refs.append(ref)
+    @property
+    def refs(self) -> list[ClipRef]:
+        return [s.ref for s in self.scans]
+
+    def keep(self, source: ClipSource, scan: ScannedClip) -> None:
         self.sources.append(source)
+        self.scans.append(scan)
 
-    def fail(self, item: object, error: BaseException) -> None:
-        message = getattr(error, "reason", None) or str(error) or type(error).__name__
-        if isinstance(error, FormatError):
-            message = str(error)
-        self.failures.append(Failure(len(self.failures), item, str(message).splitlines()[0]))
+    def fail(self, item: object, message: str) -> None:
+        self.failures.append(Failure(len(self.failures), item, message))
+
+    def select(self, keep: Sequence[int]) -> None:
+        self.sources = [self.sources[i] for i in keep]
+        self.scans = [self.scans[i] for i in keep]
 
 
-def _read_step(
+def _scan_step(
     sources: Iterable[Any],
-    read: ReadSettings,
+    settings: CompressSettings,
     skip: bool,
     known: Sequence[tuple[int, str]] | None,
     on_doubt: OnDoubt | None,
-    report: Progress | None = None,
+    runner: _Runner,
 ) -> _Inputs:
-    """Every clip of ``sources`` read by :func:`quatmotion.collection.read_clip`, named by the
+    """Every clip of ``sources`` scanned by :func:`scan_clip` through the runner, named by the
     collection's rules. With ``skip``, a file that cannot be found, hashed or read is noted in
-    the failures and left out instead of raising; ``report`` hears ``("read", done, total)``
-    as clips are read."""
+    the failures and left out instead of raising; progress hears ``("read", done, total)``."""
     out = _Inputs()
+    read = settings.read
     found_errors: list[tuple[str, str]] = []
     items = [Path(s) if isinstance(s, str) else s for s in sources]
     found = find_clips(items, read, on_error=found_errors if skip else None)
@@ -174,27 +268,24 @@ def _read_step(
     if known is not None and len(known) != len(in_memory):
         raise ValueError(f"sources gives {len(known)} sizes for {len(in_memory)} clips")
     sizes = iter(known or ())
-    if report is not None and found:
-        report("read", 0, len(found))
-    for n_read, source in enumerate(found, 1):
-        if report is not None and (n_read == len(found) or n_read % 16 == 0):
-            report("read", n_read, len(found))
-        try:
-            motion, ref, doubts = read_clip(source, read)
-            size = (0, "") if source.path is None else _source_size(source.path)
-        except (FormatError, OSError, ValueError) as error:
+    options = _ScanOptions(read, text_bytes=settings.ratio is not None)
+    for source, scan in zip(found, runner.each("read", scan_clip, found, options), strict=True):
+        if isinstance(scan, _Unread):
             if not skip:
-                raise
-            out.fail(source, error)
+                read_clip(source, read)  # raises the error itself
+                raise ValueError(scan.message)
+            out.fail(source, scan.message)
             continue
         if source.path is None and known is not None:
-            size = tuple(next(sizes))  # type: ignore[assignment]
-        for doubt in doubts:
-            out.doubts.append((ref, doubt.message))
+            from dataclasses import replace
+
+            scan = replace(scan, source=tuple(next(sizes)))
+        for doubt in scan.doubts:
+            out.doubts.append((scan.ref, doubt.message))
             if on_doubt is not None:
                 on_doubt(str(source), doubt)
-        out.keep(motion, ref, size)
-    if not out.motions and not out.failures:
+        out.keep(source, scan)
+    if not out.scans and not out.failures:
         raise ValueError("nothing to compress: no clips given")
     return out
 
@@ -206,22 +297,22 @@ def _source_size(path: Path) -> tuple[int, str]:
 def _admit(inputs: _Inputs, table: _SkeletonTable, skip: bool) -> None:
     """Keep the clips that can be stored (frames, a skeleton the format can record); the others
     are noted in the failures (``skip``) or raise."""
-    kept = _Inputs(failures=inputs.failures, doubts=inputs.doubts)
-    for motion, ref, source in zip(inputs.motions, inputs.refs, inputs.sources, strict=True):
+    keep = []
+    for i, scan in enumerate(inputs.scans):
         try:
-            if motion.n_frames == 0:
-                raise ValueError(f"clip {motion.name!r} has no frames")
-            table.index(motion.skeleton)
+            if scan.n_frames == 0:
+                raise ValueError(f"clip {scan.name!r} has no frames")
+            table.index(scan.skeleton)
         except ValueError as error:
             if not skip:
                 raise
-            kept.fail(ref.path or ref.name, error)
+            inputs.fail(scan.ref.path or scan.ref.name, _one_line(error))
             continue
-        kept.keep(motion, ref, source)
-    if not kept.motions:
-        first = kept.failures[0] if kept.failures else None
+        keep.append(i)
+    inputs.select(keep)
+    if not inputs.scans:
+        first = inputs.failures[0] if inputs.failures else None
         raise ValueError(f"nothing to compress: every input failed ({first})")
-    inputs.motions, inputs.refs, inputs.sources = kept.motions, kept.refs, kept.sources
 
 
 # ---------------------------------------------------------------------------------- skeletons
@@ -283,7 +374,409 @@ class _SkeletonTable:
         return k
 
 
-# ---------------------------------------------------------------------------------- encoding
+# ---------------------------------------------------------------------------------- planning
+@dataclass(frozen=True)
+class SharedModels:
+    """What every clip's job shares, sent to each worker once per batch (the batch's context,
+    :meth:`quatmotion.parallel.Runner.map`): the layouts and the models learned on the sample.
+
+    Attributes
+    ----------
+    method : Method
+    layouts : list of LayoutInfo
+        Every layout of the library (those of the file appended to first).
+    models : list
+        Per layout, the encoder's model (:meth:`Method.fit_models`).
+    decoder_models : list
+        Per layout, the same model as the decoder reads it from the file.
+    quality : float
+    max_error : float or None
+        The bound the encoder aims at and the repair enforces (``None``: none).
+    vertices : bool
+        The bound also covers the virtual vertices.
+    read : ReadSettings
+        How a worker reads its clip.
+    """
+
+    method: Method
+    layouts: list[LayoutInfo]
+    models: list[Any]
+    decoder_models: list[Any]
+    quality: float
+    max_error: float | None
+    vertices: bool
+    read: ReadSettings
+
+
+@dataclass(frozen=True)
+class ClipTask:
+    """One clip's share of the encoding, without its frames (the worker reads them) and
+    without the models (:class:`SharedModels`, the batch's context).
+
+    Attributes
+    ----------
+    source : ClipSource
+        What the worker reads (a file, or a motion given in memory).
+    name : str
+        The clip's name in the library.
+    layout : int
+    verify : bool
+        Decode the payload, measure it and repair the frames over the bound.
+    payload : (str, int, int) or None
+        Already coded (verify only): the spool file, offset and length of its bytes.
+    """
+
+    source: ClipSource
+    name: str
+    layout: int
+    verify: bool
+    payload: tuple[str, int, int] | None = None
+
+    def __str__(self) -> str:  # how a failure names the task
+        return f"clip {self.name!r}"
+
+
+@dataclass(frozen=True)
+class CodedClip:
+    """:func:`code_clip`'s result: the clip chunk's prefix (rest flags, corrections) and the
+    method's payload, and after verification its errors (``None`` without)."""
+
+    prefix: bytes
+    payload: bytes
+    corrections: int
+    errors: ClipErrors | None
+
+
+def _prepared(task: ClipTask, models: SharedModels) -> PreparedLibrary:
+    """The task's clip read and prepared alone, with every layout (its index stays valid)."""
+    motion = read_clip(task.source, models.read).motion
+    if motion.name != task.name:
+        motion = motion.renamed(task.name)
+    info = models.layouts[task.layout]
+    X, at_rest = to_channels(motion, info.layout, info.reference)
+    clip = PreparedClip(motion, task.layout, X, at_rest, forward_kinematics(motion))
+    members = [[0] if k == task.layout else [] for k in range(len(models.layouts))]
+    return PreparedLibrary(models.layouts, [clip], members, models.vertices)
+
+
+def code_clip(task: ClipTask, models: SharedModels) -> CodedClip:
+    """Read one clip, encode it (unless its payload is given), then decode it from its bytes,
+    measure it and correct the frames over the bound: the per-clip job of
+    :func:`build_library` and :func:`add_to_library`, run by :mod:`quatmotion.parallel` with
+    ``models`` as the batch's context."""
+    library = _prepared(task, models)
+    method = models.method
+    if task.payload is None:
+        payload = method.encode_clip(
+            library, 0, models.models[task.layout], quality=models.quality,
+            max_error=models.max_error,
+        )  # fmt: skip
+    else:
+        spool, offset, length = task.payload
+        with open(spool, "rb") as file:
+            file.seek(offset)
+            payload = file.read(length)
+    fix, errors = Corrections.empty(), None
+    if task.verify:
+        max_error = models.max_error
+        fix, errors = _verify_clip(
+            method, library, 0, payload, models.decoder_models[task.layout], max_error
+        )
+    return CodedClip(write_clip_prefix(library.clips[0].at_rest, fix), payload, len(fix), errors)
+
+
+@dataclass
+class _Plan:
+    """The library planned from the scans: every clip's layout, and the sample the layouts
+    and the shared models are learned on (read in the caller: at most ``fit_sample`` clips of
+    each layout)."""
+
+    layout_of: list[int]
+    sample: PreparedLibrary
+    given: list[Any]
+
+
+def _plan(
+    inputs: _Inputs,
+    existing: Sequence[tuple[LayoutInfo, Any]],
+    settings: CompressSettings,
+    vertices: bool,
+    report: Progress,
+) -> _Plan:
+    """Group the clips by layout (the existing layouts first, then new ones in order of first
+    appearance), draw the seeded sample of each layout (all of its clips up to
+    ``fit_sample``), read the sample and fit the new layouts on it
+    (:func:`~quatmotion.codec.library.prepare_library`)."""
+    keys = [layout_key(info.skeleton) for info, _ in existing]
+    layout_index = {key: k for k, key in reversed(list(enumerate(keys)))}  # first one wins
+    layout_of = []
+    for scan in inputs.scans:
+        if scan.key not in layout_index:
+            layout_index[scan.key] = len(keys)
+            keys.append(scan.key)
+        layout_of.append(layout_index[scan.key])
+    members: list[list[int]] = [[] for _ in keys]
+    for i, k in enumerate(layout_of):
+        members[k].append(i)
+    rng = np.random.default_rng(settings.seed)
+    given = [model for _, model in existing]
+    chosen: list[int] = []
+    for k, group in enumerate(members):
+        if len(group) > settings.fit_sample:
+            group = sorted(int(i) for i in rng.choice(group, settings.fit_sample, replace=False))
+        if k >= len(given) or given[k] is None:
+            chosen.extend(group)
+    chosen.sort(key=lambda i: (layout_of[i], i))
+    report("prepare", 0, len(chosen))
+    motions = []
+    for n, i in enumerate(chosen, 1):
+        motion = read_clip(inputs.sources[i], settings.read).motion
+        name = inputs.scans[i].name
+        motions.append(motion if motion.name == name else motion.renamed(name))
+        if n == len(chosen) or n % 16 == 0:
+            report("prepare", n, len(chosen))
+    sample = prepare_library(
+        motions,
+        [inputs.scans[i].source for i in chosen],
+        [info for info, _ in existing],
+        vertices=vertices,
+    )
+    if len(sample.layouts) != len(keys):  # a bug of this module
+        raise RuntimeError(f"{len(sample.layouts)} layouts fitted for {len(keys)}")
+    return _Plan(layout_of, sample, given)
+
+
+def _fit(
+    method: Method,
+    plan: _Plan,
+    quality: float,
+    max_error: float | None,
+    seed: int,
+    read: ReadSettings,
+) -> tuple[SharedModels, list[bytes]]:
+    """The shared models learned on the sample (the models of the file appended to kept), and
+    the ``L`` chunks' model bytes (empty for a given model: already in the file)."""
+    sample, given = plan.sample, plan.given
+    fitted = method.fit_models(
+        sample, sample.members, quality=quality, max_error=max_error, seed=seed, models=given
+    )
+    blobs, decoder_models = [], []
+    for k, info in enumerate(sample.layouts):
+        if k < len(given) and given[k] is not None:
+            blobs.append(b"")  # already in the file
+            decoder_models.append(given[k])
+        else:
+            blob = method.model_bytes(fitted[k], info) if fitted[k] is not None else b""
+            blobs.append(blob)
+            used = blob or sample.members[k]
+            decoder_models.append(method.load_model(blob, info) if used else None)
+    models = SharedModels(
+        method, sample.layouts, fitted, decoder_models, quality, max_error, sample.vertices, read
+    )
+    return models, blobs
+
+
+def plan_clip_tasks(
+    sources: Iterable[Any],
+    settings: CompressSettings | None = None,
+    *,
+    runner: Runner | None = None,
+) -> tuple[list[ClipTask], SharedModels]:
+    """The per-clip tasks ``compress`` hands to :mod:`quatmotion.parallel` and their shared
+    models, at the method's default quality with verification: ``code_clip`` over them with
+    the models as context is the batch step on its own (the benchmarks' hook)."""
+    settings = settings or CompressSettings()
+    method = get_method(settings.method)
+    runner_ = _Runner(runner, lambda *_: None)
+    inputs = _scan_step(sources, settings, False, None, None, runner_)
+    _admit(inputs, _SkeletonTable(), False)
+    plan = _plan(inputs, [], settings, settings.bound_on == "vertices", lambda *_: None)
+    q = settings.quality if settings.quality is not None else method.default_quality
+    models, _ = _fit(method, plan, q, settings.max_error, settings.seed, settings.read)
+    return _tasks(inputs, plan, verify=True), models
+
+
+def _tasks(inputs: _Inputs, plan: _Plan, *, verify: bool) -> list[ClipTask]:
+    return [
+        ClipTask(source, scan.name, k, verify)
+        for source, scan, k in zip(inputs.sources, inputs.scans, plan.layout_of, strict=True)
+    ]
+
+
+def runner_of(
+    workers: int | None = None, scheduler: str | Scheduler | None = None
+) -> Runner | None:
+    """The :class:`~quatmotion.parallel.Runner` of the command line's ``--workers`` and
+    ``--scheduler`` (None for neither: the default, :meth:`Runner.resolve`)."""
+    if workers is None and scheduler is None:
+        return None
+    if isinstance(scheduler, Scheduler):
+        return Runner(scheduler)
+    return Runner.resolve(scheduler, workers=workers)
+
+
+@dataclass(frozen=True)
+class _Runner:
+    """Where per-clip jobs run (:mod:`quatmotion.parallel`) and how progress is reported."""
+
+    runner: Runner | None
+    report: Progress
+
+    def each(
+        self, step: str, func: Callable[..., Any], items: Sequence[Any], context: Any
+    ) -> Iterator[Any]:
+        """``func(item, context)`` of every item, streamed in input order.
+
+        Raises
+        ------
+        ValueError
+            Naming the first item whose job failed (nothing is written then).
+        """
+        runner = self.runner
+        if runner is None:
+            # one clip: a process pool would only add its start-up
+            runner = Runner.inline() if len(items) < 2 else Runner.resolve(None)
+        self.report(step, 0, len(items))
+        progress = lambda done, total: self.report(step, done, total)  # noqa: E731
+        with runner.map(func, items, context=context, progress=progress) as stream:
+            for outcome in stream:
+                if outcome.failure is not None:
+                    raise ValueError(str(outcome.failure))
+                yield outcome.value
+
+
+# ---------------------------------------------------------------------------------- coding
+@dataclass
+class _Coded:
+    """A library coded at one quality: the clips' chunks spooled to a temporary file (prefix
+    then payload, in clip order), the models, and after verification every clip's errors."""
+
+    models: SharedModels
+    blobs: list[bytes]
+    spool: Any  # a named temporary file
+    spans: list[tuple[int, int, int]] = field(default_factory=list)  # offset, prefix, payload
+    corrections: list[int] = field(default_factory=list)
+    errors: list[ClipErrors] = field(default_factory=list)
+
+    @property
+    def chunk_sizes(self) -> list[int]:
+        return [p + n for _, p, n in self.spans]
+
+    def payload_ref(self, i: int) -> tuple[str, int, int]:
+        offset, prefix, length = self.spans[i]
+        return self.spool.name, offset + prefix, length
+
+    def chunks(self) -> Iterator[bytes]:
+        """Every clip's chunk payload, read back from the spool in order."""
+        self.spool.flush()
+        with open(self.spool.name, "rb") as file:
+            for offset, prefix, length in self.spans:
+                file.seek(offset)
+                yield file.read(prefix + length)
+
+    def close(self) -> None:
+        self.spool.close()
+
+
+def _spool(models: SharedModels, blobs: list[bytes], coded: Iterable[CodedClip]) -> _Coded:
+    import tempfile
+
+    out = _Coded(models, blobs, tempfile.NamedTemporaryFile(prefix="quatmotion-spool-"))  # noqa: SIM115 (closed by _Coded.close)
+    try:
+        offset = 0
+        for clip in coded:
+            out.spool.write(clip.prefix)
+            out.spool.write(clip.payload)
+            out.spans.append((offset, len(clip.prefix), len(clip.payload)))
+            offset += len(clip.prefix) + len(clip.payload)
+            out.corrections.append(clip.corrections)
+            if clip.errors is not None:
+                out.errors.append(clip.errors)
+        out.spool.flush()
+    except BaseException:
+        out.close()
+        raise
+    return out
+
+
+@dataclass
+class _Job:
+    """One build or add: the method, the clips planned, where their jobs run."""
+
+    method: Method
+    inputs: _Inputs
+    plan: _Plan
+    settings: CompressSettings
+    runner: _Runner
+
+    def encode(self, quality: float, max_error: float | None, *, verify: bool) -> _Coded:
+        """Learn the shared models on the sample, then code every clip in a worker."""
+        self.runner.report("learn", 0, 1)
+        models, blobs = _fit(
+            self.method, self.plan, quality, max_error, self.settings.seed, self.settings.read
+        )
+        tasks = _tasks(self.inputs, self.plan, verify=verify)
+        return _spool(models, blobs, self.runner.each("encode", code_clip, tasks, models))
+
+    def verify(self, coded: _Coded, max_error: float | None) -> _Coded:
+        """Decode, measure and repair every clip of a library coded without verification."""
+        from dataclasses import replace
+
+        models = replace(coded.models, quality=0.0, max_error=max_error)
+        tasks = [
+            replace(task, payload=coded.payload_ref(i))
+            for i, task in enumerate(_tasks(self.inputs, self.plan, verify=True))
+        ]
+        try:
+            return _spool(models, coded.blobs, self.runner.each("verify", code_clip, tasks, models))
+        finally:
+            coded.close()
+
+
+def _chunk_size(n: int) -> int:
+    """Bytes of a chunk of an ``n``-byte payload (tag, length, payload, CRC)."""
+    return 1 + len(Writer().uvarint(n).bytes()) + n + 4
+
+
+@dataclass
+class _Layout:
+    """The file's tables and shared chunks around the clips' chunks."""
+
+    method: str
+    settings: CompressSettings
+    table: _SkeletonTable
+    layout_skeletons: list[int]
+    records: list[bytes]
+    old_layout_chunks: list[bytes]
+    old_entries: list[ClipEntry]
+    first_layout: int = 0
+
+    def header(self, entries: list[ClipEntry]) -> Header:
+        return Header(
+            self.method,
+            tuple(self.table.records),
+            tuple(self.table.skeletons),
+            tuple(LayoutEntry(s) for s in self.layout_skeletons),
+            tuple(self.old_entries + entries),
+            json.dumps(self.settings.to_dict(), sort_keys=True, separators=(",", ":")).encode(),
+        )
+
+    def layout_chunks(self, plan: _Plan, coded: _Coded) -> list[bytes]:
+        return self.old_layout_chunks + _layout_chunks(
+            plan.sample, EncodedLibrary(coded.blobs, []), self.first_layout
+        )
+
+    def file_size(
+        self, inputs: _Inputs, plan: _Plan, clip_skeleton: list[int], coded: _Coded, old: int = 0
+    ) -> int:
+        """The size of the file ``coded`` makes (declared errors of 0: sizing a try); ``old``
+        the bytes of the clip chunks already in the file."""
+        entries = _clip_entries(inputs, plan, clip_skeleton, None)
+        chunks = [self.header(entries).to_bytes(), *self.records, *self.layout_chunks(plan, coded)]
+        size = len(MAGIC) + 2 + sum(_chunk_size(len(c)) for c in chunks) + old
+        return size + sum(_chunk_size(n) for n in coded.chunk_sizes)
+
+
 def _clip_context(library: PreparedLibrary, i: int) -> ClipContext:
     clip = library.clips[i]
     info = library.layouts[clip.layout]
@@ -292,69 +785,6 @@ def _clip_context(library: PreparedLibrary, i: int) -> ClipContext:
         if clip.at_rest[k]:
             active[info.layout.translation_columns(k)] = False
     return ClipContext(info, clip.motion.skeleton, clip.motion.n_frames, clip.motion.fps, active)
-
-
-@dataclass(frozen=True)
-class ClipJob:
-    """One clip's share of the encoding: what :func:`code_clip` needs, and nothing of the
-    other clips, so the clips of a library are coded in any process with the same bytes.
-
-    Attributes
-    ----------
-    method : Method
-    library : PreparedLibrary
-        The clip alone (index 0) with every layout of the library.
-    model : object
-        The encoder's model of the clip's layout (:meth:`Method.fit_models`).
-    decoder_model : object
-        The same model as the decoder reads it from the file (:meth:`Method.load_model`).
-    quality : float
-    max_error : float or None
-        The bound the encoder aims at and the repair enforces (``None``: none).
-    verify : bool
-        Decode the payload, measure it and repair the frames over ``max_error``.
-    payload : bytes or None
-        Already coded (verify only).
-    """
-
-    method: Method
-    library: PreparedLibrary
-    model: Any
-    decoder_model: Any
-    quality: float
-    max_error: float | None
-    verify: bool
-    payload: bytes | None = None
-
-    def __str__(self) -> str:  # how a failure names the job
-        return f"clip {self.library.clips[0].motion.name!r}"
-
-
-@dataclass(frozen=True)
-class CodedClip:
-    """:func:`code_clip`'s result: the clip's payload, and after verification its corrections
-    and errors (``None`` without)."""
-
-    payload: bytes
-    corrections: Corrections
-    errors: ClipErrors | None
-
-
-def code_clip(job: ClipJob) -> CodedClip:
-    """Encode one clip (unless its payload is given), then decode it from its bytes, measure
-    it and correct the frames over the bound: the per-clip job of :func:`compress` and
-    :func:`append`, run by :mod:`quatmotion.parallel`."""
-    payload = job.payload
-    if payload is None:
-        payload = job.method.encode_clip(
-            job.library, 0, job.model, quality=job.quality, max_error=job.max_error
-        )
-    if not job.verify:
-        return CodedClip(payload, Corrections.empty(), None)
-    fix, errors = _verify_clip(
-        job.method, job.library, 0, payload, job.decoder_model, job.max_error
-    )
-    return CodedClip(payload, fix, errors)
 
 
 def _verify_clip(
@@ -387,199 +817,29 @@ def _verify_clip(
     return fix, clip_errors(clip.world, library.motion_of(i, X))
 
 
-def _one_clip(library: PreparedLibrary, i: int) -> PreparedLibrary:
-    """Clip ``i`` alone, with every layout (so its layout index stays valid)."""
-    clip = library.clips[i]
-    members = [[0] if k == clip.layout else [] for k in range(len(library.layouts))]
-    return PreparedLibrary(library.layouts, [clip], members, library.vertices)
-
-
-def _fit_members(library: PreparedLibrary, seed: int, sample: int) -> list[list[int]]:
-    """The clips each layout's shared model is learned on: all of them, or a seeded sample of
-    ``sample`` in a larger library (learning time then stays flat in its size)."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for members in library.members:
-        if len(members) <= sample:
-            out.append(list(members))
-        else:
-            out.append(sorted(int(i) for i in rng.choice(members, sample, replace=False)))
-    return out
-
-
-def runner_of(
-    workers: int | None = None, scheduler: str | Scheduler | None = None
-) -> Runner | None:
-    """The :class:`~quatmotion.parallel.Runner` of the command line's ``--workers`` and
-    ``--scheduler`` (None for neither: the default, :meth:`Runner.resolve`)."""
-    if workers is None and scheduler is None:
-        return None
-    if isinstance(scheduler, Scheduler):
-        return Runner(scheduler)
-    return Runner.resolve(scheduler, workers=workers)
-
-
-@dataclass(frozen=True)
-class _Runner:
-    """Where per-clip jobs run (:mod:`quatmotion.parallel`) and how progress is reported."""
-
-    runner: Runner | None
-    report: Progress
-    fit_sample: int = FIT_SAMPLE_CLIPS
-
-    def run(self, step: str, jobs: list[ClipJob]) -> list[CodedClip]:
-        """``code_clip`` of every job, in input order.
-
-        Raises
-        ------
-        ValueError
-            Naming the first clip whose job failed (nothing is written then).
-        """
-        runner = self.runner
-        if runner is None:
-            # one clip: a process pool would only add its start-up
-            runner = Runner.inline() if len(jobs) < 2 else Runner.resolve(None)
-        self.report(step, 0, len(jobs))
-        result = runner.run(
-            code_clip, jobs, progress=lambda done, total: self.report(step, done, total)
-        )
-        if result.failures:
-            raise ValueError(str(result.failures[0]))
-        return list(result.results)
-
-
-@dataclass
-class _Coded:
-    """A library coded at one quality: payloads, the models as the decoder reads them, and
-    after verification every clip's corrections and errors."""
-
-    encoded: EncodedLibrary
-    models: list[Any]
-    corrections: list[Corrections] = field(default_factory=list)
-    errors: list[ClipErrors] = field(default_factory=list)
-
-
-def plan_clip_jobs(
-    method: Method,
-    library: PreparedLibrary,
-    quality: float,
-    max_error: float | None,
-    seed: int,
-    given: list,
-    *,
-    verify: bool,
-    fit_sample: int = FIT_SAMPLE_CLIPS,
-) -> tuple[list[ClipJob], list[bytes], list[Any]]:
-    """The fit step: the shared models learned on a seeded sample of at most ``fit_sample``
-    clips per layout (``given`` models of the file appended to are kept), then one
-    :class:`ClipJob` per clip. Returns the jobs, the ``L`` chunks' model bytes (empty for a
-    given model: already in the file) and the models as the decoder reads them."""
-    fitted = method.fit_models(
-        library, _fit_members(library, seed, fit_sample), quality=quality, max_error=max_error,
-        seed=seed, models=given,
-    )  # fmt: skip
-    blobs, models = [], []
-    for k, info in enumerate(library.layouts):
-        if k < len(given) and given[k] is not None:
-            blobs.append(b"")  # already in the file
-            models.append(given[k])
-        else:
-            blob = method.model_bytes(fitted[k], info) if fitted[k] is not None else b""
-            blobs.append(blob)
-            models.append(method.load_model(blob, info) if blob or library.members[k] else None)
-    jobs = [
-        ClipJob(
-            method,
-            _one_clip(library, i),
-            fitted[clip.layout],
-            models[clip.layout],
-            quality,
-            max_error,
-            verify,
-        )  # fmt: skip
-        for i, clip in enumerate(library.clips)
-    ]
-    return jobs, blobs, models
-
-
-def _encode_once(
-    method: Method,
-    library: PreparedLibrary,
-    quality: float,
-    max_error: float | None,
-    seed: int,
-    given: list,
-    runner: _Runner,
-    *,
-    verify: bool,
-) -> _Coded:
-    """Learn the shared models (on a sample), then code every clip as a per-clip job."""
-    runner.report("learn", 0, 1)
-    jobs, blobs, models = plan_clip_jobs(
-        method, library, quality, max_error, seed, given, verify=verify,
-        fit_sample=runner.fit_sample,
-    )  # fmt: skip
-    coded = runner.run("encode", jobs)
-    out = _Coded(EncodedLibrary(blobs, [c.payload for c in coded]), models)
-    if verify:
-        out.corrections = [c.corrections for c in coded]
-        out.errors = [c.errors for c in coded]
-    return out
-
-
-def _verify(
-    method: Method, library: PreparedLibrary, coded: _Coded, max_error: float | None, runner
-) -> _Coded:
-    """Decode, measure and repair every clip of a library coded without verification."""
-    jobs = [
-        ClipJob(
-            method,
-            _one_clip(library, i),
-            None,
-            coded.models[clip.layout],
-            0.0,
-            max_error,
-            True,
-            coded.encoded.clips[i],
-        )  # fmt: skip
-        for i, clip in enumerate(library.clips)
-    ]
-    checked = runner.run("verify", jobs)
-    coded.corrections = [c.corrections for c in checked]
-    coded.errors = [c.errors for c in checked]
-    return coded
-
-
-def _clip_chunks(
-    library: PreparedLibrary,
-    refs: list[ClipRef],
-    clip_skeleton: list[int],
-    encoded: EncodedLibrary,
-    corrections: list[Corrections] | None,
-    errors: list[ClipErrors] | None,
-) -> tuple[list[ClipEntry], list[bytes]]:
-    """Every clip's index entry and ``C`` payload (its prefix of corrections, then the
-    method's bytes); declared errors of 0 where none are given yet (sizing a try)."""
-    entries, chunks = [], []
-    for i, clip in enumerate(library.clips):
-        fix = corrections[i] if corrections else Corrections.empty()
+def _clip_entries(
+    inputs: _Inputs, plan: _Plan, clip_skeleton: list[int], errors: list[ClipErrors] | None
+) -> list[ClipEntry]:
+    """Every clip's index entry; declared errors of 0 where none are given yet (sizing a
+    try)."""
+    entries = []
+    for i, scan in enumerate(inputs.scans):
         err = errors[i] if errors else None
-        chunks.append(write_clip_prefix(clip.at_rest, fix) + encoded.clips[i])
         entries.append(
             ClipEntry(
-                clip.motion.name,
+                scan.name,
                 clip_skeleton[i],
-                clip.layout,
-                clip.motion.n_frames,
-                clip.motion.fps,
-                clip.source_bytes,
-                clip.source_format,
+                plan.layout_of[i],
+                scan.n_frames,
+                scan.fps,
+                scan.source[0],
+                scan.source[1],
                 err.max_joint if err else 0.0,
                 err.arms if err else 0.0,
-                refs[i],
+                scan.ref,
             )
         )
-    return entries, chunks
+    return entries
 
 
 def _layout_chunks(library: PreparedLibrary, encoded: EncodedLibrary, start: int) -> list[bytes]:
@@ -592,70 +852,73 @@ def _layout_chunks(library: PreparedLibrary, encoded: EncodedLibrary, start: int
     return out
 
 
-def _assemble(
-    method: str,
-    settings: CompressSettings,
-    table: _SkeletonTable,
-    layout_skeletons: list[int],
+def _write(
+    out: Path | None,
+    layout: _Layout,
     entries: list[ClipEntry],
-    record_chunks: list[bytes],
     layout_chunks: list[bytes],
-    clip_chunks: list[bytes],
-) -> bytes:
-    """The assemble step: the header (tables, clip index, the settings' JSON) and every chunk,
-    as :func:`~quatmotion.codec.container.write_container` writes them."""
-    header = Header(
-        method,
-        tuple(table.records),
-        tuple(table.skeletons),
-        tuple(LayoutEntry(s) for s in layout_skeletons),
-        tuple(entries),
-        json.dumps(settings.to_dict(), sort_keys=True, separators=(",", ":")).encode("utf-8"),
-    )
-    out = io.BytesIO()
-    write_container(out, header, record_chunks, layout_chunks, clip_chunks)
-    return out.getvalue()
+    clip_chunks: Iterable[bytes],
+) -> bytes | None:
+    """The write step: the header and every chunk (:func:`write_container`), the clips'
+    chunks streamed from their spool into the file, written atomically; the bytes when
+    ``out`` is None."""
+    header = layout.header(entries)
+    if out is None:
+        buffer = io.BytesIO()
+        write_container(buffer, header, layout.records, layout_chunks, clip_chunks)
+        return buffer.getvalue()
+    with atomic_output(out) as temp, open(temp, "wb") as file:
+        write_container(file, header, layout.records, layout_chunks, clip_chunks)
+    return None
 
 
 def _search_ratio(
-    method: Method,
-    library: PreparedLibrary,
-    ratio: float,
-    seed: int,
-    size_of: Callable[[EncodedLibrary], int],
-    runner: _Runner,
+    job: _Job, ratio: float, size_of: Callable[[_Coded], int]
 ) -> tuple[float, _Coded]:
     """The smallest quality knob (best fidelity) whose file fits ``source / ratio``: doubling
     or halving until the target is bracketed, then geometric bisection."""
-    target = sum(c.source_bytes or _text_bytes(c.motion) for c in library.clips) / ratio
+    method, scans = job.method, job.inputs.scans
+    target = sum(s.source[0] or s.text_bytes for s in scans) / ratio
     # the sizes below are measured with zeros for the declared errors, which deflate better
     # than the final values: keep room for their 8 bytes per clip
-    target -= 8 * len(library.clips) + 8
-    fits: dict[float, _Coded] = {}
+    target -= 8 * len(scans) + 8
+    fits: set[float] = set()
+    best: tuple[float, _Coded] | None = None  # the smallest quality that fits, kept
     too_big: set[float] = set()
     q = method.default_quality
-    for _ in range(24):
-        coded = _encode_once(method, library, q, None, seed, [], runner, verify=False)
-        if size_of(coded.encoded) <= target:
-            fits[q] = coded
-        else:
-            too_big.add(q)
-        smallest_fit = min(fits, default=None)
-        largest_miss = max(
-            (b for b in too_big if smallest_fit is None or b < smallest_fit), default=None
-        )
-        if smallest_fit is None:
-            q *= 2.0
-        elif largest_miss is None:
-            q /= 2.0
-        elif smallest_fit / largest_miss < 1.06:
-            break
-        else:
-            q = float(np.sqrt(smallest_fit * largest_miss))
-    if not fits:
+    try:
+        for _ in range(24):
+            coded = job.encode(q, None, verify=False)
+            if size_of(coded) <= target:
+                fits.add(q)
+                if best is None or q < best[0]:
+                    if best is not None:
+                        best[1].close()
+                    best = (q, coded)
+                else:
+                    coded.close()
+            else:
+                too_big.add(q)
+                coded.close()
+            smallest_fit = min(fits, default=None)
+            largest_miss = max(
+                (b for b in too_big if smallest_fit is None or b < smallest_fit), default=None
+            )
+            if smallest_fit is None:
+                q *= 2.0
+            elif largest_miss is None:
+                q /= 2.0
+            elif smallest_fit / largest_miss < 1.06:
+                break
+            else:
+                q = float(np.sqrt(smallest_fit * largest_miss))
+    except BaseException:
+        if best is not None:
+            best[1].close()
+        raise
+    if best is None:
         raise ValueError(f"no setting of {method.name} reaches ratio {ratio:g}")
-    q = min(fits)
-    return q, fits[q]
+    return best
 
 
 def _text_bytes(motion: Motion) -> int:
@@ -671,61 +934,53 @@ def _text_bytes(motion: Motion) -> int:
 
 
 def _details(
-    data: bytes,
-    method: str,
-    library: PreparedLibrary,
-    coded: _Coded,
-    started: float,
-    quality: float,
-    first: int = 0,
+    data: bytes | None, method: str, inputs: _Inputs, coded: _Coded, started: float, quality: float
 ) -> dict[str, Any]:
-    """What a build or an add made, per clip of ``library`` (``first``: the file's index of
-    its first clip; the clips before it were already in the file)."""
-    with Archive.open(data) as archive:
-        clip_bytes = [archive.chunk_bytes(i) for i in range(first, len(archive))]
-    return {
-        "data": data,
+    """What a build or an add made, per clip coded (``data``: the file's bytes, when it was
+    written to no path)."""
+    details: dict[str, Any] = {} if data is None else {"data": data}
+    details.update({
         "method": method,
         "quality": quality,
         "clip_errors": list(coded.errors),
-        "clip_bytes": clip_bytes,
-        "corrections": [len(c) for c in coded.corrections],
-        "source_bytes": [c.source_bytes for c in library.clips],
-        "raw_bytes": [
-            4 * sum(len(ch) for ch in c.motion.skeleton.channels) * c.motion.n_frames
-            for c in library.clips
-        ],
+        "clip_bytes": coded.chunk_sizes,
+        "corrections": list(coded.corrections),
+        "source_bytes": [s.source[0] for s in inputs.scans],
+        "raw_bytes": [s.raw_bytes for s in inputs.scans],
         "seconds": time.perf_counter() - started,
-    }
+    })  # fmt: skip
+    return details
 
 
-def _encode_step(
-    codec: Method,
-    library: PreparedLibrary,
-    settings: CompressSettings,
-    runner: _Runner,
-    file_size: Callable[..., int],
-) -> tuple[float, _Coded]:
+def _encode_step(job: _Job, size_of: Callable[[_Coded], int]) -> tuple[float, _Coded]:
     """Fit, encode, verify and repair, by the settings' target: a ratio (search the quality
     knob, then verify), a bound the method cannot aim at itself (try four quality steps and
     keep the smallest file after repair), or one pass."""
+    codec, settings = job.method, job.settings
     q = settings.quality if settings.quality is not None else codec.default_quality
-    seed, max_error = settings.seed, settings.max_error
+    max_error = settings.max_error
     if settings.ratio is not None:
-        q, coded = _search_ratio(codec, library, settings.ratio, seed, file_size, runner)
-        return q, _verify(codec, library, coded, None, runner)
+        q, coded = _search_ratio(job, settings.ratio, size_of)
+        return q, job.verify(coded, None)
     if max_error is not None and not codec.controls_bound and settings.quality is None:
-        best = None
-        for scale in (1.0, 0.5, 0.25, 0.125):
-            coded = _encode_once(
-                codec, library, q * scale, max_error, seed, [], runner, verify=True
-            )
-            size = file_size(coded.encoded, coded.corrections)
-            if best is None or size < best[0]:
-                best = (size, q * scale, coded)
+        best: tuple[int, float, _Coded] | None = None
+        try:
+            for scale in (1.0, 0.5, 0.25, 0.125):
+                coded = job.encode(q * scale, max_error, verify=True)
+                size = size_of(coded)
+                if best is None or size < best[0]:
+                    if best is not None:
+                        best[2].close()
+                    best = (size, q * scale, coded)
+                else:
+                    coded.close()
+        except BaseException:
+            if best is not None:
+                best[2].close()
+            raise
         assert best is not None
         return best[1], best[2]
-    return q, _encode_once(codec, library, q, max_error, seed, [], runner, verify=True)
+    return q, job.encode(q, max_error, verify=True)
 
 
 def build_library(
@@ -740,6 +995,13 @@ def build_library(
 ) -> BuildReport:
     """Compress clips into one ``.qmz`` library (:meth:`quatmotion.codec.Archive.build`).
 
+    The caller holds no clip's frames: the clips are scanned in the runner's workers
+    (:func:`scan_clip`), the layouts and the shared models are learned on a seeded sample of
+    at most ``settings.fit_sample`` clips of each skeleton structure (read here), and every
+    clip is read, coded, decoded and repaired in a worker (:func:`code_clip`, the models sent
+    to each worker once), its chunk spooled to a temporary file and streamed into the
+    container.
+
     Parameters
     ----------
     sources : iterable
@@ -753,11 +1015,10 @@ def build_library(
     settings : CompressSettings, optional
         How (stored in the file). Default: every joint within 1 cm with ``best``.
     runner : Runner, optional
-        Where the per-clip jobs (encode, decode, repair) run (default
+        Where the per-clip jobs (scan, encode, decode, repair) run (default
         :meth:`Runner.resolve`: a local pool, or ``QUATMOTION_SCHEDULER``). The shared models
-        are learned here first (on at most ``settings.fit_sample`` clips of each skeleton
-        structure) and the file is assembled here: every scheduler and number of workers gives
-        the same bytes.
+        are learned here and the file is assembled here: every scheduler and number of
+        workers gives the same bytes.
     progress : callable, optional
         ``progress(step_name, done, total)``.
     on_doubt : callable, optional
@@ -770,8 +1031,9 @@ def build_library(
     -------
     BuildReport
         ``added`` the clips' references; ``failures`` the inputs left out (``on_error="skip"``);
-        ``details`` the bytes and per-clip sizes and errors (``data``, ``clip_errors``,
-        ``clip_bytes``, ``source_bytes``, ``raw_bytes``, ``quality``, ``seconds``).
+        ``details`` the per-clip sizes and errors (``clip_errors``, ``clip_bytes``,
+        ``source_bytes``, ``raw_bytes``, ``quality``, ``seconds``) and, when ``out`` is None,
+        the bytes (``data``).
 
     Raises
     ------
@@ -786,49 +1048,38 @@ def build_library(
     report = progress or (lambda *_: None)
     codec = get_method(settings.method)
     skip = settings.on_error == "skip"
-    # 1. read
-    inputs = _read_step(sources, settings.read, skip, source_sizes, on_doubt, report)
+    runner_ = _Runner(runner, report)
+    # 1. scan (in the workers)
+    inputs = _scan_step(sources, settings, skip, source_sizes, on_doubt, runner_)
     # 2. store the skeletons
     table = _SkeletonTable()
     _admit(inputs, table, skip)
-    clip_skeleton = [table.index(m.skeleton) for m in inputs.motions]
-    # 3. prepare (layouts, channels, weights)
-    report("prepare", 0, len(inputs.motions))
-    library = prepare_library(
-        inputs.motions,
-        inputs.sources,
-        vertices=settings.bound_on == "vertices",
-        progress=lambda done, total: report("prepare", done, total),
-    )
-    layout_skeletons = [table.index(info.skeleton) for info in library.layouts]
-
-    def assemble(encoded: EncodedLibrary, corrections=None, errors=None) -> bytes:
-        entries, chunks = _clip_chunks(
-            library, inputs.refs, clip_skeleton, encoded, corrections, errors
-        )
-        return _assemble(
-            codec.name, settings, table, layout_skeletons, entries, table.new_records,
-            _layout_chunks(library, encoded, 0), chunks,
-        )  # fmt: skip
-
-    # 4. fit the shared models, encode, verify and repair
-    runner_ = _Runner(runner, report, settings.fit_sample)
-    q, coded = _encode_step(
-        codec, library, settings, runner_, lambda enc, fix=None: len(assemble(enc, fix))
-    )
-    # 5. assemble, 6. write
-    data = assemble(coded.encoded, coded.corrections, coded.errors)
-    path = None if out is None else Path(out)
-    if path is not None:
-        atomic_write_bytes(path, data)
-    report("done", len(inputs.motions), len(inputs.motions))
+    clip_skeleton = [table.index(s.skeleton) for s in inputs.scans]
+    # 3. plan: layouts, the sample read and the layouts fitted on it
+    plan = _plan(inputs, [], settings, settings.bound_on == "vertices", report)
+    layout = _Layout(
+        codec.name, settings, table, [table.index(info.skeleton) for info in plan.sample.layouts],
+        table.new_records, [], [],
+    )  # fmt: skip
+    # 4. fit the shared models, code every clip in a worker (encode, verify, repair)
+    job = _Job(codec, inputs, plan, settings, runner_)
+    q, coded = _encode_step(job, lambda c: layout.file_size(inputs, plan, clip_skeleton, c))
+    # 5. assemble and write, the clips' chunks streamed from the spool
+    try:
+        path = None if out is None else Path(out)
+        entries = _clip_entries(inputs, plan, clip_skeleton, coded.errors)
+        data = _write(path, layout, entries, layout.layout_chunks(plan, coded), coded.chunks())
+        details = _details(data, codec.name, inputs, coded, t0, q)
+    finally:
+        coded.close()
+    report("done", len(inputs.scans), len(inputs.scans))
     return BuildReport(
         path=path,
-        added=list(inputs.refs),
+        added=inputs.refs,
         failures=inputs.failures,
         doubts=inputs.doubts,
         settings=settings,
-        details=_details(data, codec.name, library, coded, t0, q),
+        details=details,
     )
 
 
@@ -843,15 +1094,19 @@ def add_to_library(
 ) -> BuildReport:
     """Add clips to an existing ``.qmz`` file, rewritten atomically (:meth:`Archive.add`).
 
-    The clips already in the file keep their chunks byte for byte; the new ones are coded with
-    the file's method, with its library models where their skeleton structure is known, and
-    with ``settings`` (default: the file's own, else :class:`CompressSettings`; the method is
-    always the file's). A clip whose content hash the file already holds is skipped (in
-    ``report.skipped``); a new clip whose name the file holds is an error. The file keeps the
-    settings it was made with. A version 1 file is rewritten in the current version.
+    The clips already in the file keep their chunks byte for byte (streamed from the old
+    file); the new ones are coded with the file's method, with its library models where their
+    skeleton structure is known, and with ``settings`` (default: the file's own, else
+    :class:`CompressSettings`; the method is always the file's). A clip whose content hash the
+    file already holds is skipped (in ``report.skipped``); a new clip whose name the file
+    holds is an error. The file keeps the settings it was made with. A version 1 file is
+    rewritten in the current version.
     """
+    from dataclasses import replace
+
     t0 = time.perf_counter()
     path = Path(path)
+    report = progress or (lambda *_: None)
     with Archive.open(path) as archive:
         old = archive.header
         settings = settings or archive.settings or CompressSettings()
@@ -865,55 +1120,51 @@ def add_to_library(
             [archive.skeleton(k) for k in range(len(old.skeletons))],
         )
         layouts = [archive.layout(k) for k in range(len(old.layouts))]
-        old_records, old_layout_chunks, old_clip_chunks = archive.payloads()
-    inputs = _read_step(sources, settings.read, False, None, on_doubt)
+        old_records, old_layout_chunks = archive.shared_payloads()
+    runner_ = _Runner(runner, report)
+    inputs = _scan_step(sources, settings, False, None, on_doubt, runner_)
     known = {r.sha256: r for r in old_refs}
     skipped = [known[r.sha256] for r in inputs.refs if r.sha256 in known]
-    keep = [i for i, r in enumerate(inputs.refs) if r.sha256 not in known]
-    inputs.motions = [inputs.motions[i] for i in keep]
-    inputs.refs = [_name_apart(r, old_refs, path) for r in (inputs.refs[i] for i in keep)]
-    inputs.sources = [inputs.sources[i] for i in keep]
-    inputs.motions = [
-        m if m.name == r.name else m.renamed(r.name)
-        for m, r in zip(inputs.motions, inputs.refs, strict=True)
-    ]
-    if not inputs.motions:
+    inputs.select([i for i, r in enumerate(inputs.refs) if r.sha256 not in known])
+    for i, scan in enumerate(inputs.scans):
+        ref = _name_apart(scan.ref, old_refs, path)
+        inputs.scans[i] = replace(scan, ref=ref, name=ref.name)
+    if not inputs.scans:
         return BuildReport(path=path, skipped=skipped, settings=stored, details={})
     codec = get_method(old.method)
     _admit(inputs, table, False)
-    clip_skeleton = [table.index(m.skeleton) for m in inputs.motions]
-    library = prepare_library(inputs.motions, inputs.sources, [info for info, _ in layouts])
-    given = [model for _, model in layouts]
+    clip_skeleton = [table.index(s.skeleton) for s in inputs.scans]
+    plan = _plan(inputs, layouts, settings, False, report)
     n_old = len(layouts)
     layout_skeletons = [lay.skeleton for lay in old.layouts] + [
-        table.index(info.skeleton) for info in library.layouts[n_old:]
+        table.index(info.skeleton) for info in plan.sample.layouts[n_old:]
     ]
     q = settings.quality if settings.quality is not None else codec.default_quality
-    runner_ = _Runner(runner, progress or (lambda *_: None), settings.fit_sample)
-    coded = _encode_once(
-        codec, library, q, settings.max_error, settings.seed, given, runner_, verify=True
-    )
-    new_entries, new_chunks = _clip_chunks(
-        library, inputs.refs, clip_skeleton, coded.encoded, coded.corrections, coded.errors
-    )
+    job = _Job(codec, inputs, plan, settings, runner_)
+    coded = job.encode(q, settings.max_error, verify=True)
     old_entries = [
         entry if entry.ref is not None else _with_ref(entry, ref)
         for entry, ref in zip(old.clips, old_refs, strict=True)
     ]
-    data = _assemble(
-        old.method, stored, table, layout_skeletons, old_entries + new_entries,
-        old_records + table.new_records,
-        old_layout_chunks + _layout_chunks(library, coded.encoded, n_old),
-        list(old_clip_chunks) + new_chunks,
+    layout = _Layout(
+        old.method, stored, table, layout_skeletons, old_records + table.new_records,
+        old_layout_chunks, old_entries, n_old,
     )  # fmt: skip
-    atomic_write_bytes(path, data)
+    try:
+        entries = _clip_entries(inputs, plan, clip_skeleton, coded.errors)
+        with Archive.open(path) as archive:
+            chunks = itertools.chain(archive.clip_payloads(), coded.chunks())
+            _write(path, layout, entries, layout.layout_chunks(plan, coded), chunks)
+        details = _details(None, codec.name, inputs, coded, t0, q)
+    finally:
+        coded.close()
     return BuildReport(
         path=path,
-        added=list(inputs.refs),
+        added=inputs.refs,
         skipped=skipped,
         doubts=inputs.doubts,
         settings=stored,
-        details=_details(data, codec.name, library, coded, t0, q, first=len(old.clips)),
+        details=details,
     )
 
 
