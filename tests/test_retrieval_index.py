@@ -270,3 +270,21 @@ def test_search_queries_in_one_process_equal_one_at_a_time(clip_folder, tmp_path
     assert [d["query"] for d in json.loads(folder.output)["queries"]][:4] == files
     both = runner.invoke(app, ["search", files[0], "--queries", str(listing), *args])
     assert both.exit_code != 0 and "not both" in both.output
+
+
+def test_a_query_from_the_shell_imports_no_scikit_learn(clip_folder, tmp_path):
+    """`quatmotion search NAME` opens the index (its settings validated) and ranks without
+    importing scikit-learn or SciPy's statistics (about a second of CPU at start-up)."""
+    out = tmp_path / "light.qidx"
+    assert _build(clip_folder, out).exit_code == 0
+    argv = ["quatmotion", "search", "walk_0", "--index", str(out), "--top", "3", "--json"]
+    code = (
+        "import sys\nfrom quatmotion.cli import main\n"
+        f"sys.argv = {argv!r}\n"
+        "try:\n    main()\nexcept SystemExit:\n    pass\n"
+        "heavy = [m for m in ('sklearn', 'scipy.stats') if m in sys.modules]\n"
+        "print('HEAVY', heavy, file=sys.stderr)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert "HEAVY []" in done.stderr, done.stderr
+    assert json.loads(done.stdout)["results"]
