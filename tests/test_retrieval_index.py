@@ -288,3 +288,19 @@ def test_a_query_from_the_shell_imports_no_scikit_learn(clip_folder, tmp_path):
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert "HEAVY []" in done.stderr, done.stderr
     assert json.loads(done.stdout)["results"]
+
+
+def test_index_build_computes_the_dictionaries_only_for_a_method_that_needs_them(
+    clip_folder, tmp_path
+):
+    plain, ksvd = tmp_path / "plain.qidx", tmp_path / "ksvd.qidx"
+    assert _build(clip_folder, plain).exit_code == 0
+    with ClipIndex.open(plain) as idx:
+        assert idx.settings.kinds == ("motion",)
+        assert not {"ksvd", "qssd"} & set().union(*idx.feature_keys().values())
+    assert _build(clip_folder, ksvd, "--method", "paper-ksvd").exit_code == 0
+    with ClipIndex.open(ksvd) as idx:
+        assert idx.settings.kinds == ("motion", "ksvd")
+        assert "ksvd" in set().union(*idx.feature_keys().values())
+    bad = _build(clip_folder, tmp_path / "bad.qidx", "--method", "nonesuch")
+    assert bad.exit_code == 2 and "unknown method" in bad.output
