@@ -20,6 +20,7 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from collections.abc import Mapping
 from numbers import Integral, Real
@@ -56,12 +57,12 @@ class Interval:
             return None
         if value != value:  # NaN
             return None
-        low_ok = self.left is None or (
-            value >= self.left if self.closed in ("left", "both") else value > self.left
-        )
-        high_ok = self.right is None or (
-            value <= self.right if self.closed in ("right", "both") else value < self.right
-        )
+        # an open end is an infinite bound, compared as the interval's closedness says (so
+        # inf is outside [0, inf), as scikit-learn has it)
+        left = -math.inf if self.left is None else self.left
+        right = math.inf if self.right is None else self.right
+        low_ok = value >= left if self.closed in ("left", "both") else value > left
+        high_ok = value <= right if self.closed in ("right", "both") else value < right
         return True if low_ok and high_ok else None
 
     def sklearn(self) -> Any:
