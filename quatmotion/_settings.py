@@ -20,21 +20,107 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from collections.abc import Mapping
+from numbers import Integral, Real
 from pathlib import Path
 from typing import Any, ClassVar, Self
 
-# scikit-learn's parameter validation (what its estimators and quatmotion.sparse use): the
-# constraints are declarative and the messages name the parameter, the range and the value.
-from sklearn.utils._param_validation import (
-    InvalidParameterError,
-    validate_parameter_constraints,
-)
-
 from quatmotion.errors import FormatError
 
-__all__ = ["Settings"]
+__all__ = ["Interval", "Settings", "StrOptions"]
+
+
+# scikit-learn's parameter validation (what its estimators and quatmotion.sparse use): the
+# constraints are declarative and the messages name the parameter, the range and the value.
+# Importing it costs about a second (scikit-learn imports SciPy's statistics), so settings
+# declare their ranges with the two light descriptions below, which become scikit-learn's
+# objects only when a value fails the quick check: a valid settings object (an index opened
+# for one query) is checked without importing scikit-learn.
+@dataclasses.dataclass(frozen=True)
+class Interval:
+    """scikit-learn's ``Interval(type, left, right, closed=...)``, built when needed."""
+
+    type: type
+    left: float | None
+    right: float | None
+    closed: str
+
+    def __init__(self, type_: type, left: float | None, right: float | None, *, closed: str):
+        for name, value in (("type", type_), ("left", left), ("right", right), ("closed", closed)):
+            object.__setattr__(self, name, value)
+
+    def satisfied(self, value: Any) -> bool | None:
+        """True when scikit-learn's would accept ``value``; None: let it decide."""
+        if isinstance(value, bool) or not isinstance(value, self.type):
+            return None
+        if value != value:  # NaN
+            return None
+        # an open end is an infinite bound, compared as the interval's closedness says (so
+        # inf is outside [0, inf), as scikit-learn has it)
+        left = -math.inf if self.left is None else self.left
+        right = math.inf if self.right is None else self.right
+        low_ok = value >= left if self.closed in ("left", "both") else value > left
+        high_ok = value <= right if self.closed in ("right", "both") else value < right
+        return True if low_ok and high_ok else None
+
+    def sklearn(self) -> Any:
+        from sklearn.utils._param_validation import Interval as SkInterval
+
+        return SkInterval(self.type, self.left, self.right, closed=self.closed)
+
+
+@dataclasses.dataclass(frozen=True)
+class StrOptions:
+    """scikit-learn's ``StrOptions(options)``, built when needed."""
+
+    options: frozenset[str]
+
+    def __init__(self, options: Any):
+        object.__setattr__(self, "options", frozenset(options))
+
+    def satisfied(self, value: Any) -> bool | None:
+        return True if isinstance(value, str) and value in self.options else None
+
+    def sklearn(self) -> Any:
+        from sklearn.utils._param_validation import StrOptions as SkStrOptions
+
+        return SkStrOptions(set(self.options))
+
+
+def _quick_check(constraint: Any, value: Any) -> bool | None:
+    """Whether ``value`` meets one constraint, when that is plain (None: ask scikit-learn)."""
+    if constraint is None:
+        return True if value is None else None
+    if constraint == "boolean":
+        return True if isinstance(value, bool) else None
+    if isinstance(constraint, Interval | StrOptions):
+        return constraint.satisfied(value)
+    if isinstance(constraint, type) and constraint not in (Integral, Real):
+        return True if isinstance(value, constraint) else None
+    return None
+
+
+def _validate(constraints: Mapping[str, list[Any]], params: Mapping[str, Any], caller: str) -> None:
+    """scikit-learn's ``validate_parameter_constraints``, imported only when some value is not
+    plainly valid (its message then names the parameter, the range and the value)."""
+    if all(any(_quick_check(c, params[k]) for c in cs) for k, cs in constraints.items()):
+        return
+    from sklearn.utils._param_validation import (
+        InvalidParameterError,
+        validate_parameter_constraints,
+    )
+
+    full = {
+        k: [c.sklearn() if isinstance(c, Interval | StrOptions) else c for c in cs]
+        for k, cs in constraints.items()
+    }
+    try:
+        validate_parameter_constraints(full, dict(params), caller_name=caller)
+    except InvalidParameterError as error:
+        # A ValueError (and no TypeError) for the command line's bad-input contract.
+        raise ValueError(str(error)) from None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,11 +136,7 @@ class Settings:
                 object.__setattr__(self, f.name, tuple(value))
         params = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         constraints = {k: v for k, v in self._parameter_constraints.items() if k in params}
-        try:
-            validate_parameter_constraints(constraints, params, caller_name=type(self).__name__)
-        except InvalidParameterError as error:
-            # A ValueError (and no TypeError) for the command line's bad-input contract.
-            raise ValueError(str(error)) from None
+        _validate(constraints, params, type(self).__name__)
         self._check()
 
     def _check(self) -> None:

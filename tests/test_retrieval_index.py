@@ -127,6 +127,56 @@ def test_add_after_a_killed_build_completes_it_once(tmp_path):
     assert sorted(names) == [f"wave_{s:02d}" for s in range(16)]
 
 
+def test_a_killed_index_build_command_resumes_every_clip_once_with_the_labels_given(tmp_path):
+    """`quatmotion index build --kinds motion` killed once a batch is committed; the same
+    command again with --labels indexes the rest (every clip once), says it resumed, applies
+    the labels to old and new clips, and a third run says the labels changed nothing."""
+    folder = tmp_path / "many"
+    folder.mkdir()
+    total = 36  # over two batches of 16: the kill comes with clips left to index
+    for seed in range(total):
+        write_motion(generate_clip("wave", seed, n_frames=120), folder / f"wave_{seed:02d}.bvh")
+    out = tmp_path / "killed.qidx"
+    argv = ["quatmotion", "index", "build", str(folder), "-o", str(out), "--kinds", "motion"]
+    argv += ["--workers", "1"]
+    code = f"import sys\nfrom quatmotion.cli import main\nsys.argv = {argv!r}\nmain()\n"
+    # its own session: the kill takes the command and any worker it started
+    proc = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
+    deadline = time.monotonic() + 300
+    count = 0
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            with sqlite3.connect(f"{out.resolve().as_uri()}?mode=ro", uri=True) as db:
+                count = db.execute("SELECT count(*) FROM clips").fetchone()[0]
+        except sqlite3.DatabaseError:
+            count = 0
+        if count >= 1:
+            os.killpg(proc.pid, signal.SIGKILL)
+            break
+        time.sleep(0.05)
+    proc.wait()
+    with ClipIndex.open(out) as idx:  # readable after the kill
+        partial = len(idx)
+    assert 1 <= partial < total
+    labels = tmp_path / "labels.csv"
+    labels.write_text(
+        "clip,label\n" + "".join(f"wave_{s:02d},wave-{s % 2}\n" for s in range(total)),
+        encoding="utf-8",
+    )
+    result = _build(folder, out, "--labels", str(labels))
+    assert result.exit_code == 0, result.output
+    assert f"{total - partial} clips added, {partial} already indexed" in result.output
+    assert "(resumed" in result.output and f"{total} clips labelled" in result.output
+    with ClipIndex.open(out) as idx:
+        names = [c.name for c in idx.clips()]
+        assert sorted(names) == [f"wave_{s:02d}" for s in range(total)]
+        assert idx.labels() == {f"wave_{s:02d}": f"wave-{s % 2}" for s in range(total)}
+    again = _build(folder, out, "--labels", str(labels))
+    assert again.exit_code == 0, again.output
+    assert f"0 clips added, {total} already indexed" in again.output
+    assert "changed no label" in again.output
+
+
 def test_remove_and_ls(clip_folder, tmp_path):
     out = tmp_path / "r.qidx"
     _build(clip_folder, out)
@@ -220,3 +270,37 @@ def test_search_queries_in_one_process_equal_one_at_a_time(clip_folder, tmp_path
     assert [d["query"] for d in json.loads(folder.output)["queries"]][:4] == files
     both = runner.invoke(app, ["search", files[0], "--queries", str(listing), *args])
     assert both.exit_code != 0 and "not both" in both.output
+
+
+def test_a_query_from_the_shell_imports_no_scikit_learn(clip_folder, tmp_path):
+    """`quatmotion search NAME` opens the index (its settings validated) and ranks without
+    importing scikit-learn or SciPy's statistics (about a second of CPU at start-up)."""
+    out = tmp_path / "light.qidx"
+    assert _build(clip_folder, out).exit_code == 0
+    argv = ["quatmotion", "search", "walk_0", "--index", str(out), "--top", "3", "--json"]
+    code = (
+        "import sys\nfrom quatmotion.cli import main\n"
+        f"sys.argv = {argv!r}\n"
+        "try:\n    main()\nexcept SystemExit:\n    pass\n"
+        "heavy = [m for m in ('sklearn', 'scipy.stats') if m in sys.modules]\n"
+        "print('HEAVY', heavy, file=sys.stderr)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert "HEAVY []" in done.stderr, done.stderr
+    assert json.loads(done.stdout)["results"]
+
+
+def test_index_build_computes_the_dictionaries_only_for_a_method_that_needs_them(
+    clip_folder, tmp_path
+):
+    plain, ksvd = tmp_path / "plain.qidx", tmp_path / "ksvd.qidx"
+    assert _build(clip_folder, plain).exit_code == 0
+    with ClipIndex.open(plain) as idx:
+        assert idx.settings.kinds == ("motion",)
+        assert not {"ksvd", "qssd"} & set().union(*idx.feature_keys().values())
+    assert _build(clip_folder, ksvd, "--method", "paper-ksvd").exit_code == 0
+    with ClipIndex.open(ksvd) as idx:
+        assert idx.settings.kinds == ("motion", "ksvd")
+        assert "ksvd" in set().union(*idx.feature_keys().values())
+    bad = _build(clip_folder, tmp_path / "bad.qidx", "--method", "nonesuch")
+    assert bad.exit_code == 2 and "unknown method" in bad.output

@@ -53,7 +53,7 @@ pose_app = typer.Typer(
 )
 app.add_typer(pose_app, name="pose")
 
-from quatmotion.pose.library import FPS_RANGE  # noqa: E402  (the settings' ranges)
+from quatmotion.pose.ranges import FPS_RANGE  # noqa: E402  (the settings' ranges)
 
 
 def _echo(message: str) -> None:

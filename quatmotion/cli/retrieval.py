@@ -48,18 +48,27 @@ _KINDS_HELP = (
     "Feature kinds to compute: motion, qssd, ksvd (comma-separated; qssd and ksvd only for "
     "the paper-qssd and paper-ksvd methods, which cost several times motion alone)."
 )
+_BUILD_METHOD_HELP = (
+    "Also compute the feature kinds this search method needs (paper-qssd: qssd; paper-ksvd: "
+    "ksvd); repeat for several."
+)
 
 
-def _kinds(text: str) -> tuple[str, ...]:
-    from quatmotion.retrieval.methods import FEATURE_KINDS
+def _kinds(text: str, methods: list[str] | None = None) -> tuple[str, ...]:
+    """The kinds asked for, then those the named methods need (each once, in that order)."""
+    from quatmotion.retrieval.methods import FEATURE_KINDS, METHODS
 
-    kinds = tuple(k.strip() for k in text.split(",") if k.strip())
+    kinds = [k.strip() for k in text.split(",") if k.strip()]
     unknown = [k for k in kinds if k not in FEATURE_KINDS]
     if unknown or not kinds:
         raise CliInputError(
             f"unknown feature kinds {unknown}; choose from {', '.join(FEATURE_KINDS)}"
         )
-    return kinds
+    for method in methods or ():
+        if method not in METHODS:
+            raise CliInputError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+        kinds += [k for k in METHODS[method].kinds if k not in kinds]
+    return tuple(kinds)
 
 
 def _settings(
@@ -68,6 +77,7 @@ def _settings(
     skeletons: Path | None,
     units: str | None,
     label_folders: bool,
+    methods: list[str] | None = None,
 ):  # -> IndexSettings
     """The one settings object of a build, from the options (checked once, by the settings'
     constraints; the ASF option's file-or-folder checked here for its message)."""
@@ -83,7 +93,7 @@ def _settings(
         raise CliInputError(f"{asf}: no such skeleton file or folder")
     check_units(units)
     read = ReadSettings(units=units, skeleton=None if asf is None else str(asf), strict=False)
-    return IndexSettings(kinds=_kinds(kinds), label_folders=label_folders, read=read)
+    return IndexSettings(kinds=_kinds(kinds, methods), label_folders=label_folders, read=read)
 
 
 def _labels_from(labels: Path | None) -> dict[str, str] | None:
@@ -178,6 +188,7 @@ def build_command(
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
     kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
+    method: Annotated[list[str] | None, typer.Option(help=_BUILD_METHOD_HELP)] = None,
     label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
@@ -189,7 +200,7 @@ def build_command(
     others.
     """
     with user_errors():
-        settings = _settings(kinds, skeleton, skeletons, units, label_folders)
+        settings = _settings(kinds, skeleton, skeletons, units, label_folders, method)
     _build(paths, output, settings, labels, workers, scheduler, add=False)
 
 
@@ -202,6 +213,7 @@ def add_command(
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
     kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
+    method: Annotated[list[str] | None, typer.Option(help=_BUILD_METHOD_HELP)] = None,
     label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
@@ -211,7 +223,7 @@ def add_command(
     from quatmotion.retrieval.index import ClipIndex
 
     with user_errors():
-        settings = _settings(kinds, skeleton, skeletons, units, label_folders)
+        settings = _settings(kinds, skeleton, skeletons, units, label_folders, method)
         ClipIndex.open(index).close()
     _build(paths, index, settings, labels, workers, scheduler, add=True)
 
@@ -289,6 +301,12 @@ def ls_command(
     )
 
 
+_QUERIES_HELP = (
+    "Many queries in one process: a folder of motion files (searched recursively) or a text "
+    "file of queries, one a line (files or indexed clip names; # starts a comment)."
+)
+
+
 @app.command("search")
 def search_command(
     index: Annotated[Path, typer.Option(help="Index file (.qidx).")],
@@ -296,13 +314,7 @@ def search_command(
         str | None,
         typer.Argument(help="An .amc/.bvh file, or an indexed clip's name, file name or stem."),
     ] = None,
-    queries: Annotated[
-        Path | None,
-        typer.Option(
-            help="Many queries in one process: a folder of motion files (searched recursively) "
-            "or a text file of queries, one a line (files or indexed clip names)."
-        ),
-    ] = None,
+    queries: Annotated[Path | None, typer.Option(help=_QUERIES_HELP)] = None,
     top: Annotated[int, typer.Option(help="Results to show.")] = 20,
     method: Annotated[
         str | None, typer.Option(help="Retrieval method (default: the best measured).")
@@ -314,74 +326,114 @@ def search_command(
         bool, typer.Option(help="Find where the query occurs inside longer clips.")
     ] = False,
 ) -> None:
-    """Rank the indexed clips by similarity to the query.
+    """Rank the indexed clips by similarity to the query (or to each of --queries).
 
     With --within, each result names the frames of the clip that match, first to last (from
-    0); the JSON's stop_frame is one past the last.
+    0); the JSON's stop_frame is one past the last. With --queries and --json, one document
+    lists every query's results, in the order given.
     """
+    with user_errors():
+        _check_search_options(query, queries, method, within, skeleton, units)
+        texts = _query_texts(query, queries)
+        method_name, answers = _answer(index, texts, top, method, within, skeleton, units)
+    _show_answers(texts, answers, method_name, as_json, batch=queries is not None, within=within)
+
+
+def _check_search_options(
+    query: str | None,
+    queries: Path | None,
+    method: str | None,
+    within: bool,
+    skeleton: Path | None,
+    units: str | None,
+) -> None:
+    """Step 1: the options agree (one query or --queries; --within without another method)."""
+    from quatmotion.retrieval.methods import DEFAULT_METHOD
+
+    if within and method not in (None, DEFAULT_METHOD):
+        raise CliInputError("--within uses the motion frames; leave out --method")
+    if (query is None) == (queries is None):
+        raise CliInputError("give one query, or --queries, not both")
+    check_units(units)
+    if skeleton is not None:
+        require_file(skeleton)
+
+
+def _query_texts(query: str | None, queries: Path | None) -> list[str]:
+    """Step 2: the queries as given (file paths or clip names), in order."""
+    from quatmotion.io import MOTION_SUFFIXES
+
+    if queries is None:
+        return [str(query)]
+    if queries.is_dir():
+        texts = [
+            str(p)
+            for p in sorted(queries.rglob("*"))
+            if p.is_file() and p.suffix.lower() in MOTION_SUFFIXES
+        ]
+    else:
+        require_file(queries)
+        lines = queries.read_text(encoding="utf-8").splitlines()
+        texts = [t.strip() for t in lines if t.strip() and not t.strip().startswith("#")]
+    if not texts:
+        raise CliInputError(f"{queries}: no queries in it")
+    return texts
+
+
+def _answer(
+    index: Path,
+    texts: list[str],
+    top: int,
+    method: str | None,
+    within: bool,
+    skeleton: Path | None,
+    units: str | None,
+) -> tuple[str, list[list]]:
+    """Step 3: every query answered on the index opened once (a motion file is read; any other
+    text names an indexed clip). Returns the method's name and each query's results."""
     from quatmotion.errors import ClipNameError
     from quatmotion.io import MOTION_SUFFIXES
     from quatmotion.retrieval.index import ClipIndex
-    from quatmotion.retrieval.methods import DEFAULT_METHOD
     from quatmotion.retrieval.search import default_method, search, search_within
 
-    with user_errors():
-        name = method or DEFAULT_METHOD
-        if within and method not in (None, DEFAULT_METHOD):
-            raise CliInputError("--within uses the motion frames; leave out --method")
-        if (query is None) == (queries is None):
-            raise CliInputError("give one query, or --queries, not both")
-        check_units(units)
-        if skeleton is not None:
-            require_file(skeleton)
-        if queries is not None:
-            if queries.is_dir():
-                texts = [
-                    str(p)
-                    for p in sorted(queries.rglob("*"))
-                    if p.is_file() and p.suffix.lower() in MOTION_SUFFIXES
-                ]
-            else:
-                require_file(queries)
-                lines = queries.read_text(encoding="utf-8").splitlines()
-                texts = [t.strip() for t in lines if t.strip() and not t.startswith("#")]
-            if not texts:
-                raise CliInputError(f"{queries}: no queries in it")
-        else:
-            texts = [str(query)]
-        answers = []
-        with ClipIndex.open(index) as idx:
-            if method is None and not within:
-                name = default_method(idx)  # an index of 0.3.0 has no dtw-fused features
-            for text in texts:
-                path = Path(text)
-                # A motion file if there is one; else an indexed clip's name (walk.bvh too).
-                is_file = path.suffix.lower() in MOTION_SUFFIXES and path.exists()
-                if not is_file and (skeleton is not None or units is not None):
-                    raise CliInputError("--skeleton and --units apply to a query file")
-                target = read_clip(path, skeleton, units) if is_file else text
-                try:
-                    answers.append(
-                        search_within(idx, target, k=top)
-                        if within
-                        else search(idx, target, method=name, k=top)
-                    )
-                except ClipNameError as error:
-                    looks_like_file = path.suffix.lower() in MOTION_SUFFIXES
-                    raise CliInputError(
-                        f"{text}: no such file, and {error}" if looks_like_file else str(error)
-                    ) from None
-    method_name = "subsequence-dtw" if within else name
+    answers = []
+    with ClipIndex.open(index) as idx:
+        # an index of 0.3.0 has no features of the default: default_method says which it has
+        name = "subsequence-dtw" if within else (method or default_method(idx))
+        for text in texts:
+            path = Path(text)
+            looks_like_file = path.suffix.lower() in MOTION_SUFFIXES
+            is_file = looks_like_file and path.exists()  # else a clip's name (walk.bvh too)
+            if not is_file and (skeleton is not None or units is not None):
+                raise CliInputError("--skeleton and --units apply to a query file")
+            target = read_clip(path, skeleton, units) if is_file else text
+            try:
+                answers.append(
+                    search_within(idx, target, k=top)
+                    if within
+                    else search(idx, target, method=name, k=top)
+                )
+            except ClipNameError as error:
+                raise CliInputError(
+                    f"{text}: no such file, and {error}" if looks_like_file else str(error)
+                ) from None
+    return name, answers
+
+
+def _show_answers(
+    texts: list[str], answers: list[list], method: str, as_json: bool, *, batch: bool, within: bool
+) -> None:
+    """Step 4: the results as JSON (one document) or a table per query."""
     if as_json:
         docs = [
-            {"query": t, "method": method_name, "results": [r.as_dict() for r in rs]}
+            {"query": t, "method": method, "results": [r.as_dict() for r in rs]}
             for t, rs in zip(texts, answers, strict=True)
         ]
-        print_json(docs[0] if queries is None else {"method": method_name, "queries": docs})
+        print_json({"method": method, "queries": docs} if batch else docs[0])
         return
     for text, results in zip(texts, answers, strict=True):
-        if queries is not None:
-            console.print(f"query {text}")
+        if batch:
+            console.print(f"query {text}", markup=False, highlight=False)
         _print_results(results, within)
 
 

@@ -27,9 +27,7 @@ from numbers import Real
 from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
 
-from sklearn.utils._param_validation import Interval, StrOptions
-
-from quatmotion._settings import Settings
+from quatmotion._settings import Interval, Settings, StrOptions
 from quatmotion.collection.refs import ClipRef, content_hash, duplicates, motion_hash, unique_names
 from quatmotion.errors import FormatError
 from quatmotion.io import LENGTH_UNITS, TRANSLATION_MODES

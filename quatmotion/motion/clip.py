@@ -115,3 +115,76 @@ class Motion:
             f"Motion(name={self.name!r}, skeleton={self.skeleton.name!r}, frames={self.n_frames}, "
             f"fps={self.fps:g}, joints={self.n_joints})"
         )
+
+
+def _heading(root_rotation: NDArray[np.float64]) -> float:
+    """Yaw about +Y of one root rotation (w first): the angle of its twist about the vertical."""
+    w, y = float(root_rotation[0]), float(root_rotation[2])
+    return 2.0 * float(np.arctan2(y, w))
+
+
+def join(motions: list[Motion] | tuple[Motion, ...], name: str = "") -> Motion:
+    """One take made of ``motions`` one after the other, each turned about the vertical and
+    moved on the floor so that it starts where the previous one stopped, facing the way it
+    faced (its heading, the root rotation's twist about +Y); heights are kept.
+
+    Parameters
+    ----------
+    motions : sequence of Motion
+        At least one clip, all of one frame rate and of the same joints (names and parents);
+        the take has the first clip's skeleton. Either every clip has joint translations or
+        none has.
+    name : str
+        The take's name.
+
+    Returns
+    -------
+    Motion
+        ``sum(len)`` frames; clip ``k`` starts at frame ``sum(len[:k])``.
+
+    Raises
+    ------
+    ValueError
+        No clip, different frame rates or joints, joint translations on some clips only.
+    """
+    clips = list(motions)
+    if not clips:
+        raise ValueError("join needs at least one motion")
+    first = clips[0]
+    for c in clips[1:]:
+        if c.fps != first.fps:
+            raise ValueError(f"{c.name!r} runs at {c.fps:g} fps, {first.name!r} at {first.fps:g}")
+        same = c.skeleton.joint_names == first.skeleton.joint_names and np.array_equal(
+            c.skeleton.parents, first.skeleton.parents
+        )
+        if not same:
+            raise ValueError(f"{c.name!r} and {first.name!r} have different joints")
+    with_translations = [c.joint_translations is not None for c in clips]
+    if any(with_translations) and not all(with_translations):
+        raise ValueError("some clips have joint translations and others not")
+    roots, rotations = [], []
+    end_position, end_heading = None, None
+    for c in clips:
+        root = c.root_translation.copy()
+        rot = c.rotations.copy()
+        if end_position is not None and c.n_frames:
+            turn = end_heading - _heading(rot[0, 0])
+            spin = quat.about_axis(turn, "y")
+            rot[:, 0] = quat.multiply(spin, rot[:, 0])
+            offset = quat.rotate(spin, root - root[0])
+            root = offset + np.array([end_position[0], root[0, 1], end_position[2]])
+        if c.n_frames:
+            end_position, end_heading = root[-1], _heading(rot[-1, 0])
+        roots.append(root)
+        rotations.append(rot)
+    translations = (
+        np.concatenate([c.joint_translations for c in clips]) if all(with_translations) else None
+    )
+    return Motion(
+        skeleton=first.skeleton,
+        fps=first.fps,
+        root_translation=np.concatenate(roots),
+        rotations=quat.make_continuous(np.concatenate(rotations), axis=0),
+        joint_translations=translations,
+        name=name,
+    )

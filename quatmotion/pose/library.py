@@ -77,6 +77,7 @@ from quatmotion.pose import labels
 from quatmotion.pose.data import PoseClip, PoseData
 from quatmotion.pose.index import HNSWIndex
 from quatmotion.pose.methods import METHODS, project_features
+from quatmotion.pose.ranges import FPS_RANGE
 
 __all__ = [
     "DEFAULT_METRIC",
@@ -98,7 +99,6 @@ FORMAT = FileFormat("quatmotion-pose-library", 3, 2, "a quatmotion pose library"
 canonical body, features clipped to the library's range."""
 _FORMAT = FORMAT.name
 _VERSION = FORMAT.version
-FPS_RANGE = (1.0, 1000.0)
 HEIGHT_RANGE = (50.0, 300.0)  # cm: a stature from a small child to beyond the tallest adult
 _NOT_A_LIBRARY = (
     f"not a quatmotion pose library (expected a file written by 'quatmotion pose index': "

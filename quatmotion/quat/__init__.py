@@ -32,7 +32,6 @@ import warnings
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 FloatArray = NDArray[np.float64]
 
@@ -269,6 +268,8 @@ def from_matrix(m: ArrayLike) -> FloatArray:
     if m.shape[-2:] != (3, 3):
         raise ValueError(f"rotation matrices need trailing shape (3, 3), got {m.shape}")
     lead = m.shape[:-2]
+    from scipy.spatial.transform import Rotation  # on first use: SciPy's import is slow
+
     q = _wxyz(Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat())
     return canonicalize(q.reshape(*lead, 4))
 
@@ -323,6 +324,8 @@ def to_euler(q: ArrayLike, order: str, degrees: bool = False) -> FloatArray:
     _check_order(order)
     q = _as_quat(q)
     lead = q.shape[:-1]
+    from scipy.spatial.transform import Rotation  # on first use: SciPy's import is slow
+
     rot = Rotation.from_quat(_xyzw(q.reshape(-1, 4)))
     with warnings.catch_warnings():
         # Gimbal lock is a property of the data, not an error: SciPy still returns valid angles.

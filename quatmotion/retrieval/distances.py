@@ -203,10 +203,13 @@ def atom_matching_distances(
     return cost[:, np.arange(5)[None, :], _PERMUTATIONS].sum(-1).min(-1)
 
 
-# How far the refined ends may reach: take frames at most this many times the matched frames'
-# 90th-percentile distance to their nearest query frame still belong to the match.
-_REFINE_FACTOR = 2.0
+# The refined ends (find_within): matched frames farther than _SHRINK_FACTOR times the
+# matched frames' 90th-percentile distance to their nearest query frame are dropped from the
+# ends; take frames as near the body of the query (its frames but the first and last
+# _LEAD_SHARE) as 90 % of the matched frames are added.
+_SHRINK_FACTOR = 2.0
 _REFINE_QUANTILE = 90.0
+_LEAD_SHARE = 0.2
 
 
 def find_within(
@@ -218,11 +221,12 @@ def find_within(
     symmetricP1, module conventions), its length in the take between ``n/2`` and ``2n``. A
     periodic motion at another tempo aligns whole cycles with fewer or more of the take's, so
     its path can stop short of the segment; ``refine`` then re-aligns the ends on what each
-    take frame looks like: a take frame belongs to the match when its distance to its nearest
-    query frame is at most twice the 90th percentile of that distance over the matched frames.
-    The ends first move inward past matched frames that do not belong, then outward over
-    neighbours that do (so a take doing the query's motion for longer than the query is
-    matched whole).
+    take frame looks like. The ends first move inward past matched frames more than twice as
+    far from their nearest query frame as 90 % of the matched frames are; then outward over
+    take frames as near the *body* of the query (its frames but the first and last 20 %, the
+    lead-in and lead-out poses that neighbouring motions share) as 90 % of the matched frames
+    are, crossing a single frame that is not: a take doing the query's motion for longer
+    than the query is matched whole.
 
     Parameters
     ----------
@@ -247,22 +251,26 @@ def find_within(
         return float("inf"), 0, 0
     start, stop = int(start), int(stop)
     if refine:
-        start, stop = _refine_ends(frame_cost.min(axis=0), start, stop)
+        start, stop = _refine_ends(frame_cost, start, stop)
     return float(cost), start, stop
 
 
-def _refine_ends(nearest: FloatArray, start: int, stop: int) -> tuple[int, int]:
-    """The ends of a match ``[start, stop)`` re-aligned on ``nearest`` ``(m,)``, each take
-    frame's distance to its nearest query frame (see :func:`find_within`)."""
-    limit = _REFINE_FACTOR * float(np.percentile(nearest[start:stop], _REFINE_QUANTILE))
-    belongs = nearest <= limit
-    while stop - start > 1 and not belongs[stop - 1]:
+def _refine_ends(frame_cost: FloatArray, start: int, stop: int) -> tuple[int, int]:
+    """The ends of a match ``[start, stop)`` re-aligned on the frame distances ``(n, m)``
+    (see :func:`find_within`)."""
+    n, m = frame_cost.shape
+    nearest = frame_cost.min(axis=0)
+    limit = _SHRINK_FACTOR * float(np.percentile(nearest[start:stop], _REFINE_QUANTILE))
+    while stop - start > 1 and nearest[stop - 1] > limit:
         stop -= 1
-    while stop - start > 1 and not belongs[start]:
+    while stop - start > 1 and nearest[start] > limit:
         start += 1
-    m = nearest.shape[0]
-    while stop < m and belongs[stop]:
+    lead = int(_LEAD_SHARE * n)
+    body = frame_cost[lead : n - lead].min(axis=0) if n - 2 * lead >= 1 else nearest
+    near = body <= float(np.percentile(body[start:stop], _REFINE_QUANTILE))
+    # one frame over the limit on its own is crossed (a tenth of the matched frames are)
+    while stop < m and (near[stop] or (stop + 1 < m and near[stop + 1])):
         stop += 1
-    while start > 0 and belongs[start - 1]:
+    while start > 0 and (near[start - 1] or (start > 1 and near[start - 2])):
         start -= 1
     return start, stop

@@ -39,10 +39,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
-from sklearn.utils._param_validation import Interval
 
 from quatmotion._format import FileFormat
-from quatmotion._settings import Settings
+from quatmotion._settings import Interval, Settings
 from quatmotion.collection import ClipRef, ReadSettings, unique_names
 from quatmotion.collection.refs import content_hash
 from quatmotion.errors import ClipNameError, FormatError
