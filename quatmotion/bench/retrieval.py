@@ -1,13 +1,18 @@
 """Content-based motion retrieval (QSSD paper section 5.2), every method in one run.
 
-``quatmotion bench retrieval --out ret.json [--quick]``. Leave-one-out on ``hdm05`` (class
-labels), ``bandai1`` (content labels) and generated motions (their kind): each clip queries all
-the others; METRICS.md's TPR@20 (capped by class size), precision@10, mAP over the full ranking
-and 1-NN accuracy, per class and averaged over the queries that have a relevant clip. Also the
-feature time per clip (index build seconds per clip, by feature kind), query latency (median
-and p95, the query's features computed inside the timing, from a loaded Motion: parsing is
-left out) at each data set's size and on synthetic libraries of 1,000 and 10,000 clips, and the
-Fig. 7 confusion matrices of the paper's method and the default, as PNG beside the JSON.
+``quatmotion bench retrieval --out ret.json [--quick]``; from Python, ``run(...,
+methods=...)`` scores a subset (the paper's methods cost most of the run: their dictionaries).
+Leave-one-out on ``hdm05`` (class labels), ``bandai1`` (content labels) and generated
+motions (their kind): each clip queries all the others; METRICS.md's TPR@20 (capped by class
+size), precision@10, mAP over the full ranking and 1-NN accuracy, per class and averaged over
+the queries that have a relevant clip; on bandai1 the share of the top 10 taken by a
+neighbouring class (:data:`NEIGHBOURS`). Also the feature time per clip (index build seconds
+per clip, by feature kind), query latency (median and p95, the query's features computed
+inside the timing, from a loaded Motion: parsing is left out; the top :data:`TOP_N`, as
+``search`` asks for, so the default's pruning counts) at each data set's size and on
+synthetic libraries of 1,000 and 10,000 clips, the share of full DTWs the default computed
+there, and the Fig. 7 confusion matrices of the paper's method and the default, as PNG beside
+the JSON. Its headline figures are listed under ``headlines``.
 
 The synthetic libraries are built from the motion features of the real and generated clips,
 each copy cropped (up to 20 % at each end), time-warped (x0.8-1.25) and jittered (1 cm), so
@@ -53,6 +58,7 @@ class _Dataset:
     features: list[dict[str, np.ndarray]]
     fingerprints: list[str]
     seconds: dict[str, list[float]]
+    groups: list[str] | None = None  # actor or style: the label-learning splits
 
 
 def _motion(source: tuple[str, str, str | None]) -> Motion:
@@ -83,7 +89,9 @@ def _features_job(
     return out, secs, skeleton_fingerprint(motion.skeleton)
 
 
-def _load(name: str, quick: bool, seed: int, log: Callable[[str], None]) -> _Dataset:
+def _load(
+    name: str, quick: bool, seed: int, log: Callable[[str], None], kinds: tuple[str, ...] = KINDS
+) -> _Dataset:
     from quatmotion.datasets import catalogue
 
     sources: list[tuple[str, str, str | None]]
@@ -98,6 +106,7 @@ def _load(name: str, quick: bool, seed: int, log: Callable[[str], None]) -> _Dat
             for j in range(per_kind)
         ]
         labels = [s[1] for s in sources]
+        groups = None
     else:
         entries = catalogue(collection=name)
         if quick:
@@ -107,14 +116,72 @@ def _load(name: str, quick: bool, seed: int, log: Callable[[str], None]) -> _Dat
             for e in entries
         ]
         labels = [e.label for e in entries]
+        groups = [str(e.labels.get("actor") or e.labels.get("style") or "") for e in entries]
     log(f"{name}: {len(sources)} clips, computing features")
     workers = os.cpu_count() or 1
     # spawn, not fork: this process may already run OpenMP threads (Numba, BLAS)
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        results = list(pool.map(_features_job, [(s, KINDS) for s in sources], chunksize=1))
-    seconds = {k: [r[1][k] for r in results] for k in KINDS}
+        results = list(pool.map(_features_job, [(s, kinds) for s in sources], chunksize=1))
+    seconds = {k: [r[1][k] for r in results] for k in kinds}
     sample = [_motion(s) for s in sources[:: max(1, len(sources) // 20)]]
-    return _Dataset(name, labels, sample, [r[0] for r in results], [r[2] for r in results], seconds)
+    return _Dataset(
+        name,
+        labels,
+        sample,
+        [r[0] for r in results],
+        [r[2] for r in results],
+        seconds,
+        groups if groups and all(groups) else None,
+    )
+
+
+LEARNED = "dtw-fused-labels"
+
+
+def label_learning(data: _Dataset) -> dict[str, Any] | None:
+    """Learning from labels, measured on actors or styles not trained on: the groups (actor on
+    hdm05, style on bandai1) sorted and dealt alternately into two halves; the model of
+    ``dtw-fused-labels`` learned from one half's labels ranks the other half (leave-one-out
+    inside it), against ``dtw-fused`` on the same clips, and the reverse. ``None`` without
+    groups."""
+    from quatmotion.retrieval.methods import fused_model
+
+    if data.groups is None or LEARNED not in METHODS:
+        return None
+    names = sorted(set(data.groups))
+    halves = (names[::2], names[1::2])
+    out: dict[str, Any] = {"splits": []}
+    for train, test in (halves, halves[::-1]):
+        tr = [i for i, g in enumerate(data.groups) if g in train]
+        te = [i for i, g in enumerate(data.groups) if g in test]
+        labelled = Library(
+            [data.features[i] for i in tr],
+            [data.fingerprints[i] for i in tr],
+            labels=[data.labels[i] for i in tr],
+        )
+        plain, learned = fused_model(labelled), fused_model(labelled, learned=True)
+        feats, prints = [data.features[i] for i in te], [data.fingerprints[i] for i in te]
+        labels = [data.labels[i] for i in te]
+        split: dict[str, Any] = {"train": list(train), "test": list(test)}
+        for method, key, model in (
+            (DEFAULT_METHOD, "model:dtw-fused", plain),
+            (LEARNED, "model:dtw-fused-labels", learned),
+        ):
+            library = Library(feats, prints, {key: model.to_bytes()})
+            rankings = [
+                METHODS[method].rank(library, QueryFeatures(f, p), exclude=i)
+                for i, (f, p) in enumerate(zip(feats, prints, strict=True))
+            ]
+            scores = retrieval_scores(rankings, labels)
+            split[method] = {k: scores[k] for k in ("map", "precision10", "nn1")}
+        out["splits"].append(split)
+    for method in (DEFAULT_METHOD, LEARNED):
+        out[method] = {
+            k: float(np.mean([s[method][k] for s in out["splits"]]))
+            for k in ("map", "precision10", "nn1")
+        }
+    out["map_gain"] = out[LEARNED]["map"] - out[DEFAULT_METHOD]["map"]
+    return out
 
 
 def retrieval_scores(rankings: list[Ranking], labels: list[str]) -> dict[str, Any]:
@@ -186,6 +253,8 @@ def _leave_one_out(data: _Dataset, method: str) -> tuple[dict[str, Any], list[fl
 def _latency(
     library: Library, motions: list[Motion], method: str, repeats: int
 ) -> dict[str, float]:
+    # the library's packed arrays (and the default's model) are built once, before the timing
+    METHODS[method].rank(library, QueryFeatures(library.features[0], library.fingerprints[0]))
     """Milliseconds of query features + ranking over ``repeats`` queries (after a warm-up):
     wall time, and the querying thread's processor time (on a shared machine the wall time
     also counts waiting for a core)."""
@@ -197,7 +266,7 @@ def _latency(
     for k, pick in enumerate(picks):
         motion = motions[pick]
         t0, c0 = time.perf_counter(), time.thread_time()
-        METHODS[method].rank(library, query_features(motion, method))
+        METHODS[method].rank(library, query_features(motion, method), k=TOP_N)
         if k:
             wall.append(1e3 * (time.perf_counter() - t0))
             cpu.append(1e3 * (time.thread_time() - c0))
@@ -208,7 +277,22 @@ def _latency(
         "cpu_p95_ms": float(np.percentile(cpu, 95)),
         "queries": len(wall),
         "clips": len(library),
+        **_pruning(library, motions, method, picks),
     }
+
+
+def _pruning(library: Library, motions: list[Motion], method: str, picks: Any) -> dict[str, float]:
+    """For the default: the mean share of the library's clips whose full DTW was computed."""
+    from quatmotion.retrieval.search import query_features
+
+    if method != DEFAULT_METHOD or not len(library):
+        return {}
+    shares = [
+        METHODS[method].distances(library, query_features(motions[p], method), k=TOP_N)[1]
+        / len(library)
+        for p in picks[1:]
+    ]
+    return {"full_dtw_share": float(np.mean(shares))}
 
 
 def _warped(P: np.ndarray, idx: np.ndarray, rng: np.random.Generator, noise: float) -> np.ndarray:
@@ -308,8 +392,68 @@ def _confusion_figure(path: Path, title: str, scores: dict[str, Any]) -> str:
     return path.name
 
 
-def run(out: Path, quick: bool = False, seed: int = 0) -> dict[str, Any]:
-    """Run the benchmark; write JSON to ``out`` and the figures beside it; return the dict."""
+def _headline(name: str, path: list[str], unit: str, better: str, fmt: str) -> dict[str, Any]:
+    return {"name": name, "path": path, "unit": unit, "better": better, "format": fmt}
+
+
+def _headlines(methods: list[str]) -> list[dict[str, Any]]:
+    d = DEFAULT_METHOD
+    out = [
+        _headline(
+            f"retrieval mAP, {ds} ({d})", ["datasets", ds, "methods", d, "map"], "", "higher", ".3f"
+        )
+        for ds in ("hdm05", "bandai1", "synthetic")
+    ]
+    out.append(
+        _headline(
+            f"bandai1 neighbouring-class share of the top 10 ({d})",
+            ["datasets", "bandai1", "methods", d, "neighbour_share10", "all"],
+            "",
+            "lower",
+            ".3f",
+        )
+    )
+    out += [
+        _headline(
+            f"query p95 at {n:,} clips ({d})",
+            ["scaling", str(n), d, "p95_ms"],
+            "ms",
+            "lower",
+            ".1f",
+        )
+        for n in (1_000, 10_000)
+    ]
+    out += [
+        _headline(
+            f"mAP gain of labels learned on other {who} ({ds})",
+            ["datasets", ds, "label_learning", "map_gain"],
+            "",
+            "higher",
+            "+.3f",
+        )
+        for ds, who in (("hdm05", "actors"), ("bandai1", "styles"))
+    ]
+    out.append(
+        _headline(
+            "index build seconds a clip (motion)",
+            ["datasets", "bandai1", "feature_seconds_per_clip", "motion"],
+            "s",
+            "lower",
+            ".3f",
+        )
+    )
+    return out if d in methods else []
+
+
+def run(
+    out: Path, quick: bool = False, seed: int = 0, methods: list[str] | None = None
+) -> dict[str, Any]:
+    """Run the benchmark; write JSON to ``out`` and the figures beside it; return the dict.
+    ``methods``: the names scored (default every method of ``METHODS``)."""
+    from quatmotion.bench._provenance import provenance
+
+    chosen = list(METHODS) if methods is None else [m for m in METHODS if m in methods]
+    kinds = tuple(k for k in KINDS if any(k in METHODS[m].kinds for m in chosen))
     out = Path(out)
     t_start = time.perf_counter()
 
@@ -317,26 +461,28 @@ def run(out: Path, quick: bool = False, seed: int = 0) -> dict[str, Any]:
         print(f"[retrieval {time.perf_counter() - t_start:6.0f} s] {msg}", flush=True)
 
     rng = np.random.default_rng(seed)
-    results: dict[str, Any] = {
-        "quick": quick,
-        "seed": seed,
-        "default_method": DEFAULT_METHOD,
-        "methods": list(METHODS),
-        "datasets": {},
-        "figures": [],
-    }
+    results: dict[str, Any] = provenance("retrieval", out, quick, seed)
+    results.update(
+        {
+            "default_method": DEFAULT_METHOD,
+            "methods": chosen,
+            "headlines": _headlines(chosen),
+            "datasets": {},
+            "figures": [],
+        }
+    )
     sources: list[dict[str, np.ndarray]] = []
     prints: list[str] = []
     query_motions: list[Motion] = []
     for name in ("hdm05", "bandai1", "synthetic"):
-        data = _load(name, quick, seed, log)
+        data = _load(name, quick, seed, log, kinds)
         res: dict[str, Any] = {
             "clips": len(data.labels),
             "feature_seconds_per_clip": {k: float(np.mean(v)) for k, v in data.seconds.items()},
             "methods": {},
         }
         library = Library(data.features, data.fingerprints)
-        for method in METHODS:
+        for method in [m for m in chosen if m != LEARNED]:  # LEARNED: label_learning
             scores, times = _leave_one_out(data, method)
             repeats = 3 if method.startswith("paper") else (10 if quick else 50)
             scores["latency"] = _latency(library, data.motions, method, repeats)
@@ -347,7 +493,14 @@ def run(out: Path, quick: bool = False, seed: int = 0) -> dict[str, Any]:
                 f"TPR20 {scores['tpr20']:.3f} 1NN {scores['nn1']:.3f}, "
                 f"{scores['latency']['median_ms']:.2f} ms"
             )
-        for method in (PAPER, DEFAULT_METHOD):
+        learning = label_learning(data)
+        if learning is not None:
+            res["label_learning"] = learning
+            log(
+                f"  {name} labels learned on other actors/styles: mAP "
+                f"{learning[DEFAULT_METHOD]['map']:.3f} -> {learning[LEARNED]['map']:.3f}"
+            )
+        for method in [m for m in (PAPER, DEFAULT_METHOD) if m in chosen]:
             fig = out.with_name(f"{out.stem}_{name}_confusion_{method.replace('+', '_')}.png")
             results["figures"].append(
                 _confusion_figure(
@@ -365,7 +518,7 @@ def run(out: Path, quick: bool = False, seed: int = 0) -> dict[str, Any]:
     for n in (1_000, 10_000):
         library = _synthetic_library(sources, prints, n, rng)
         entry = {}
-        for method in METHODS:
+        for method in [m for m in chosen if m != LEARNED]:
             if method.startswith("paper") and quick:
                 continue
             repeats = 3 if method.startswith("paper") else (5 if method.startswith("dtw") else 30)

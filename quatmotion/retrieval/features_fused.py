@@ -32,6 +32,11 @@ Conventions
   (orthonormal rows): the projection on which the exact search's lower bounds are computed
   (an orthonormal projection never lengthens a difference, so a bound on the projection
   bounds the full distance).
+* **Learned from labels** (``dtw-fused-labels``, off by default): where a library has labels,
+  a linear discriminant projection of the fused frames (at most :data:`N_COMPONENTS`
+  directions, frames labelled by their clip; :func:`fit_label_projection`) scaled to the
+  stream's spread, appended to the stream times :data:`LEARNED_WEIGHT`. It keeps every
+  invariance above (a linear map of the same frames).
 * Stored in an index's ``blobs`` table under :data:`MODEL_KEY` as ``.npz`` bytes (no pickles):
   a JSON header (format version, scales, weights, the number of clips fitted on, a SHA-256
   digest of the header and the projection) and the projection. Bytes that do not read or
@@ -54,16 +59,24 @@ from quatmotion.errors import FormatError
 __all__ = [
     "FIT_CLIPS",
     "FUSED_DIM",
+    "LEARNED_WEIGHT",
     "MODEL_KEY",
+    "MODEL_KEY_LABELS",
     "N_COMPONENTS",
     "PARTS",
     "WEIGHTS",
     "FusedModel",
     "fit_fused_model",
+    "fit_label_projection",
     "stream_parts",
 ]
 
 MODEL_KEY = "model:dtw-fused"
+MODEL_KEY_LABELS = "model:dtw-fused-labels"
+LEARNED_WEIGHT = 0.5
+"""Weight of the learned projection appended to the fused stream."""
+LABEL_FRAMES = 20_000
+"""Frames the label projection is fitted on, at most (drawn with the seed)."""
 MODEL_VERSION = 1
 FIT_CLIPS = 48
 """Clips the scales and the projection are fitted on, at most."""
@@ -100,20 +113,27 @@ class FusedModel:
     projection: NDArray[np.float32]  # (N_COMPONENTS, FUSED_DIM), orthonormal rows
     fitted_clips: int
     weights: tuple[float, ...] = WEIGHTS
+    learned: NDArray[np.float32] | None = None  # (FUSED_DIM, c), from labels
+    labels_digest: str = ""  # of the labels it was learned from
 
     def stream(
         self, frames: NDArray[np.floating], path: NDArray[np.floating]
     ) -> NDArray[np.float32]:
-        """Fused stream ``(T, FUSED_DIM)`` float32 of a clip's motion and path frames."""
+        """Fused stream ``(T, FUSED_DIM)`` float32 of a clip's motion and path frames (with a
+        learned projection: ``FUSED_DIM + c`` columns)."""
         parts = stream_parts(frames, path)
         out = np.concatenate(
             [x * (w / s) for x, w, s in zip(parts, self.weights, self.scales, strict=True)], axis=1
         )
+        if self.learned is not None:
+            out = np.concatenate((out, LEARNED_WEIGHT * (out @ self.learned)), axis=1)
         return np.ascontiguousarray(out, dtype=np.float32)
 
     def project(self, stream: NDArray[np.float32]) -> NDArray[np.float32]:
-        """The stream on the principal directions ``(T, N_COMPONENTS)``."""
-        return np.ascontiguousarray(stream @ self.projection.T, dtype=np.float32)
+        """The stream's first ``FUSED_DIM`` columns on the principal directions
+        ``(T, N_COMPONENTS)`` (the rows padded with zeros stay orthonormal on a longer
+        stream)."""
+        return np.ascontiguousarray(stream[:, :FUSED_DIM] @ self.projection.T, dtype=np.float32)
 
     def _header(self) -> dict[str, object]:
         return {
@@ -122,21 +142,28 @@ class FusedModel:
             "weights": [float(x) for x in self.weights],
             "fitted_clips": int(self.fitted_clips),
             "shape": list(self.projection.shape),
+            "learned": None if self.learned is None else list(self.learned.shape),
+            "labels_digest": self.labels_digest,
         }
 
     def _digest(self) -> str:
         h = hashlib.sha256(json.dumps(self._header(), sort_keys=True).encode())
         h.update(np.ascontiguousarray(self.projection, dtype="<f4").tobytes())
+        if self.learned is not None:
+            h.update(np.ascontiguousarray(self.learned, dtype="<f4").tobytes())
         return h.hexdigest()
 
     def to_bytes(self) -> bytes:
         """``.npz`` bytes: the header (with its digest) as JSON and the projection."""
         header = dict(self._header(), digest=self._digest())
         buf = io.BytesIO()
+        arrays = {"projection": np.ascontiguousarray(self.projection, dtype="<f4")}
+        if self.learned is not None:
+            arrays["learned"] = np.ascontiguousarray(self.learned, dtype="<f4")
         np.savez(
             buf,
             header=np.frombuffer(json.dumps(header, sort_keys=True).encode(), dtype=np.uint8),
-            projection=np.ascontiguousarray(self.projection, dtype="<f4"),
+            **arrays,
         )
         return buf.getvalue()
 
@@ -155,11 +182,14 @@ class FusedModel:
             with np.load(io.BytesIO(data), allow_pickle=False) as z:
                 header = json.loads(bytes(z["header"]).decode())
                 projection = np.array(z["projection"], dtype=np.float32)
+                learned = np.array(z["learned"], dtype=np.float32) if "learned" in z else None
             model = cls(
                 tuple(float(x) for x in header["scales"]),
                 projection,
                 int(header["fitted_clips"]),
                 tuple(float(x) for x in header["weights"]),
+                learned,
+                str(header["labels_digest"]),
             )
             version, digest = header["version"], header["digest"]
         except Exception as exc:  # noqa: BLE001 - any damage reads as a format error
@@ -172,6 +202,7 @@ class FusedModel:
             projection.shape != (N_COMPONENTS, FUSED_DIM)
             or len(model.scales) != len(PARTS)
             or model.weights != WEIGHTS
+            or (learned is not None and (learned.ndim != 2 or learned.shape[0] != FUSED_DIM))
         ):
             raise ValueError(f"{MODEL_KEY}: fitted with other parameters than this code's")
         return model
@@ -216,3 +247,53 @@ def fit_fused_model(
     # principal directions; with fewer frames than components, completed to an orthonormal set
     _, _, vt = np.linalg.svd(np.concatenate((X, np.zeros((N_COMPONENTS, FUSED_DIM)))), False)
     return FusedModel(scales, vt[:N_COMPONENTS].astype(np.float32), len(picks), tuple(weights))
+
+
+def labels_digest(labels: list[str]) -> str:
+    """SHA-256 of a library's labels in clip order (what a label projection was learned on)."""
+    return hashlib.sha256(json.dumps(list(labels)).encode()).hexdigest()
+
+
+def fit_label_projection(
+    model: FusedModel,
+    frames: list[NDArray[np.floating]],
+    paths: list[NDArray[np.floating]],
+    labels: list[str],
+    seed: int = 0,
+) -> FusedModel:
+    """``model`` with a linear discriminant projection learned from ``labels`` (module
+    conventions): clips with an empty label, or of a label no other clip has, are left out;
+    fewer than two labels left returns ``model`` unchanged."""
+    from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+
+    counts: dict[str, int] = {}
+    for lab in labels:
+        counts[lab] = counts.get(lab, 0) + 1
+    use = [i for i, lab in enumerate(labels) if lab and counts[lab] >= 2]
+    classes = sorted({labels[i] for i in use})
+    if len(classes) < 2:
+        return model
+    base = FusedModel(model.scales, model.projection, model.fitted_clips, model.weights)
+    streams = [base.stream(frames[i], paths[i]) for i in use]
+    X = np.concatenate(streams).astype(np.float64)
+    y = np.concatenate(
+        [[classes.index(labels[i])] * len(s) for i, s in zip(use, streams, strict=True)]
+    )
+    if len(X) > LABEL_FRAMES:
+        pick = np.sort(np.random.default_rng(seed).choice(len(X), LABEL_FRAMES, replace=False))
+        X, y = X[pick], y[pick]
+    c = min(N_COMPONENTS, len(classes) - 1)
+    lda = LinearDiscriminantAnalysis(solver="eigen", shrinkage="auto").fit(X, y)
+    W = lda.scalings_[:, :c]
+    centred = X - X.mean(axis=0)
+    spread = np.median(np.linalg.norm(centred, axis=1))
+    learned_spread = np.median(np.linalg.norm(centred @ W, axis=1))
+    W = W * (_positive(float(spread)) / _positive(float(learned_spread)))
+    return FusedModel(
+        model.scales,
+        model.projection,
+        model.fitted_clips,
+        model.weights,
+        W.astype(np.float32),
+        labels_digest(labels),
+    )

@@ -447,7 +447,12 @@ class ClipIndex:
                     "SELECT key, data FROM blobs WHERE key LIKE 'model:%'"
                 )
             }
-        library = Library([arrays[r.id] for r in rows], [r.rotation_key for r in rows], stored)
+        library = Library(
+            [arrays[r.id] for r in rows],
+            [r.rotation_key for r in rows],
+            stored,
+            [r.label for r in rows],
+        )
         return rows, library
 
     def blob(self, key: str) -> bytes | None:

@@ -26,6 +26,10 @@ features of every method it was built for.
   clips that cannot be among the ``k`` nearest, the full DTW abandons early; ``k=None``
   computes every distance. The model (scales, projection) is stored in an index
   (:func:`store_models`) and refitted when missing, damaged or of other parameters.
+- ``"dtw-fused-labels"``: ``dtw-fused`` with a projection learned from the library's labels
+  appended to its stream (:func:`quatmotion.retrieval.features_fused.fit_label_projection`);
+  without labels, ``dtw-fused`` itself. Not the default: measured on actors and styles it was
+  not trained on (docs/performance.md).
 - ``"pooled+dtw"`` (the default before 0.4.0): the pooled embedding shortlists
   ``K = 64`` clips, DTW over the motion frames (band 0.2, at most :data:`MAX_WARP_S`)
   re-ranks them, and the two distances, each
@@ -44,7 +48,14 @@ from numpy.typing import NDArray
 from quatmotion.retrieval import _kernels
 from quatmotion.retrieval import distances as dist
 from quatmotion.retrieval.features import FEATURE_FPS, POSITION_DIM
-from quatmotion.retrieval.features_fused import MODEL_KEY, FusedModel, fit_fused_model
+from quatmotion.retrieval.features_fused import (
+    MODEL_KEY,
+    MODEL_KEY_LABELS,
+    FusedModel,
+    fit_fused_model,
+    fit_label_projection,
+    labels_digest,
+)
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -95,11 +106,14 @@ class Library:
         Per clip, its skeleton fingerprint.
     stored : dict of str to bytes
         What an index stores for the whole library (its ``blobs``: models by key).
+    labels : list of str, optional
+        Per clip, its label ("" for none): what ``dtw-fused-labels`` learns from.
     """
 
     features: list[dict[str, np.ndarray]]
     fingerprints: list[str]
     stored: dict[str, bytes] = field(default_factory=dict)
+    labels: list[str] | None = None
     _cache: dict[str, object] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -241,21 +255,34 @@ FUSED_RADIUS = 11
 half the length ratio plus one, so that a path exists."""
 
 
-def fused_model(library: Library) -> FusedModel:
+def fused_model(library: Library, learned: bool = False) -> FusedModel:
     """The library's :class:`FusedModel`: the one its index stores, or (missing, damaged or of
-    other parameters) fitted on the library, once per :class:`Library`."""
-    if "fused:model" not in library._cache:
+    other parameters) fitted on the library, once per :class:`Library`. ``learned``: the
+    model of ``dtw-fused-labels`` (learned from ``library.labels`` when fitted here; without
+    labels, the plain model)."""
+    key = MODEL_KEY_LABELS if learned else MODEL_KEY
+    if key not in library._cache:
         model = None
-        data = library.stored.get(MODEL_KEY)
+        data = library.stored.get(key)
         if data is not None:
             try:
                 model = FusedModel.from_bytes(data)
             except ValueError:  # FormatError included: refit
                 model = None
-        if model is None:
+        if model is None and learned:
+            model = _fit_labels(library, fused_model(library))
+        elif model is None:
             model = fit_fused_model(library._need("frames"), library._need("path"))
-        library._cache["fused:model"] = model
-    return library._cache["fused:model"]  # type: ignore[return-value]
+        library._cache[key] = model
+    return library._cache[key]  # type: ignore[return-value]
+
+
+def _fit_labels(library: Library, model: FusedModel, seed: int = 0) -> FusedModel:
+    if not library.labels:
+        return model
+    return fit_label_projection(
+        model, library._need("frames"), library._need("path"), list(library.labels), seed
+    )
 
 
 @dataclass(frozen=True)
@@ -265,13 +292,14 @@ class FusedDTW:
 
     name: str
     radius: int = FUSED_RADIUS
+    learned: bool = False
     kinds: tuple[str, ...] = ("motion",)
     keys: tuple[str, ...] = ("frames", "path")
 
     def _packed(self, library: Library) -> tuple[np.ndarray, ...]:
-        key = f"fused:{self.radius}"
+        key = f"fused:{self.radius}:{self.learned}"
         if key not in library._cache:
-            model = fused_model(library)
+            model = fused_model(library, self.learned)
             streams = [
                 model.stream(f, p)
                 for f, p in zip(library._need("frames"), library._need("path"), strict=True)
@@ -291,7 +319,7 @@ class FusedDTW:
         """Every clip's distance (``inf``: pruned, never one of the ``k`` nearest, or
         ``exclude``) and the number of full DTWs computed."""
         frames, projected, upper, lower, offsets = self._packed(library)
-        model = fused_model(library)
+        model = fused_model(library, self.learned)
         q = dist._as_frames(model.stream(query.arrays["frames"], query.arrays["path"]), "query")
         kk = len(library) if k is None else max(1, int(k))
         return _kernels.fused_search(
@@ -309,25 +337,44 @@ class FusedDTW:
         return _sorted(ids[keep], d[keep], exclude, k)
 
 
-def store_models(index: object, seed: int = 0) -> bool:
+def store_models(index: object, seed: int = 0) -> list[str]:
     """Fit and store in ``index`` (a writable :class:`~quatmotion.retrieval.index.ClipIndex`)
     the default's model when it is missing, damaged, of other parameters, or fitted on fewer
-    clips than it would be now; returns whether it wrote one."""
+    clips than it would be now; and, when the index has labels, ``dtw-fused-labels``'s when it
+    is missing, damaged or learned from other labels. Returns the keys written."""
     from quatmotion.retrieval.features_fused import FIT_CLIPS
 
-    data = index.blob(MODEL_KEY)  # type: ignore[attr-defined]
-    _, library = index.load(("frames", "path"))  # type: ignore[attr-defined]
+    rows, library = index.load(("frames", "path"))  # type: ignore[attr-defined]
     if len(library) == 0:
-        return False
-    if data is not None:
-        try:
-            if FusedModel.from_bytes(data).fitted_clips >= min(FIT_CLIPS, len(library)):
-                return False
-        except ValueError:
-            pass
-    model = fit_fused_model(library._need("frames"), library._need("path"), seed)
-    index.set_blob(MODEL_KEY, model.to_bytes())  # type: ignore[attr-defined]
-    return True
+        return []
+    written = []
+    model = _stored(index.blob(MODEL_KEY))  # type: ignore[attr-defined]
+    if model is None or model.fitted_clips < min(FIT_CLIPS, len(library)):
+        model = fit_fused_model(library._need("frames"), library._need("path"), seed)
+        index.set_blob(MODEL_KEY, model.to_bytes())  # type: ignore[attr-defined]
+        written.append(MODEL_KEY)
+    labels = [r.label for r in rows]
+    if any(labels):
+        learned = _stored(index.blob(MODEL_KEY_LABELS))  # type: ignore[attr-defined]
+        if (
+            learned is None
+            or learned.labels_digest != labels_digest(labels)
+            or learned.scales != model.scales
+        ):
+            library.labels = labels
+            learned = _fit_labels(library, model, seed)
+            index.set_blob(MODEL_KEY_LABELS, learned.to_bytes())  # type: ignore[attr-defined]
+            written.append(MODEL_KEY_LABELS)
+    return written
+
+
+def _stored(data: bytes | None) -> FusedModel | None:
+    if data is None:
+        return None
+    try:
+        return FusedModel.from_bytes(data)
+    except ValueError:
+        return None
 
 
 @dataclass(frozen=True)
@@ -409,6 +456,7 @@ METHODS: dict[str, RetrievalMethod] = {
     "dtw-heading": PathDTW("dtw-heading"),
     "pooled": PooledEmbedding("pooled"),
     DEFAULT_METHOD: FusedDTW(DEFAULT_METHOD),
+    "dtw-fused-labels": FusedDTW("dtw-fused-labels", learned=True),
     "pooled+dtw": ShortlistThenDTW("pooled+dtw", max_radius=MAX_WARP_S * FEATURE_FPS),
 }
 """Name -> method; every method the benchmark scores."""
