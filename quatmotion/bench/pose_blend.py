@@ -187,6 +187,7 @@ def run(
         "skipped": {},
     }
     root = data_root()
+    loaded: dict[str, tuple[list, list[int], list[int]]] = {}
     for kind in datasets:
         try:
             clips = _load(kind, root, quick)
@@ -194,22 +195,25 @@ def run(
             results["skipped"][kind] = f"{type(exc).__name__}: {exc}"
             continue
         train, test = _split(clips)
+        loaded[kind] = (clips, train, test)
         log(f"{kind}: {len(clips)} clips ({len(train)} train, {len(test)} test)")
-        per_seed = []
-        for s in range(seed, seed + n_seeds):
+    per_seed: dict[str, list[dict[str, Any]]] = {kind: [] for kind in loaded}
+    # seeds outermost: a run stopped early has every data set, each seed written as it ends
+    for s in range(seed, seed + n_seeds):
+        for kind, (clips, train, test) in loaded.items():
             try:
-                per_seed.append(_one_seed(clips, train, test, methods, quick, s, log))
+                per_seed[kind].append(_one_seed(clips, train, test, methods, quick, s, log))
             except Exception as exc:
                 results["skipped"][f"{kind} seed {s}"] = f"{type(exc).__name__}: {exc}"
-        if per_seed:
-            summary = _summary(per_seed)
-            results["datasets"][kind] = {
-                "summary": summary,
-                "best": _best(summary, "precision"),
-                "best_near": _best(summary, "near_precision"),
-                "per_seed": per_seed,
-            }
-        atomic_write_json(out, results)
+            if per_seed[kind]:
+                summary = _summary(per_seed[kind])
+                results["datasets"][kind] = {
+                    "summary": summary,
+                    "best": _best(summary, "precision"),
+                    "best_near": _best(summary, "near_precision"),
+                    "per_seed": per_seed[kind],
+                }
+            atomic_write_json(out, results)
     results["seconds"] = time.perf_counter() - t_start
     atomic_write_json(out, results)
     return results
