@@ -45,6 +45,25 @@ __all__ = ["run"]
 
 NEAR_CM = 10.0  # "near pairs": Eq. 35 mean joint distance under this (the paper's tau)
 _SLOW = ("RDSR", "Xing")
+_DATASETS = ("hdm05", "cmu", "bandai")
+
+
+def _headlines(datasets: tuple[str, ...]) -> list[dict[str, Any]]:
+    """The shipped default's and the feet baseline's precision per data set (mean over seeds)."""
+    rows = []
+    for kind in datasets:
+        for method, key, what in (
+            (INDEX_DEFAULT, "precision", "pose index default"),
+            ("FEET", "precision", "FEET baseline"),
+            (INDEX_DEFAULT, "near_precision", "pose index default, near pairs"),
+            ("FEET", "near_precision", "FEET baseline, near pairs"),
+        ):
+            rows.append({
+                "name": f"{kind} transition precision, {what}",
+                "path": ["datasets", kind, "summary", method, key, "mean"],
+                "unit": "", "better": "higher", "format": "",
+            })  # fmt: skip
+    return rows
 
 
 def _one_seed(
@@ -152,7 +171,7 @@ def run(
     out: pathlib.Path,
     quick: bool = False,
     seed: int = 0,
-    datasets: tuple[str, ...] = ("hdm05", "cmu", "bandai"),
+    datasets: tuple[str, ...] = _DATASETS,
     n_seeds: int | None = None,
     verbose: bool = True,
     only: tuple[str, ...] | None = None,
@@ -183,6 +202,7 @@ def run(
         "seeds": list(range(seed, seed + n_seeds)),
         "near_cm": NEAR_CM,
         "not_run": not_run,
+        "headlines": _headlines(datasets),
         "datasets": {},
         "skipped": {},
     }
