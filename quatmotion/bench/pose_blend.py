@@ -1,10 +1,12 @@
 """Transition decision under labels judged on the blended transition (issue 20).
 
 ``run(out, quick, seed)``: for each data set (``hdm05``, ``cmu``, ``bandai``, prepared and split
-as :mod:`quatmotion.bench.pose` does) and each of ``n_seeds`` seeds (``seed`` .. ``seed +
-n_seeds - 1``), good and bad transition pairs of the training and of the test subjects are
-labelled by :func:`quatmotion.pose.blend_labels.blended_transition_labels` (natural percentiles
-fitted on the training clips, reused on the test clips); every registered method of
+as :mod:`quatmotion.bench.pose` does, except that a data set whose every-third-group test side
+has fewer than 10 clips holds out every other group) and each of ``n_seeds`` seeds
+(``seed`` .. ``seed + n_seeds - 1``), good and bad transition pairs of the training and of
+the test subjects are labelled by
+:func:`quatmotion.pose.blend_labels.blended_transition_labels` (natural percentiles fitted on
+the training clips, reused on the test clips); every registered method of
 :data:`quatmotion.pose.methods.METHODS` (aliases once), the feet-only baseline ``FEET`` among
 them, and the row ``"pose index default"`` (what ``quatmotion pose index`` ships, trained on
 its own pairs) are fitted on the training pairs and scored on the test pairs by transition
@@ -46,6 +48,21 @@ __all__ = ["run"]
 NEAR_CM = 10.0  # "near pairs": Eq. 35 mean joint distance under this (the paper's tau)
 _SLOW = ("RDSR", "Xing")
 _DATASETS = ("hdm05", "cmu", "bandai")
+_MIN_TEST_CLIPS = 10
+
+
+def _split_blend(clips: list) -> tuple[list[int], list[int]]:
+    """:func:`quatmotion.bench.pose._split` (every third group held out), or every other group
+    when that leaves fewer than ``_MIN_TEST_CLIPS`` test clips (CMU's subjects: 4 clips, 2
+    test pairs)."""
+    train, test = _split(clips)
+    if len(test) >= _MIN_TEST_CLIPS:
+        return train, test
+    groups = sorted({c.group for c in clips})
+    test_groups = set(groups[1::2])
+    train = [i for i, c in enumerate(clips) if c.group not in test_groups]
+    test = [i for i, c in enumerate(clips) if c.group in test_groups]
+    return train, test
 
 
 def _headlines(datasets: tuple[str, ...]) -> list[dict[str, Any]]:
@@ -214,7 +231,7 @@ def run(
         except Exception as exc:
             results["skipped"][kind] = f"{type(exc).__name__}: {exc}"
             continue
-        train, test = _split(clips)
+        train, test = _split_blend(clips)
         loaded[kind] = (clips, train, test)
         log(f"{kind}: {len(clips)} clips ({len(train)} train, {len(test)} test)")
     per_seed: dict[str, list[dict[str, Any]]] = {kind: [] for kind in loaded}
