@@ -254,7 +254,7 @@ def test_library_file_checks_its_format_version(tmp_path: pathlib.Path) -> None:
 
 
 @pytest.mark.parametrize("n_clips", [1, 3])
-def test_default_metric_is_gpd_lms_with_a_diagonal_projection(n_clips: int) -> None:
+def test_default_metric_is_gpd_logit_with_a_diagonal_projection(n_clips: int) -> None:
     from quatmotion.pose.data import PoseClip
     from quatmotion.pose.library import DEFAULT_METRIC
     from quatmotion.synthetic import generate_clip
@@ -264,7 +264,7 @@ def test_default_metric_is_gpd_lms_with_a_diagonal_projection(n_clips: int) -> N
         for k in ("walk", "squat", "wave")[:n_clips]
     ]
     library = PoseLibrary.build(clips, n_unlabeled=200, n_pairs=60)
-    assert DEFAULT_METRIC == "GPD+LMS" and library.meta["metric"] == "GPD+LMS"
+    assert DEFAULT_METRIC == "GPD+LOGIT" and library.meta["metric"] == "GPD+LOGIT"
     assert library.meta["n_negative_pairs"] > 0
     W = library.model["W"]
     # one non-negative weight per kept GPD dimension: each column has a single positive entry
@@ -311,7 +311,7 @@ def test_a_query_far_outside_the_library_range_does_not_swamp_its_pose() -> None
     assert np.mean(ids[:, 0] == np.arange(len(raw))) > 0.8
 
 
-@pytest.mark.parametrize("metric_name", ["GPD+LMS", "GPD+RDSR"])
+@pytest.mark.parametrize("metric_name", ["GPD+LOGIT", "GPD+LMS", "GPD+RDSR"])
 def test_pose_index_library_and_the_benchmark_method_give_the_same_distances(
     tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, metric_name: str
 ) -> None:

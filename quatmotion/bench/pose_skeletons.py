@@ -158,6 +158,16 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0, verbose: bool = T
         "fps": FPS,
         "height_cm": HEIGHT_CM,
         "libraries": {},
+        "headlines": [
+            {
+                "name": f"{name} library queried with other skeletons, top-1 of the right kind",
+                "path": ["libraries", name, "mean"],
+                "unit": "",
+                "better": "higher",
+                "format": "",
+            }  # fmt: skip
+            for name in ("asf", "bandai")
+        ],
     }
     queries = _queries(root)
     for name, files in _libraries(root).items():

@@ -53,7 +53,7 @@ pose_app = typer.Typer(
 )
 app.add_typer(pose_app, name="pose")
 
-from quatmotion.pose.ranges import FPS_RANGE  # noqa: E402  (the settings' ranges)
+from quatmotion.pose.ranges import DEFAULT_METRIC, FPS_RANGE  # noqa: E402  (the settings' ranges)
 
 
 def _echo(message: str) -> None:
@@ -77,8 +77,11 @@ def index_command(
         typer.Option(help="Stature of the common body every skeleton is put on, cm."),
     ] = 170.0,
     metric: Annotated[
-        str, typer.Option(help="Pose distance to learn: GPD+LMS (measured best) or GPD+RDSR.")
-    ] = "GPD+LMS",
+        str,
+        typer.Option(
+            help="Pose distance to learn: GPD+LOGIT (measured best), GPD+LMS or GPD+RDSR."
+        ),
+    ] = DEFAULT_METRIC,
     rank: Annotated[int, typer.Option(help="Dimensions of RDSR's projection W.")] = 50,
     unlabeled: Annotated[int, typer.Option(help="Unlabeled poses for RDSR.")] = 5000,
     pairs: Annotated[

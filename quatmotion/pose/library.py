@@ -10,9 +10,11 @@ by the registered method of that name (``quatmotion.pose.methods.METHODS[metric_
 whose ``projection_`` the library stores: ``bench pose`` scores that same code, trained on
 the same kind of set, as its ``"pose index default"`` row):
 
-* ``"GPD+LMS"`` (the default; docs/performance.md compares it in ``bench pose``):
-  non-negative least-squares weights per GPD dimension from similar and dissimilar pairs;
-  ``W`` is the diagonal of their square roots, dimensions of weight 0 left out.
+* ``"GPD+LOGIT"`` (the default; docs/performance.md compares it in ``bench pose_blend``):
+  non-negative weights per GPD dimension by logistic regression on good and bad pairs
+  (:class:`~quatmotion.pose.metric.PairLogistic`); ``W`` is the diagonal of their square
+  roots, dimensions of weight 0 left out.
+* ``"GPD+LMS"``: the same with least-squares weights.
 * ``"GPD+RDSR"`` (the GPD paper): RDSR of rank ``rank`` from the similar pairs and an
   unlabeled random sample.
 
@@ -77,7 +79,7 @@ from quatmotion.pose import labels
 from quatmotion.pose.data import PoseClip, PoseData
 from quatmotion.pose.index import HNSWIndex
 from quatmotion.pose.methods import METHODS, project_features
-from quatmotion.pose.ranges import FPS_RANGE
+from quatmotion.pose.ranges import DEFAULT_METRIC, FPS_RANGE
 
 __all__ = [
     "DEFAULT_METRIC",
@@ -108,9 +110,8 @@ _NOT_A_LIBRARY = (
 _MIN_TRANSITION_PAIRS = 10
 _FAR_APART_S = 1.0  # fallback dissimilar pairs: poses of one clip at least this far apart
 
-METRICS: tuple[str, ...] = ("GPD+LMS", "GPD+RDSR")
+METRICS: tuple[str, ...] = ("GPD+LMS", "GPD+LOGIT", "GPD+RDSR")
 """The pose distances :meth:`PoseLibrary.build` can learn."""
-DEFAULT_METRIC = "GPD+LMS"
 
 
 def _at_least(n: int) -> Interval:
@@ -422,7 +423,7 @@ class PoseLibrary:
             For ``"GPD+RDSR"``: unfitted, with ``fit(X_unlabeled, positive_pairs)`` and
             ``components_`` of shape ``(rank, D)`` after fitting; default
             ``RDSR(n_components=rank)``.
-        metric_name : {"GPD+LMS", "GPD+RDSR"}
+        metric_name : {"GPD+LOGIT", "GPD+LMS", "GPD+RDSR"}
             The pose distance to learn (module docstring); ``rank`` applies to RDSR only.
         log : callable, optional
             Called with progress messages.
