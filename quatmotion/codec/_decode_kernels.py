@@ -4,12 +4,14 @@ Kernels trust their input: the public functions there validate and lay arrays ou
 
 Conventions
 -----------
-* A clip's spline is flattened across segments: ``knots`` holds every spline segment's clamped
-  knot vector back to back (``knot_start[s]`` .. ``knot_start[s + 1]``), ``coef`` every
-  segment's coefficient rows (``row_start[s]`` ..), one column per channel evaluated; the
-  de Boor steps are :func:`quatmotion.codec.spline._evaluate`'s, so that frame times give the
-  decoded frames.
-* Positions ``x`` are in frames from the segment's first frame, within ``[0, L - 1]``.
+* A clip's segments are a table ``segs`` ``(S, 6)``: first frame, frames, first coefficient
+  row, whether it is a spline, and the span of its clamped knot vector in ``knots``
+  (:class:`quatmotion.codec.spline.SegmentTables` side by side); ``P`` holds every segment's
+  coefficient rows, one column per channel evaluated. The de Boor steps are those of
+  :func:`quatmotion.codec.spline._evaluate_channels`, so frame times give the decoded frames
+  to the bit.
+* Positions ``x`` are in frames from the clip's first frame, within ``[0, T - 1]`` (``T`` for
+  the loop's wrap).
 """
 
 from __future__ import annotations
@@ -17,18 +19,47 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from quatmotion.codec.channels import _rotations_kernel
+from quatmotion.codec.channels import rotation_row
 
 __all__ = ["read_uvarints", "sample_poses"]
 
 
-@numba.njit(cache=True)
-def _evaluate_point(knots, t0, m, coef, r0, xv, d, out, k):  # pragma: no cover
-    """One segment's spline at ``xv`` into ``out[k]`` (``d`` is ``(4, c)`` scratch)."""
-    C = coef.shape[1]
-    n = m - 4  # coefficient rows
-    # the interval as _evaluate walks to it: the last i in [3, n - 1] with t[i] <= x
-    lo = 3
+@numba.njit(inline="always", cache=True)
+def _segment_of(segs, i):  # pragma: no cover - compiled
+    """The segment holding frame ``i``: the last ``s`` with ``segs[s, 0] <= i``."""
+    lo, hi = 0, segs.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if segs[mid, 0] <= i:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+@numba.njit(inline="always", cache=True)
+def _alpha(knots, i, width, x):  # pragma: no cover - compiled
+    den = knots[i + width] - knots[i]
+    return (x - knots[i]) / den if den > 0.0 else 0.0
+
+
+@numba.njit(inline="always", cache=True)
+def _channels_at(x, s, segs, knots, P, cols, scale, X):  # pragma: no cover - compiled
+    """The channels ``cols`` at frame position ``x`` of segment ``s`` into ``X[0]``: the
+    spline (the de Boor steps of :func:`quatmotion.codec.spline._evaluate_channels`, so frame
+    times give the decoded frames to the bit) or, in a segment kept frame by frame, the row
+    of frame ``x`` (an integer)."""
+    a = segs[s, 0]
+    r0 = segs[s, 2]
+    if segs[s, 3] == 0:
+        f = r0 + int(x) - a
+        for k in range(cols.shape[0]):
+            X[0, cols[k]] = P[f, k] / scale[k]
+        return
+    t0 = segs[s, 4]
+    n = segs[s, 5] - t0 - 4
+    xv = x - a
+    lo = 3  # the last i in [3, n - 1] with t[i] <= x, as _evaluate_channels walks to it
     hi = n - 1
     while lo < hi:
         mid = (lo + hi + 1) // 2
@@ -36,115 +67,98 @@ def _evaluate_point(knots, t0, m, coef, r0, xv, d, out, k):  # pragma: no cover
             lo = mid
         else:
             hi = mid - 1
+    iv = t0 + lo
+    # the de Boor weights of _evaluate_channels' loop (r, q) = (1, 3), (1, 2), (1, 1), (2, 3),
+    # (2, 2), (3, 3), as scalars
+    a0 = _alpha(knots, iv, 3, xv)
+    a1 = _alpha(knots, iv - 1, 3, xv)
+    a2 = _alpha(knots, iv - 2, 3, xv)
+    a3 = _alpha(knots, iv, 2, xv)
+    a4 = _alpha(knots, iv - 1, 2, xv)
+    a5 = _alpha(knots, iv, 1, xv)
     interval = lo
-    for r in range(4):
-        for ch in range(C):
-            d[r, ch] = coef[r0 + interval - 3 + r, ch]
-    for r in range(1, 4):
-        for q in range(3, r - 1, -1):
-            i = interval - 3 + q
-            den = knots[t0 + i + 4 - r] - knots[t0 + i]
-            alpha = (xv - knots[t0 + i]) / den if den > 0.0 else 0.0
-            for ch in range(C):
-                d[q, ch] = (1.0 - alpha) * d[q - 1, ch] + alpha * d[q, ch]
-    for ch in range(C):
-        out[k, ch] = d[3, ch]
+    b = r0 + interval - 3
+    for c in range(cols.shape[0]):
+        d0, d1, d2, d3 = P[b, c], P[b + 1, c], P[b + 2, c], P[b + 3, c]
+        d3 = (1.0 - a0) * d2 + a0 * d3
+        d2 = (1.0 - a1) * d1 + a1 * d2
+        d1 = (1.0 - a2) * d0 + a2 * d1
+        d3 = (1.0 - a3) * d2 + a3 * d3
+        d2 = (1.0 - a4) * d1 + a4 * d2
+        d3 = (1.0 - a5) * d2 + a5 * d3
+        X[0, cols[c]] = d3 / scale[c]
+
+
+@numba.njit(inline="always", cache=True)
+def _frame(i, segs, knots, P, cols, scale, corr, X):  # pragma: no cover - compiled
+    """The decoded channels ``cols`` of frame ``i`` (corrections added) into ``X[0]``."""
+    _channels_at(float(i), _segment_of(segs, i), segs, knots, P, cols, scale, X)
+    if corr.shape[0] > 0:
+        for k in range(cols.shape[0]):
+            X[0, cols[k]] += corr[i, cols[k]]
 
 
 @numba.njit(cache=True)
 def sample_poses(
-    u,
-    loop,
-    seg_first,
-    seg_last,
-    knots,
-    knot_start,
-    coef,
-    row_start,
-    cols,
-    scale,
-    corr,
-    channels,
-    frame_rot,
-    sel,
-    kinds,
-    starts,
-    counts,
-    dof_axes,
-    pre,
-    ref,
-    out_root,
-    out_rot,
-):  # pragma: no cover
+    u, loop, segs, knots, P, cols, scale, corr, sel, kinds, starts, counts, dof_axes, pre, ref,
+    out_root, out_rot,
+):  # pragma: no cover  # fmt: skip
     """Root translation and rotations of joints ``sel`` at frame positions ``u`` (already
-    clamped or wrapped): the spline (``coef`` columns ``cols`` of the channels, divided by
-    ``scale``, plus the lerp of ``corr`` when it has rows) where a spline segment spans ``u``,
-    else the nlerp of ``frame_rot`` and lerp of ``channels`` between the neighbouring frames.
-    ``kinds`` .. ``ref`` are the rotation tables of the joints ``sel``."""
-    T = channels.shape[0]
-    C = channels.shape[1]
-    S = seg_first.shape[0]
+    clamped or wrapped) of a clip of ``T = corr.shape[0]`` frames (or ``segs``' last frame).
+
+    ``segs`` ``(S, 6)``: each segment's first frame, frames, first coefficient row, whether it
+    is a spline, and its knots' span in ``knots``; ``P`` the coefficient rows of the channels
+    ``cols`` (divided by ``scale``), ``corr`` ``(T, C)`` the clip's corrections (or no rows).
+    Where a spline spans ``u`` the pose is the spline's (corrections lerped between frames),
+    elsewhere the nlerp of the two neighbouring decoded frames' rotations.
+    """
+    S = segs.shape[0]
+    T = segs[S - 1, 0] + segs[S - 1, 1]
+    C = 3
+    for k in range(cols.shape[0]):
+        C = max(C, cols[k] + 1)
     X = np.zeros((1, C))
-    vals = np.empty((1, coef.shape[1]))
-    d = np.empty((4, coef.shape[1]))
+    Y = np.zeros((1, C))
     for k in range(u.shape[0]):
         x = u[k]
         i0 = min(int(np.floor(x)), T - 1)
         f = x - i0
-        lo, hi = 0, S - 1  # the last segment starting at or before x
-        s = -1
-        while lo <= hi:
-            mid = (lo + hi) // 2
-            if seg_first[mid] <= x:
-                s = mid
-                lo = mid + 1
-            else:
-                hi = mid - 1
-        if s >= 0 and x <= seg_last[s]:
-            t0 = knot_start[s]
-            _evaluate_point(
-                knots,
-                t0,
-                knot_start[s + 1] - t0,
-                coef,
-                row_start[s],
-                x - seg_first[s],
-                d,
-                vals,
-                0,
-            )
-            for c in range(C):
-                X[0, c] = 0.0
-            for ch in range(cols.shape[0]):
-                X[0, cols[ch]] = vals[0, ch] / scale[ch]
+        s = _segment_of(segs, i0)
+        if segs[s, 3] != 0 and x <= segs[s, 0] + segs[s, 1] - 1:
+            _channels_at(x, s, segs, knots, P, cols, scale, X)
             if corr.shape[0] > 0:
                 i1 = min(i0 + 1, T - 1)
-                for c in range(C):
-                    X[0, c] += (1.0 - f) * corr[i0, c] + f * corr[i1, c]
+                for c in range(cols.shape[0]):
+                    ch = cols[c]
+                    X[0, ch] += (1.0 - f) * corr[i0, ch] + f * corr[i1, ch]
             for c in range(3):
                 out_root[k, c] = X[0, c]
-            R = _rotations_kernel(X, kinds, starts, counts, dof_axes, pre, ref)
             for j in range(sel.shape[0]):
-                for c in range(4):
-                    out_rot[k, j, c] = R[0, j, c]
-        else:
-            b = (i0 + 1) % T if loop else min(i0 + 1, T - 1)
-            for c in range(3):
-                out_root[k, c] = (1.0 - f) * channels[i0, c] + f * channels[b, c]
-            for j in range(sel.shape[0]):
-                q = sel[j]
-                dot = 0.0
-                for c in range(4):
-                    dot += frame_rot[i0, q, c] * frame_rot[b, q, c]
-                sign = -1.0 if dot < 0.0 else 1.0
-                norm = 0.0
-                for c in range(4):
-                    v = (1.0 - f) * frame_rot[i0, q, c] + f * sign * frame_rot[b, q, c]
-                    out_rot[k, j, c] = v
-                    norm += v * v
-                norm = np.sqrt(norm)
-                for c in range(4):
-                    out_rot[k, j, c] /= norm
+                w, qx, qy, qz = rotation_row(
+                    X, 0, sel[j], kinds, starts, counts, dof_axes, pre, ref
+                )
+                out_rot[k, j, 0] = w
+                out_rot[k, j, 1] = qx
+                out_rot[k, j, 2] = qy
+                out_rot[k, j, 3] = qz
+            continue
+        b = (i0 + 1) % T if loop else min(i0 + 1, T - 1)
+        _frame(i0, segs, knots, P, cols, scale, corr, X)
+        _frame(b, segs, knots, P, cols, scale, corr, Y)
+        for c in range(3):
+            out_root[k, c] = (1.0 - f) * X[0, c] + f * Y[0, c]
+        for j in range(sel.shape[0]):
+            q = sel[j]
+            aw, ax, ay, az = rotation_row(X, 0, q, kinds, starts, counts, dof_axes, pre, ref)
+            bw, bx, by, bz = rotation_row(Y, 0, q, kinds, starts, counts, dof_axes, pre, ref)
+            g = 1.0 - f
+            h = -f if aw * bw + ax * bx + ay * by + az * bz < 0.0 else f  # the shorter arc
+            vw, vx, vy, vz = g * aw + h * bw, g * ax + h * bx, g * ay + h * by, g * az + h * bz
+            norm = np.sqrt(vw * vw + vx * vx + vy * vy + vz * vz)
+            out_rot[k, j, 0] = vw / norm
+            out_rot[k, j, 1] = vx / norm
+            out_rot[k, j, 2] = vy / norm
+            out_rot[k, j, 3] = vz / norm
 
 
 @numba.njit(cache=True)

@@ -40,6 +40,7 @@ from quatmotion.codec.container import (
 from quatmotion.codec.library import LayoutInfo
 from quatmotion.codec.methods import ClipContext, get_method
 from quatmotion.codec.repair import Corrections, correction_lever, read_clip_prefix
+from quatmotion.codec.sampling import sampler_for
 from quatmotion.codec.skeletons import (
     RECORD_BVH,
     RECORD_BVH_GUESSED,
@@ -553,8 +554,6 @@ class Archive:
         ValueError
             A time that is not finite, an unknown mode, or a joint that is not in the skeleton.
         """
-        from quatmotion.codec.sampling import sampler_for
-
         return sampler_for(self, clip).sample(times, joints, mode=mode)
 
     def read_rotations(self, clip: int | str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -368,6 +368,38 @@ def _sincos(x):  # pragma: no cover - compiled
     return -c, s
 
 
+@numba.njit(inline="always", cache=True)
+def rotation_row(X, t, j, kinds, starts, counts, dof_axes, pre, ref):  # pragma: no cover
+    """Joint ``j``'s local rotation from row ``t`` of channels ``X``, a ``(w, x, y, z)`` tuple
+    (the tables indexed by ``j``: :func:`_kernel_tables`' and the layout's)."""
+    kind = kinds[j]
+    a = starts[j]
+    w, x, y, z = 1.0, 0.0, 0.0, 0.0
+    if kind == 2 or kind == 3:
+        b = a + 1 if kind == 3 else a
+        vx, vy, vz = 0.5 * X[t, b], 0.5 * X[t, b + 1], 0.5 * X[t, b + 2]
+        ang = np.sqrt(vx * vx + vy * vy + vz * vz)
+        sn, ew = _sincos(ang)
+        s = sn / ang if ang > 1e-12 else 1.0
+        ex, ey, ez = vx * s, vy * s, vz * s
+        w, x, y, z = multiply(ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3], ew, ex, ey, ez)
+        if kind == 3:
+            sh, ch = _sincos(0.5 * X[t, a])
+            w, x, y, z = multiply(ch, 0.0, sh, 0.0, w, x, y, z)
+    elif kind == 1:
+        # rotation about the axes C e_i in turn (C M C^-1 without forming C)
+        intrinsic = pre[j, 3, 0] > 0.5
+        for i in range(counts[j]):
+            ax = dof_axes[j, i]
+            sh, ew = _sincos(0.5 * X[t, a + i])
+            ex, ey, ez = sh * pre[j, ax, 0], sh * pre[j, ax, 1], sh * pre[j, ax, 2]
+            if intrinsic:  # q <- q e
+                w, x, y, z = multiply(w, x, y, z, ew, ex, ey, ez)
+            else:  # extrinsic: q <- e q
+                w, x, y, z = multiply(ew, ex, ey, ez, w, x, y, z)
+    return w, x, y, z
+
+
 @numba.njit(cache=True)
 def _rotations_kernel(X, kinds, starts, counts, dof_axes, pre, ref):  # pragma: no cover
     T = X.shape[0]
@@ -375,31 +407,7 @@ def _rotations_kernel(X, kinds, starts, counts, dof_axes, pre, ref):  # pragma: 
     out = np.empty((T, J, 4))
     for t in range(T):
         for j in range(J):
-            kind = kinds[j]
-            a = starts[j]
-            w, x, y, z = 1.0, 0.0, 0.0, 0.0
-            if kind == 2 or kind == 3:
-                b = a + 1 if kind == 3 else a
-                vx, vy, vz = 0.5 * X[t, b], 0.5 * X[t, b + 1], 0.5 * X[t, b + 2]
-                ang = np.sqrt(vx * vx + vy * vy + vz * vz)
-                sn, ew = _sincos(ang)
-                s = sn / ang if ang > 1e-12 else 1.0
-                ex, ey, ez = vx * s, vy * s, vz * s
-                w, x, y, z = multiply(ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3], ew, ex, ey, ez)
-                if kind == 3:
-                    sh, ch = _sincos(0.5 * X[t, a])
-                    w, x, y, z = multiply(ch, 0.0, sh, 0.0, w, x, y, z)
-            elif kind == 1:
-                # rotation about the axes C e_i in turn (C M C^-1 without forming C)
-                intrinsic = pre[j, 3, 0] > 0.5
-                for i in range(counts[j]):
-                    ax = dof_axes[j, i]
-                    sh, ew = _sincos(0.5 * X[t, a + i])
-                    ex, ey, ez = sh * pre[j, ax, 0], sh * pre[j, ax, 1], sh * pre[j, ax, 2]
-                    if intrinsic:  # q <- q e
-                        w, x, y, z = multiply(w, x, y, z, ew, ex, ey, ez)
-                    else:  # extrinsic: q <- e q
-                        w, x, y, z = multiply(ew, ex, ey, ez, w, x, y, z)
+            w, x, y, z = rotation_row(X, t, j, kinds, starts, counts, dof_axes, pre, ref)
             out[t, j, 0] = w
             out[t, j, 1] = x
             out[t, j, 2] = y
@@ -421,7 +429,7 @@ def _kernel_tables(skeleton: Skeleton, layout: ChannelLayout):
     pre = np.zeros((J, 4, 3))
     pre[:, :3] = quat.rotate(skeleton.axes[:, None, :], np.eye(3)[None])
     pre[:, 3, 0] = 1.0 if skeleton.euler == "intrinsic" else 0.0
-    if len(_TABLES) > 64:
+    if len(_TABLES) > 4096:  # many: a library of one skeleton per clip reads them all
         _TABLES.clear()
     _TABLES[id(skeleton)] = (skeleton, dof_axes, pre)
     return dof_axes, pre

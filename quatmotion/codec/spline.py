@@ -85,32 +85,6 @@ def fit_segments(
     return out
 
 
-@numba.njit(cache=True)
-def _evaluate(t, c, L, out, row0):  # pragma: no cover - compiled
-    """Cubic B-spline with knots ``t`` and coefficients ``c`` at frames 0..L-1 into
-    ``out[row0 + frame]`` (de Boor)."""
-    C = c.shape[1]
-    n = c.shape[0]
-    interval = 3
-    d = np.empty((4, C))
-    for f in range(L):
-        x = float(f)
-        while interval < n - 1 and x >= t[interval + 1]:
-            interval += 1
-        for r in range(4):
-            for ch in range(C):
-                d[r, ch] = c[interval - 3 + r, ch]
-        for r in range(1, 4):
-            for q in range(3, r - 1, -1):
-                i = interval - 3 + q
-                den = t[i + 4 - r] - t[i]
-                alpha = (x - t[i]) / den if den > 0.0 else 0.0
-                for ch in range(C):
-                    d[q, ch] = (1.0 - alpha) * d[q - 1, ch] + alpha * d[q, ch]
-        for ch in range(C):
-            out[row0 + f, ch] = d[3, ch]
-
-
 @dataclass(frozen=True)
 class SegmentTables:
     """A clip's segments flattened for the compiled evaluators (:func:`segment_tables`).
@@ -248,7 +222,7 @@ def _evaluate_channels(first, length, rows, spl, knots, ks, P, cols, scale, X): 
             x = float(f)
             while interval < n - 1 and x >= knots[t0 + interval + 1]:
                 interval += 1
-            # _evaluate's de Boor steps with the weights shared by every channel (the same
+            # the de Boor steps with the weights shared by every channel (the same
             # arithmetic, so the same bits)
             k = 0
             for r in range(1, 4):
@@ -294,18 +268,12 @@ def evaluate_segments(
     inserted: dict[int, list[int]] | None = None,
 ) -> NDArray[np.float64]:
     """The ``(T, C)`` signals of :func:`fit_segments`' coefficients."""
-    inserted = inserted or {}
     C = coefficients[0].shape[1] if coefficients else 0
     out = np.empty((n_frames, C))
-    for s, ((a, b), c) in enumerate(
-        zip(segment_bounds(n_frames, breaks), coefficients, strict=True)
-    ):
-        L = b - a
-        if L < MIN_SPLINE_FRAMES or spacing < 2:
-            out[a:b] = c
-        else:
-            t = knot_vector(L, spacing, inserted.get(s, ()))
-            _evaluate(t, np.ascontiguousarray(c, dtype=np.float64), L, out, a)
+    if coefficients:
+        P = np.ascontiguousarray(np.concatenate(coefficients), dtype=np.float64)
+        tables = segment_tables(n_frames, breaks, spacing, inserted)
+        evaluate_channels(tables, P, np.arange(C), np.ones(C), out)
     return out
 
 
