@@ -432,38 +432,30 @@ class PoseLibrary:
         -------
         PoseLibrary
         """
-        say = log or (lambda _msg: None)
         if not clips:
             raise ValueError("no clips to index")
-        model, meta, X = _learn_projection(
-            clips,
+        # The in-memory case of the streamed build: every clip is the sample (fit_poses is all
+        # their poses, so the distance is learned on all clips in input order) and the index
+        # pass runs inline on the clips as given.
+        library, failures = cls.build_streamed(
+            list(clips),
+            _as_given,
+            fit_poses=max(1, sum(len(c) for c in clips)),
             rank=rank,
             n_unlabeled=n_unlabeled,
             n_pairs=n_pairs,
             seed=seed,
+            M=M,
+            ef_construction=ef_construction,
             metric=metric,
             metric_name=metric_name,
-            say=say,
+            scheduler="inline",
+            log=log,
         )
-        t0 = time.perf_counter()
-        index = HNSWIndex(M=M, ef_construction=ef_construction, random_state=seed)
-        index.fit(X @ model["W"])
-        say(f"HNSW index of {len(X)} poses: {time.perf_counter() - t0:.1f} s")
-        offsets = labels.ClipOffsets(np.array([len(c) for c in clips]))
-        steps = np.repeat([c.step for c in clips], offsets.lengths)
-        return cls(
-            index=index,
-            clip_names=[c.name for c in clips],
-            clip_of=offsets.clip_of(),
-            frame_of=offsets.frame_of() * steps,
-            model=model,
-            meta={
-                **meta,
-                "file_fps": [c.fps * c.step for c in clips],
-                "file_frames": [c.file_frames for c in clips],
-                "skeletons": sorted({c.skeleton_kind for c in clips if c.skeleton_kind}),
-            },
-        )
+        if failures:
+            first = failures[0]
+            raise ValueError(f"clip {clips[first.index].name!r}: {first.message}")
+        return library
 
     @classmethod
     def build_streamed(
@@ -568,30 +560,10 @@ class PoseLibrary:
         def stage(name: str) -> Callable[[int, int], None] | None:
             return None if progress is None else functools.partial(progress, name)
 
-        # 1. the sample, in a seeded order, loaded until it holds fit_poses poses
-        order = np.random.default_rng([seed, len(sources)]).permutation(len(sources))
-        failed: dict[int, Failure] = {}
-        sample: list[tuple[int, PoseClip]] = []
-        n_sample_poses = 0
-        with imap_batch(
-            load, [sources[i] for i in order], progress=stage("learn"), **batch
-        ) as stream:
-            for outcome in stream:
-                where = int(order[outcome.index])
-                if outcome.failure is not None:
-                    failed[where] = dataclasses.replace(outcome.failure, index=where)
-                    continue
-                sample.append((where, outcome.value))
-                n_sample_poses += len(outcome.value)
-                if n_sample_poses >= fit_poses and len(sample) >= 2:
-                    break
-        if not sample:
-            raise ValueError(_none_read(len(sources), failed))
-        sample.sort(key=lambda pair: pair[0])
-        clips = [clip for _, clip in sample]
-        say(f"learning the distance on {len(clips)} clips ({n_sample_poses} poses)")
+        sample = _draw_sample(sources, load, fit_poses, seed, batch, stage("learn"))
+        say(f"learning the distance on {len(sample.clips)} clips ({sample.n_poses} poses)")
         model, meta, _ = _learn_projection(
-            clips,
+            sample.clips,
             rank=rank,
             n_unlabeled=n_unlabeled,
             n_pairs=n_pairs,
@@ -600,80 +572,30 @@ class PoseLibrary:
             metric_name=metric_name,
             say=say,
         )
-        fps, height, n_fit_clips = clips[0].fps, clips[0].height, len(clips)
-        del sample, clips
-
-        # 2. every clip projected in a worker, inserted in input order
+        fps, height = sample.clips[0].fps, sample.clips[0].height
+        failed = sample.failed
         kept = [i for i in range(len(sources)) if i not in failed]
-        job = functools.partial(projected_clip, load=load, model=model)
-        if chunk_size is None:
-            chunk_size = 8 if len(kept) >= 64 else 1
-        expected_poses = int(1.05 * n_sample_poses / n_fit_clips * len(kept))
-        index = HNSWIndex(
-            M=M, ef_construction=ef_construction, n_threads=index_threads, random_state=seed
+        graph = _Graph(
+            HNSWIndex(
+                M=M, ef_construction=ef_construction, n_threads=index_threads, random_state=seed
+            ),
+            flush_poses=flush_poses,
+            capacity=int(1.05 * sample.n_poses / len(sample.clips) * len(kept)),
         )
-        names: list[str] = []
-        lengths: list[int] = []
-        steps: list[int] = []
-        file_frames: list[int | None] = []
-        kinds: set[str] = set()
-        pending: list[NDArray[np.float32]] = []
-        n_pending = 0
+        n_fit_clips, n_fit_poses = len(sample.clips), sample.n_poses
+        del sample
         t0 = time.perf_counter()
-        with imap_batch(
-            job,
-            [sources[i] for i in kept],
-            progress=stage("index"),
-            chunk_size=chunk_size,
-            **batch,
-        ) as st:
-            for outcome in st:
-                where = kept[outcome.index]
-                if outcome.failure is not None:
-                    failed[where] = dataclasses.replace(outcome.failure, index=where)
-                    continue
-                clip = outcome.value
-                if clip.fps != fps or clip.height != height:
-                    message = (
-                        f"prepared at {clip.fps:g} fps and height {clip.height}, the library at "
-                        f"{fps:g} fps and height {height} (its file rate is no multiple of it)"
-                    )
-                    failed[where] = Failure(where, sources[where], message)
-                    continue
-                for doubt in clip.doubts if on_doubt is not None else ():
-                    on_doubt(clip.name, doubt)
-                names.append(clip.name)
-                lengths.append(len(clip.vectors))
-                steps.append(clip.step)
-                file_frames.append(clip.file_frames)
-                kinds.update([clip.skeleton_kind] if clip.skeleton_kind else [])
-                pending.append(clip.vectors)
-                n_pending += len(clip.vectors)
-                if n_pending >= flush_poses:
-                    index.partial_fit(np.concatenate(pending), capacity=expected_poses)
-                    pending, n_pending = [], 0
-        if pending:
-            index.partial_fit(np.concatenate(pending), capacity=expected_poses)
-        if not names:
+        catalogue = _index_pass(
+            sources, kept, load, model, fps=fps, height=height, graph=graph, failed=failed,
+            chunk_size=chunk_size, batch=batch, progress=stage("index"), on_doubt=on_doubt,
+        )  # fmt: skip
+        index = graph.close()
+        if not catalogue.names:
             raise ValueError(_none_read(len(sources), failed))
         seconds = time.perf_counter() - t0
-        say(f"indexed {index.n_items_} poses of {len(names)} clips: {seconds:.1f} s")
-        offsets = labels.ClipOffsets(np.array(lengths))
-        library = cls(
-            index=index,
-            clip_names=names,
-            clip_of=offsets.clip_of(),
-            frame_of=offsets.frame_of() * np.repeat(steps, offsets.lengths),
-            model=model,
-            meta={
-                **meta,
-                "file_fps": [fps * s for s in steps],
-                "file_frames": file_frames,
-                "skeletons": sorted(kinds),
-                "fit_clips": n_fit_clips,
-                "fit_poses": n_sample_poses,
-            },
-        )
+        say(f"indexed {index.n_items_} poses of {len(catalogue.names)} clips: {seconds:.1f} s")
+        meta = {**meta, "fit_clips": n_fit_clips, "fit_poses": n_fit_poses}
+        library = cls(index=index, model=model, **catalogue.library_fields(fps, meta))
         return library, [failed[i] for i in sorted(failed)]
 
     def prepare_query(self, motion: Motion) -> PoseClip:
@@ -1006,6 +928,151 @@ def _learn_projection(
         "seed": seed,
     }
     return model, meta, X
+
+
+def _as_given(clip: PoseClip) -> PoseClip:
+    """The ``load`` of an in-memory build: the clips are already prepared."""
+    return clip
+
+
+@dataclass
+class _Sample:
+    """The clips the distance is learned on, in input order, and the clips that failed."""
+
+    clips: list[PoseClip]
+    failed: dict[int, Failure]
+    n_poses: int
+
+
+def _draw_sample(
+    sources: list[Any],
+    load: Callable[[Any], PoseClip],
+    fit_poses: int,
+    seed: int,
+    batch: dict[str, Any],
+    progress: Callable[[int, int], None] | None,
+) -> _Sample:
+    """Step 1 of the build: clips loaded in a seeded order until they hold ``fit_poses``
+    poses (at least two clips), returned in input order."""
+    order = np.random.default_rng([seed, len(sources)]).permutation(len(sources))
+    failed: dict[int, Failure] = {}
+    drawn: list[tuple[int, PoseClip]] = []
+    n_poses = 0
+    with imap_batch(load, [sources[i] for i in order], progress=progress, **batch) as stream:
+        for outcome in stream:
+            where = int(order[outcome.index])
+            if outcome.failure is not None:
+                failed[where] = dataclasses.replace(outcome.failure, index=where)
+                continue
+            drawn.append((where, outcome.value))
+            n_poses += len(outcome.value)
+            if n_poses >= fit_poses and len(drawn) >= 2:
+                break
+    if not drawn:
+        raise ValueError(_none_read(len(sources), failed))
+    drawn.sort(key=lambda pair: pair[0])
+    return _Sample([clip for _, clip in drawn], failed, n_poses)
+
+
+class _Graph:
+    """The HNSW graph filled in input order, ``flush_poses`` vectors per insertion (with one
+    thread the graph is a function of the vectors and the chunking alone)."""
+
+    def __init__(self, index: HNSWIndex, *, flush_poses: int, capacity: int) -> None:
+        self.index, self.flush_poses, self.capacity = index, flush_poses, capacity
+        self._pending: list[NDArray[np.float32]] = []
+        self._n_pending = 0
+
+    def add(self, vectors: NDArray[np.float32]) -> None:
+        self._pending.append(vectors)
+        self._n_pending += len(vectors)
+        if self._n_pending >= self.flush_poses:
+            self._flush()
+
+    def _flush(self) -> None:
+        self.index.partial_fit(np.concatenate(self._pending), capacity=self.capacity)
+        self._pending, self._n_pending = [], 0
+
+    def close(self) -> HNSWIndex:
+        if self._pending:
+            self._flush()
+        return self.index
+
+
+@dataclass
+class _Catalogue:
+    """What the library records of each indexed clip, in input order."""
+
+    names: list[str] = field(default_factory=list)
+    lengths: list[int] = field(default_factory=list)
+    steps: list[int] = field(default_factory=list)
+    file_frames: list[int | None] = field(default_factory=list)
+    kinds: set[str] = field(default_factory=set)
+
+    def add(self, clip: ProjectedClip) -> None:
+        self.names.append(clip.name)
+        self.lengths.append(len(clip.vectors))
+        self.steps.append(clip.step)
+        self.file_frames.append(clip.file_frames)
+        self.kinds.update([clip.skeleton_kind] if clip.skeleton_kind else [])
+
+    def library_fields(self, fps: float, meta: dict[str, Any]) -> dict[str, Any]:
+        """The :class:`PoseLibrary` fields of the clips (the model and index apart)."""
+        offsets = labels.ClipOffsets(np.array(self.lengths))
+        return {
+            "clip_names": self.names,
+            "clip_of": offsets.clip_of(),
+            "frame_of": offsets.frame_of() * np.repeat(self.steps, offsets.lengths),
+            "meta": {
+                **meta,
+                "file_fps": [fps * s for s in self.steps],
+                "file_frames": self.file_frames,
+                "skeletons": sorted(self.kinds),
+            },
+        }
+
+
+def _index_pass(
+    sources: list[Any],
+    kept: list[int],
+    load: Callable[[Any], PoseClip],
+    model: dict[str, FloatArray],
+    *,
+    fps: float,
+    height: float,
+    graph: _Graph,
+    failed: dict[int, Failure],
+    chunk_size: int | None,
+    batch: dict[str, Any],
+    progress: Callable[[int, int], None] | None,
+    on_doubt: Callable[[str, Doubt], None] | None,
+) -> _Catalogue:
+    """Step 2 of the build: every clip loaded and projected in a worker, its vectors inserted
+    in input order; failures (and clips prepared at another rate) added to ``failed``."""
+    job = functools.partial(projected_clip, load=load, model=model)
+    if chunk_size is None:
+        chunk_size = 8 if len(kept) >= 64 else 1
+    catalogue = _Catalogue()
+    items = [sources[i] for i in kept]
+    with imap_batch(job, items, progress=progress, chunk_size=chunk_size, **batch) as stream:
+        for outcome in stream:
+            where = kept[outcome.index]
+            if outcome.failure is not None:
+                failed[where] = dataclasses.replace(outcome.failure, index=where)
+                continue
+            clip = outcome.value
+            if clip.fps != fps or clip.height != height:
+                message = (
+                    f"prepared at {clip.fps:g} fps and height {clip.height}, the library at "
+                    f"{fps:g} fps and height {height} (its file rate is no multiple of it)"
+                )
+                failed[where] = Failure(where, sources[where], message)
+                continue
+            for doubt in clip.doubts if on_doubt is not None else ():
+                on_doubt(clip.name, doubt)
+            catalogue.add(clip)
+            graph.add(clip.vectors)
+    return catalogue
 
 
 def _none_read(n_sources: int, failed: dict[int, Failure]) -> str:
