@@ -64,3 +64,36 @@ def test_a_library_built_from_files_stores_its_settings_and_references(tmp_path)
 def test_pose_settings_refuse_values_out_of_range(field, value):
     with pytest.raises(ValueError, match=field):
         PoseSettings(**{field: value})
+
+
+def test_adding_clips_keeps_the_distance_skips_held_clips_and_names_apart(tmp_path):
+    clips = tmp_path / "clips"
+    for folder, kind, seed in (("s1", "walk", 0), ("s2", "squat", 1), ("s3", "walk", 2)):
+        (clips / folder).mkdir(parents=True)
+        write_motion(generate_clip(kind, seed, n_frames=40, fps=30.0),
+                     clips / folder / "take_001.bvh")  # fmt: skip
+    out = tmp_path / "p.npz"
+    PoseLibrary.build([clips / "s1", clips / "s2"], out, PoseSettings(**SMALL), workers=1)
+    before = PoseLibrary.open(out)
+    # s3/take_001 collides with a stored stem; s1/take_001 is already there (same content)
+    result = runner.invoke(app, ["pose", "add", str(out), str(clips / "s3"), str(clips / "s1")])
+    assert result.exit_code == 0, result.output
+    assert "1 clips added, 1 already there" in result.output
+    after = PoseLibrary.open(out)
+    assert [r.name for r in after.clips()] == ["s1/take_001", "s2/take_001", "s3/take_001"]
+    np.testing.assert_array_equal(after.model["W"], before.model["W"])  # nothing relearned
+    assert len(after.clip_of) == len(before.clip_of) + 40
+    assert after.clip_of[-40:].tolist() == [2] * 40 and after.frame_of[-40:].tolist() == list(
+        range(40)
+    )
+    # the added clip's poses are found as themselves
+    query, _, _ = after.pose_query(2, 10)
+    [best] = after.nearest(query, k=1)
+    assert (best.clip, best.frame) == (2, 10)
+    # the old poses still answer as before
+    q0 = before.pose_query(0, 5)[0]
+    first = before.nearest(q0, k=1)[0]
+    assert (after.nearest(q0, k=1)[0].clip, after.nearest(q0, k=1)[0].frame) == (
+        first.clip,
+        first.frame,
+    )

@@ -146,6 +146,43 @@ def index_command(
         raise typer.Exit(code=1)
 
 
+@pose_app.command("add")
+def add_command(
+    library_path: Annotated[Path, typer.Argument(help="Pose library file (.npz) to add to.")],
+    paths: Annotated[
+        list[Path], typer.Argument(help="Folders (searched recursively) or .amc/.bvh files.")
+    ],
+    workers: WorkersOption = None,
+    scheduler: SchedulerOption = None,
+) -> None:
+    """Add clips to a pose library with its stored settings and distance (nothing learned
+    again); clips it already holds are skipped. Exits with code 1 if a clip failed."""
+    from quatmotion.parallel import resolve_scheduler
+    from quatmotion.pose.library import PoseLibrary
+
+    with user_errors():
+        if not library_path.is_file():
+            raise CliInputError(f"{library_path}: no pose library there (pose index makes one)")
+        where = resolve_scheduler(scheduler, workers=workers)
+        from quatmotion.cli.warmup import ensure_kernels
+
+        ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
+        with progress_bar(error_console) as bar:
+            report = PoseLibrary.add(
+                library_path, paths, runner=where, workers=workers,
+                progress=_StageBars(bar), on_doubt=doubt_reporter(bar),
+            )  # fmt: skip
+    library = report.details["library"]
+    report_skipped(report.failures)
+    _echo(
+        f"{library_path}: {len(report.added)} clips added, {len(report.skipped)} already there, "
+        f"{len(report.failures)} failed; {len(library.clip_names)} clips, "
+        f"{len(library.clip_of)} poses"
+    )
+    if report.failures:
+        raise typer.Exit(code=1)
+
+
 _OPTION_OF = {
     "fps": "--fps", "height": "--height", "metric": "--metric", "rank": "--rank",
     "n_unlabeled": "--unlabeled", "n_pairs": "--pairs", "seed": "--seed",

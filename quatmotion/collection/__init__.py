@@ -31,7 +31,13 @@ from quatmotion.collection.reading import (
     find_skeleton,
     read_clip,
 )
-from quatmotion.collection.refs import ClipRef, content_hash, motion_hash, unique_names
+from quatmotion.collection.refs import (
+    ClipRef,
+    content_hash,
+    motion_hash,
+    name_apart,
+    unique_names,
+)
 from quatmotion.collection.report import BuildReport
 
 __all__ = [
@@ -49,5 +55,6 @@ __all__ = [
     "match_keys",
     "motion_hash",
     "read_clip",
+    "name_apart",
     "unique_names",
 ]

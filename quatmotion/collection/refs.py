@@ -191,3 +191,24 @@ def unique_names(paths: Sequence[Path]) -> list[str]:
 def duplicates(names: Iterable[str]) -> list[str]:
     """The names that occur more than once, sorted."""
     return sorted(n for n, c in Counter(names).items() if c > 1)
+
+
+def name_apart(ref: ClipRef, held: Sequence[ClipRef], path: Path | str) -> ClipRef:
+    """A new clip's reference named apart from the clips a file at ``path`` holds: where its
+    name is taken by another file's clip, :func:`unique_names` over the two paths names it; a
+    clip given in memory (no path) with a taken name is an error.
+
+    Raises
+    ------
+    ValueError
+        The name is taken and no path tells the two clips apart.
+    """
+    names = {r.name: r for r in held}
+    if ref.name not in names:
+        return ref
+    other = names[ref.name]
+    if ref.path is not None and other.path is not None and other.path != ref.path:
+        renamed = unique_names([Path(other.path), Path(ref.path)])[1]
+        if renamed not in names:
+            return replace(ref, name=renamed)
+    raise ValueError(f"{path}: already holds a clip named {ref.name!r}")

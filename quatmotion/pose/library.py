@@ -43,6 +43,7 @@ Conventions
 from __future__ import annotations
 
 import dataclasses
+import errno
 import functools
 import json
 import os
@@ -68,6 +69,7 @@ from quatmotion.collection import (
     ReadSettings,
     content_hash,
     find_clips,
+    name_apart,
     read_clip,
 )
 from quatmotion.errors import FormatError
@@ -359,6 +361,103 @@ class PoseLibrary:
         report.failures += failures
         report.details["library"] = library
         return report
+
+    @classmethod
+    def add(
+        cls,
+        path: str | os.PathLike[str],
+        sources: Sequence[Any],
+        *,
+        runner: Runner | str | Scheduler | None = None,
+        workers: int | None = None,
+        progress: Callable[[str, int, int], None] | None = None,
+        log: Callable[[str], None] | None = None,
+        on_doubt: Callable[[str, Doubt], None] | None = None,
+    ) -> BuildReport:
+        """Add ``sources`` to the library at ``path`` with its stored settings and distance
+        (nothing is learned again): each new clip is read, projected and inserted into the
+        graph; a clip whose content the library already holds is skipped; a new clip whose
+        name a stored clip of another file has is named by the collection's rule
+        (:func:`~quatmotion.collection.unique_names` over the two paths). The file is
+        rewritten whole (temporary file, then rename).
+
+        Raises
+        ------
+        FileNotFoundError
+            No library at ``path``.
+        ValueError
+            A version-2 library (it stored no settings: rebuild it), or no clip could be read.
+        """
+        path = pathlib.Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(errno.ENOENT, "no pose library", str(path))
+        library = cls.open(path)
+        settings = library.settings
+        if settings is None:
+            raise ValueError(f"{path}: a version-{library.version} library stores no settings; "
+                             "build it again to add clips")  # fmt: skip
+        report = BuildReport(path=path, settings=settings, details={"resumed": True})
+        report.details["clips_before"] = len(library.clip_names)
+        errors: list[tuple[str, str]] = []
+        found = find_clips(sources, settings.read, on_error=errors)
+        report.failures += [Failure(i, p, reason) for i, (p, reason) in enumerate(errors)]
+        held = {r.sha256 for r in library.clips()}
+        refs = list(library.clips())
+        new: list[ClipSource] = []
+        for source in found:
+            if source.sha256 in held:
+                report.skipped.append(source.ref())
+                continue
+            ref = name_apart(source.ref(), refs, path)
+            refs.append(ref)
+            held.add(source.sha256)
+            new.append(dataclasses.replace(source, name=ref.name))
+        if not new:
+            report.details["library"] = library
+            return report
+        load = functools.partial(
+            load_pose_source, fps=settings.fps, height=settings.height, read=settings.read
+        )
+        scheduler = runner.scheduler if isinstance(runner, Runner) else runner
+        failed: dict[int, Failure] = {}
+        n_old = len(library.clip_names)
+        capacity = library.index.n_items_ * (n_old + len(new)) // max(1, n_old)
+        graph = _Graph(library.index, flush_poses=settings.flush_poses, capacity=capacity)
+        catalogue = _index_pass(
+            new, list(range(len(new))), load, library.model,
+            fps=library.meta["fps"], height=library.meta["height_cm"], graph=graph,
+            failed=failed, chunk_size=settings.chunk_size,
+            batch={"workers": workers, "scheduler": scheduler},
+            progress=None if progress is None else functools.partial(progress, "index"),
+            on_doubt=on_doubt,
+        )  # fmt: skip
+        graph.close()
+        if not catalogue.names:
+            raise ValueError(_none_read(len(new), failed))
+        library._extend(catalogue)
+        added = [s.ref() for i, s in enumerate(new) if i not in failed]
+        library.refs = list(library.clips()) + added
+        library.save(path)
+        report.added = added
+        report.failures += [dataclasses.replace(failed[i], item=new[i]) for i in sorted(failed)]
+        report.details["library"] = library
+        say = log or (lambda _msg: None)
+        say(f"added {len(added)} clips to {path} ({len(report.skipped)} already there)")
+        return report
+
+    def _extend(self, catalogue: _Catalogue) -> None:
+        """Append the catalogue's clips (their vectors already in the graph)."""
+        fields = catalogue.library_fields(self.meta["fps"], {})
+        self.clip_of = np.concatenate([self.clip_of, fields["clip_of"] + len(self.clip_names)])
+        self.frame_of = np.concatenate([self.frame_of, fields["frame_of"]])
+        self.clip_names = [*self.clip_names, *fields["clip_names"]]
+        extra = fields["meta"]
+        self.meta = {
+            **self.meta,
+            "file_fps": [*self.meta.get("file_fps", []), *extra["file_fps"]],
+            "file_frames": [*self.meta.get("file_frames", []), *extra["file_frames"]],
+            "skeletons": sorted({*self.meta.get("skeletons", []), *extra["skeletons"]}),
+        }
 
     @classmethod
     def build(
