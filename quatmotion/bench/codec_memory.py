@@ -24,6 +24,29 @@ FRAMES = 60
 FPS = 30.0
 
 
+def headlines(sizes: tuple[int, ...]) -> list[dict]:
+    """The figures this benchmark publishes (:func:`quatmotion.viz.report.headline_table`):
+    the peak at each size and its growth from the smallest size to the largest."""
+    rows = [
+        {
+            "name": f"compress peak RSS, {n:,} clips",
+            "path": ["peak_rss_mib", str(n)],
+            "unit": "MiB",
+            "better": "lower",
+            "format": "",
+        }
+        for n in sizes
+    ]
+    rows.append({
+        "name": f"peak RSS growth, {sizes[0]:,} to {sizes[-1]:,} clips",
+        "path": ["peak_growth"],
+        "unit": "x",
+        "better": "lower",
+        "format": "",
+    })  # fmt: skip
+    return rows
+
+
 def _write_clips(folder: Path, n: int, seed: int = 0) -> None:
     from quatmotion.io import write_bvh
     from quatmotion.synthetic import KINDS, generate_clip
@@ -68,6 +91,10 @@ def run(out: Path, quick: bool = False, seed: int = 0) -> dict:
     sizes = (100, 1000) if quick else (1000, 10000)
     result = {**provenance("codec_memory", out, quick, seed), "frames_per_clip": FRAMES}
     result["sizes"] = [measure(n, seed) for n in sizes]
+    peaks = {str(row["clips"]): row["peak_rss_mib"] for row in result["sizes"]}
+    result["peak_rss_mib"] = peaks
+    result["peak_growth"] = peaks[str(sizes[-1])] / peaks[str(sizes[0])]
+    result["headlines"] = headlines(sizes)
     atomic_write_json(out, result)
     return result
 
