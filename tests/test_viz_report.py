@@ -183,6 +183,8 @@ def benchmark_runs(tmp_path_factory) -> tuple[list[Path], list[tuple[str, list]]
             else:
                 module = qssd_bench if name == "qssd" else pose_bench
                 result["figures"] = module._figures(out, result)
+            bench = {"io": io_bench, "qssd": qssd_bench, "pose": pose_bench}[name]
+            result["tables"] = bench.summary_tables(result)  # as run() publishes them
             out.write_text(json.dumps(result), encoding="utf-8")
             paths.append(out)
     return paths, seen
@@ -273,6 +275,27 @@ def test_a_benchmark_describes_its_headline_figures_and_the_report_reads_them(tm
     with pytest.raises(ValueError, match=r"headlines\[0\] \(x\): path must be a list"):
         report.headline_table(bad)
     assert report.headline_table({"benchmark": "old"}) is None
+
+
+def test_a_benchmark_publishes_its_summary_tables_and_a_malformed_one_is_named(tmp_path):
+    """The report renders the tables a benchmark it has never seen publishes."""
+    result = {
+        "benchmark": "never_seen",
+        "tables": [{"title": "Speed by size", "columns": ["clips", "ms"],
+                    "rows": [[300, 4.7], [10000, 23.0]], "note": "one core"}],
+    }  # fmt: skip
+    [table] = report.published_tables(result)
+    assert table.header == ("clips", "ms") and table.rows == ((300, 4.7), (10000, 23.0))
+    path = tmp_path / "never_seen.json"
+    path.write_text(json.dumps(result), encoding="utf-8")
+    page = report.render_report([report.load_result(path)])
+    assert "<h4>Speed by size" in page and "All results" in page
+    bad = {"benchmark": "never_seen", "tables": [{"title": "T", "columns": ["a", "b"],
+                                                  "rows": [[1]]}]}  # fmt: skip
+    with pytest.raises(ValueError, match=r"tables\[0\] \(T\): rows must be lists of 2 cells"):
+        report.published_tables(bad)
+    path.write_text(json.dumps(bad), encoding="utf-8")
+    assert "rows must be lists of 2 cells" in report.render_report([report.load_result(path)])
 
 
 def test_report_names_bad_and_missing_files(tmp_path):

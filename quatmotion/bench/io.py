@@ -22,12 +22,14 @@ import pathlib
 import statistics
 import tempfile
 import time
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench._provenance import provenance
+from quatmotion.bench._tables import fmt, get, table
 from quatmotion.datasets import catalogue, data_root
 from quatmotion.io import (
     asf_bone_end_positions,
@@ -169,6 +171,54 @@ def _figure(out: pathlib.Path, result: dict[str, Any]) -> str | None:
     return save_figure(figure, out.with_name(f"{out.stem}_parse.png"), dpi=120).name
 
 
+def summary_tables(data: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The tables ``quatmotion report`` shows of a result (:mod:`quatmotion.bench._tables`)."""
+    rows = []
+    for step in ("parse", "write"):
+        for kind in ("amc", "bvh"):
+            entry = get(data, step, kind)
+            if isinstance(entry, Mapping):
+                rows.append(
+                    (
+                        f"{step} {kind.upper()}",
+                        entry.get("files"),
+                        entry.get("megabytes"),
+                        entry.get("mb_per_s"),
+                        entry.get("mb_per_s_cpu"),
+                        entry.get("frames_per_s"),
+                    )
+                )
+    tables = [
+        table(
+            "Throughput (one thread)",
+            ("", "files", "MB", "MB/s (wall)", "MB/s (CPU)", "frames/s"),
+            tuple(rows),
+            "MB = 10^6 bytes of file text.",
+        )
+    ]
+    fk = get(data, "forward_kinematics")
+    if isinstance(fk, Mapping):
+        tables.append(
+            table(
+                "Forward kinematics",
+                ("clip", "joints", "end sites", "frames", "frames/s (joints)", "frames/s (+sites)"),
+                (
+                    (
+                        fk.get("clip"),
+                        fk.get("joints"),
+                        fk.get("sites"),
+                        fk.get("frames"),
+                        fk.get("joints_frames_per_s"),
+                        fk.get("joints_and_sites_frames_per_s"),
+                    ),
+                ),
+                f"Largest distance to the reference positions: "
+                f"{fmt(data.get('reference_max_error_cm'))} cm.",
+            )
+        )
+    return tables
+
+
 def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     """Measure parse, write and forward-kinematics throughput; write JSON to ``out``.
 
@@ -227,5 +277,6 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     result["reference_max_error_cm"] = max(errors.values()) if errors else None
     figure = _figure(out, result)
     result["figures"] = [figure] if figure else []
+    result["tables"] = summary_tables(result)
     atomic_write_json(out, result)
     return result

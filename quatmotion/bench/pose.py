@@ -36,7 +36,7 @@ from __future__ import annotations
 import pathlib
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench._provenance import provenance
+from quatmotion.bench._tables import get, table
 from quatmotion.datasets import ClipEntry, catalogue, data_root
 from quatmotion.pose import evaluate, labels
 from quatmotion.pose.data import PoseClip, PoseData
@@ -634,6 +635,64 @@ def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
     return written
 
 
+def summary_tables(data: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The tables ``quatmotion report`` shows of a result (:mod:`quatmotion.bench._tables`)."""
+    tables = []
+    for name, result in (get(data, "datasets") or {}).items():
+        methods = get(result, "transition", "methods") or {}
+        rows = sorted(
+            (
+                (m, e["precision"], e.get("fit_seconds"), e.get("query_ms_per_pair"))
+                for m, e in methods.items()
+                if isinstance(e, Mapping) and "precision" in e
+            ),
+            key=lambda row: -row[1],
+        )
+        if rows:
+            tables.append(
+                table(
+                    f"{name}: transition precision (Eq. 37), best first",
+                    ("method", "precision", "fit (s)", "query (ms/pair)"),
+                    tuple(rows),
+                    f"{get(result, 'transition', 'test', 'pairs')} test pairs.",
+                )
+            )
+        retrieval = get(result, "retrieval", "methods") or {}
+        scopes = [str(s) for s in (get(result, "retrieval", "scopes") or [])][:4]
+        rows = [
+            (m, *(e["precision_at"].get(s) for s in scopes))
+            for m, e in retrieval.items()
+            if isinstance(e, Mapping) and isinstance(e.get("precision_at"), Mapping)
+        ]
+        if rows and scopes:
+            tables.append(
+                table(
+                    f"{name}: pose retrieval precision@s",
+                    ("method", *(f"s={s}" for s in scopes)),
+                    tuple(sorted(rows, key=lambda row: -(row[1] or 0.0))),
+                )
+            )
+    chosen = get(data, "ann", "chosen")
+    if isinstance(chosen, Mapping):
+        tables.append(
+            table(
+                "Approximate pose index (HNSW)",
+                ("items", "ef_search", "recall@10", "median ms", "p95 ms", "meets target"),
+                (
+                    (
+                        get(data, "ann", "n_items"),
+                        chosen.get("ef_search"),
+                        chosen.get("recall_at_10"),
+                        chosen.get("median_ms"),
+                        chosen.get("p95_ms"),
+                        get(data, "ann", "meets_target"),
+                    ),
+                ),
+            )
+        )
+    return tables
+
+
 def run(
     out: pathlib.Path,
     quick: bool = False,
@@ -728,5 +787,6 @@ def run(
         results["ann"] = _ann_benchmark(quick, seed, log)
     results["figures"] = _figures(out, results)
     results["seconds"] = time.perf_counter() - t_start
+    results["tables"] = summary_tables(results)
     atomic_write_json(out, results)
     return results

@@ -8,8 +8,9 @@ Conventions
   absolute), else the ``<stem>_*.png`` files beside it.
 * Every benchmark renders without code here: :func:`generic_tables` turns any JSON into tables
   (scalars as key/value rows, a mapping of records or a list of records as a table, long
-  numeric lists as a summary). Benchmarks this module knows get a summary table first
-  (:data:`SUMMARIES`); the generic tables follow, so no number is lost.
+  numeric lists as a summary). A benchmark describes its own results: its ``headlines``
+  (:func:`headline_table`) and its summary ``tables`` (:func:`published_tables`) come first,
+  the generic tables follow, so no number is lost and no key of a benchmark is named here.
 * Figures are embedded as base64 PNG: the page stands alone and opens offline.
 """
 
@@ -19,7 +20,7 @@ import base64
 import html
 import json
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -182,7 +183,7 @@ def generic_tables(
     return tables
 
 
-# ---------------------------------------------------------------------------- known benchmarks
+# ---------------------------------------------------------------- what a benchmark publishes
 
 
 def _get(data: Any, *keys: str, default: Any = None) -> Any:
@@ -232,205 +233,36 @@ def headline_table(data: Mapping[str, Any]) -> Table | None:
     return Table("Headline figures", ("figure", "value", "unit", "better"), tuple(rows))
 
 
-SUMMARIES: dict[str, Callable[[Mapping[str, Any]], list[Table]]] = {}
-"""Summary tables of the benchmarks this module knows, by benchmark name."""
+def published_tables(data: Mapping[str, Any]) -> list[Table]:
+    """The summary tables a benchmark publishes about itself (its JSON's ``tables``: a list of
+    ``{"title", "columns", "rows", "note"}``, each row as many cells as columns), so the
+    report shows a benchmark's summary without naming any key of its results.
 
-
-def _summary(name: str) -> Callable[[Callable[..., list[Table]]], Callable[..., list[Table]]]:
-    def register(function: Callable[..., list[Table]]) -> Callable[..., list[Table]]:
-        SUMMARIES[name] = function
-        return function
-
-    return register
-
-
-@_summary("io")
-def _io_summary(data: Mapping[str, Any]) -> list[Table]:
-    rows = []
-    for step in ("parse", "write"):
-        for kind in ("amc", "bvh"):
-            entry = _get(data, step, kind)
-            if isinstance(entry, Mapping):
-                rows.append(
-                    (
-                        f"{step} {kind.upper()}",
-                        entry.get("files"),
-                        entry.get("megabytes"),
-                        entry.get("mb_per_s"),
-                        entry.get("mb_per_s_cpu"),
-                        entry.get("frames_per_s"),
-                    )
-                )
-    tables = [
-        Table(
-            "Throughput (one thread)",
-            ("", "files", "MB", "MB/s (wall)", "MB/s (CPU)", "frames/s"),
-            tuple(rows),
-            "MB = 10^6 bytes of file text.",
-        )
-    ]
-    fk = _get(data, "forward_kinematics")
-    if isinstance(fk, Mapping):
-        tables.append(
-            Table(
-                "Forward kinematics",
-                ("clip", "joints", "end sites", "frames", "frames/s (joints)", "frames/s (+sites)"),
-                (
-                    (
-                        fk.get("clip"),
-                        fk.get("joints"),
-                        fk.get("sites"),
-                        fk.get("frames"),
-                        fk.get("joints_frames_per_s"),
-                        fk.get("joints_and_sites_frames_per_s"),
-                    ),
-                ),
-                f"Largest distance to the reference positions: "
-                f"{_fmt(data.get('reference_max_error_cm'))} cm.",
-            )
-        )
-    return tables
-
-
-@_summary("qssd")
-def _qssd_summary(data: Mapping[str, Any]) -> list[Table]:
+    Raises
+    ------
+    ValueError
+        A malformed entry, named by its position and title.
+    """
+    listed = data.get("tables")
+    if listed is None:
+        return []
+    if not isinstance(listed, list):
+        raise ValueError(f"tables: expected a list, found {type(listed).__name__}")
     tables = []
-    t1 = _get(data, "table1")
-    if isinstance(t1, Mapping):
-        rows = []
-        for name, entry in t1.items():
-            if isinstance(entry, Mapping) and "qssd_test_paper" in entry:
-                rows.append(
-                    (
-                        name,
-                        entry.get("clips"),
-                        entry.get("frames"),
-                        entry.get("qssd_train_paper"),
-                        entry.get("qssd_test_paper"),
-                        entry.get("ksvd_train_paper"),
-                        entry.get("ksvd_test_paper"),
-                    )
-                )
-        for name, entry in (_get(t1, "paper") or {}).items():
-            rows.append(
-                (
-                    f"paper: {name}",
-                    "",
-                    "",
-                    entry.get("qssd_train"),
-                    entry.get("qssd_test"),
-                    entry.get("ksvd_train"),
-                    entry.get("ksvd_test"),
-                )
-            )
+    for number, entry in enumerate(listed):
+        if not isinstance(entry, Mapping) or not isinstance(entry.get("title"), str):
+            raise ValueError(f"tables[{number}]: expected an object with a title")
+        columns, rows = entry.get("columns"), entry.get("rows")
+        where = f"tables[{number}] ({entry['title']})"
+        if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns):
+            raise ValueError(f"{where}: columns must be a list of names")
+        if not isinstance(rows, list) or not all(
+            isinstance(r, list) and len(r) == len(columns) for r in rows
+        ):
+            raise ValueError(f"{where}: rows must be lists of {len(columns)} cells")
+        note = entry.get("note", "")
         tables.append(
-            Table(
-                f"Table 1: reconstruction error (K={t1.get('K')}, L={t1.get('L')}, "
-                f"{t1.get('iterations')} iterations)",
-                ("data", "clips", "frames", "QSSD train", "QSSD test", "K-SVD train", "K-SVD test"),
-                tuple(rows),
-                f"Errors as the paper prints Eq. 11: {t1.get('error_unit', '')}",
-            )
-        )
-    t2 = _get(data, "table2", "rows")
-    if isinstance(t2, list):
-        tables.append(
-            Table(
-                "Table 2: seconds per iteration",
-                ("N", "n", "K", "L", "QSSD", "QSSD paper", "K-SVD", "K-SVD paper", "QSSD speed-up"),
-                tuple(
-                    (
-                        r.get("N"),
-                        r.get("n"),
-                        r.get("K"),
-                        r.get("L"),
-                        r.get("qssd_seconds"),
-                        r.get("paper_qssd_seconds"),
-                        r.get("ksvd_seconds"),
-                        r.get("paper_ksvd_seconds"),
-                        r.get("qssd_speedup_vs_paper"),
-                    )
-                    for r in t2
-                    if isinstance(r, Mapping)
-                ),
-                str(_get(data, "table2", "note", default="")),
-            )
-        )
-    noise = _get(data, "simulation", "noise")
-    if isinstance(noise, Mapping):
-        tables.append(
-            Table(
-                "Simulation (Fig. 1)",
-                ("noise", "final error (deg)", "atoms restored (Eq. 10)", "restored (log space)"),
-                tuple(
-                    (
-                        label,
-                        e.get("final_error_deg"),
-                        e.get("restoration_quaternion"),
-                        e.get("restoration_log"),
-                    )
-                    for label, e in noise.items()
-                    if isinstance(e, Mapping)
-                ),
-            )
-        )
-    return tables
-
-
-@_summary("pose")
-def _pose_summary(data: Mapping[str, Any]) -> list[Table]:
-    tables = []
-    for name, result in (_get(data, "datasets") or {}).items():
-        methods = _get(result, "transition", "methods") or {}
-        rows = sorted(
-            (
-                (m, e["precision"], e.get("fit_seconds"), e.get("query_ms_per_pair"))
-                for m, e in methods.items()
-                if isinstance(e, Mapping) and "precision" in e
-            ),
-            key=lambda row: -row[1],
-        )
-        if rows:
-            tables.append(
-                Table(
-                    f"{name}: transition precision (Eq. 37), best first",
-                    ("method", "precision", "fit (s)", "query (ms/pair)"),
-                    tuple(rows),
-                    f"{_get(result, 'transition', 'test', 'pairs')} test pairs.",
-                )
-            )
-        retrieval = _get(result, "retrieval", "methods") or {}
-        scopes = [str(s) for s in (_get(result, "retrieval", "scopes") or [])][:4]
-        rows = [
-            (m, *(e["precision_at"].get(s) for s in scopes))
-            for m, e in retrieval.items()
-            if isinstance(e, Mapping) and isinstance(e.get("precision_at"), Mapping)
-        ]
-        if rows and scopes:
-            tables.append(
-                Table(
-                    f"{name}: pose retrieval precision@s",
-                    ("method", *(f"s={s}" for s in scopes)),
-                    tuple(sorted(rows, key=lambda row: -(row[1] or 0.0))),
-                )
-            )
-    chosen = _get(data, "ann", "chosen")
-    if isinstance(chosen, Mapping):
-        tables.append(
-            Table(
-                "Approximate pose index (HNSW)",
-                ("items", "ef_search", "recall@10", "median ms", "p95 ms", "meets target"),
-                (
-                    (
-                        _get(data, "ann", "n_items"),
-                        chosen.get("ef_search"),
-                        chosen.get("recall_at_10"),
-                        chosen.get("median_ms"),
-                        chosen.get("p95_ms"),
-                        _get(data, "ann", "meets_target"),
-                    ),
-                ),
-            )
+            Table(entry["title"], tuple(columns), tuple(tuple(r) for r in rows), str(note))
         )
     return tables
 
@@ -546,22 +378,20 @@ def render_report(results: Sequence[BenchmarkResult], title: str = "quatmotion b
             parts.append(f'<p class="missing">{html.escape(str(error))}</p>')
         if headlines is not None and headlines.rows:
             parts.append(_table_html(headlines))
-        summary = SUMMARIES.get(result.name)
-        if summary is not None:
-            try:
-                tables = summary(result.data)
-            except (KeyError, TypeError, ValueError, AttributeError) as error:
-                # A result from another version of the benchmark: its numbers still show below.
-                tables = []
-                parts.append(f'<p class="missing">no summary: unexpected layout ({error!r})</p>')
-            parts += [_table_html(t) for t in tables if t.rows]
+        try:
+            tables = published_tables(result.data)
+        except ValueError as error:
+            # A malformed summary: named, and the numbers still show below.
+            tables = []
+            parts.append(f'<p class="missing">{html.escape(str(error))}</p>')
+        parts += [_table_html(t) for t in tables if t.rows]
         if result.figures:
             figures = "".join(_figure_html(p) for p in result.figures)
             parts.append(f'<h3>Figures</h3><div class="figures">{figures}</div>')
         everything = "".join(
             _table_html(t) for t in generic_tables(result.data, skip=_PROVENANCE_KEYS)
         )
-        if summary is not None:
+        if tables:
             parts.append(f"<details><summary>All results</summary>{everything}</details>")
         else:
             parts.append(f"<h3>Results</h3>{everything}")

@@ -1,0 +1,42 @@
+"""The summary tables a benchmark publishes in its JSON (``tables``), which ``quatmotion
+report`` renders without knowing the benchmark's keys
+(:func:`quatmotion.viz.report.published_tables`).
+
+Each benchmark that publishes tables turns its own result into them (``summary_tables``), so
+the layout of a result and the tables read from it live in one module.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+__all__ = ["fmt", "get", "table"]
+
+
+def get(data: Any, *keys: str, default: Any = None) -> Any:
+    """``data[k0][k1]...``, or ``default`` where a key is missing or a level is no mapping."""
+    node = data
+    for key in keys:
+        if not isinstance(node, Mapping) or key not in node:
+            return default
+        node = node[key]
+    return node
+
+
+def table(
+    title: str, columns: Sequence[str], rows: Iterable[Sequence[Any]], note: str = ""
+) -> dict[str, Any]:
+    """One published table; every row must have a cell per column."""
+    cells = [list(r) for r in rows]
+    for number, row in enumerate(cells):
+        if len(row) != len(columns):
+            raise ValueError(f"{title}: row {number} has {len(row)} cells, not {len(columns)}")
+    return {"title": title, "columns": list(columns), "rows": cells, "note": note}
+
+
+def fmt(value: Any) -> str:
+    """A number as a table note shows it (four significant digits)."""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
