@@ -123,101 +123,28 @@ def gltf_bytes(motion: Motion, binary: bool = True) -> bytes:
     import pygltflib
 
     sk = motion.skeleton
-    J, S, T = sk.n_joints, sk.n_sites, motion.n_frames
-    m = 1.0 / CM_PER_METRE
-    nodes = []
-    children: list[list[int]] = [[] for _ in range(J)]
-    for j in range(1, J):
-        children[int(sk.parents[j])].append(j)
-    for s in range(S):
-        children[int(sk.site_parents[s])].append(J + s)
-    rest_translation = sk.offsets * m
-    rest_rotation = quat.identity((J,))  # the skeleton's rest pose: every local rotation zero
-    for j in range(J):
-        nodes.append(
-            pygltflib.Node(
-                name=sk.joint_names[j],
-                translation=rest_translation[j].tolist(),
-                rotation=_xyzw(rest_rotation[j]).tolist(),
-                children=children[j] or None,
-            )
-        )
-    for s in range(S):
-        nodes.append(
-            pygltflib.Node(name=sk.site_names[s], translation=(sk.site_offsets[s] * m).tolist())
-        )
-    # Inverse bind matrices: the inverses of the rest pose's world transforms.
-    world_r = np.zeros((J, 4))
-    world_t = np.zeros((J, 3))
-    for j in range(J):
-        parent = int(sk.parents[j])
-        if parent < 0:
-            world_r[j], world_t[j] = rest_rotation[j], rest_translation[j]
-        else:
-            world_r[j] = quat.multiply(world_r[parent], rest_rotation[j])
-            world_t[j] = world_t[parent] + quat.rotate(world_r[parent], rest_translation[j])
-    inverse_bind = np.linalg.inv(_matrix(world_r, world_t))
+    rest_translation = sk.offsets * (1.0 / CM_PER_METRE)
+    rest_rotation = quat.identity((sk.n_joints,))  # the rest pose: every local rotation zero
     blob = _Blob()
     # glTF stores matrices column-major: the transpose of each row-major matrix, flattened.
-    bind_accessor = blob.add(np.transpose(inverse_bind, (0, 2, 1)).reshape(J, 16), "MAT4")
-    samplers, channels = [], []
-    if T:
-        times = blob.add(np.arange(T) / motion.fps, "SCALAR", bounds=True)
-        translations = None
-        if motion.joint_translations is not None:
-            translations = motion.joint_translations.copy()
-            translations[:, 0] = motion.root_translation
-        for j in range(J):
-            samplers.append(
-                pygltflib.AnimationSampler(
-                    input=times,
-                    output=blob.add(_xyzw(motion.rotations[:, j]), "VEC4"),
-                    interpolation="LINEAR",
-                )
-            )
-            channels.append(
-                pygltflib.AnimationChannel(
-                    sampler=len(samplers) - 1,
-                    target=pygltflib.AnimationChannelTarget(node=j, path="rotation"),
-                )
-            )
-            if j == 0 or translations is not None:
-                moved = motion.root_translation if j == 0 else translations[:, j]
-                samplers.append(
-                    pygltflib.AnimationSampler(
-                        input=times, output=blob.add(moved * m, "VEC3"), interpolation="LINEAR"
-                    )
-                )
-                channels.append(
-                    pygltflib.AnimationChannel(
-                        sampler=len(samplers) - 1,
-                        target=pygltflib.AnimationChannelTarget(node=j, path="translation"),
-                    )
-                )
+    inverse_bind = _inverse_bind_matrices(sk.parents, rest_rotation, rest_translation)
+    bind_accessor = blob.add(np.transpose(inverse_bind, (0, 2, 1)).reshape(-1, 16), "MAT4")
+    animations = [_animation(motion, blob)] if motion.n_frames else []
     data = blob.bytes()
     gltf = pygltflib.GLTF2(
         asset=pygltflib.Asset(version="2.0", generator="quatmotion"),
         scene=0,
         scenes=[pygltflib.Scene(name=motion.name or sk.name or "clip", nodes=[0])],
-        nodes=nodes,
+        nodes=_nodes(sk, rest_rotation, rest_translation),
         skins=[
             pygltflib.Skin(
                 name=sk.name or "skeleton",
-                joints=list(range(J)),
+                joints=list(range(sk.n_joints)),
                 skeleton=0,
                 inverseBindMatrices=bind_accessor,
             )
         ],
-        animations=[
-            pygltflib.Animation(
-                name=motion.name or "motion",
-                samplers=samplers,
-                channels=channels,
-                extras={"fps": motion.fps, "frames": T},
-            )
-        ]
-        if T
-        else [],
+        animations=animations,
         accessors=blob.accessors,
         bufferViews=blob.views,
         buffers=[pygltflib.Buffer(byteLength=len(data))],
@@ -229,6 +156,89 @@ def gltf_bytes(motion: Motion, binary: bool = True) -> bytes:
         "ascii"
     )
     return gltf.gltf_to_json().encode("utf-8")
+
+
+def _nodes(sk: Skeleton, rest_rotation: np.ndarray, rest_translation: np.ndarray) -> list:
+    """One node per joint (its rest transform, its children) then one per end site."""
+    import pygltflib
+
+    J = sk.n_joints
+    children: list[list[int]] = [[] for _ in range(J)]
+    for j in range(1, J):
+        children[int(sk.parents[j])].append(j)
+    for s in range(sk.n_sites):
+        children[int(sk.site_parents[s])].append(J + s)
+    nodes = [
+        pygltflib.Node(
+            name=sk.joint_names[j],
+            translation=rest_translation[j].tolist(),
+            rotation=_xyzw(rest_rotation[j]).tolist(),
+            children=children[j] or None,
+        )
+        for j in range(J)
+    ]
+    nodes += [
+        pygltflib.Node(
+            name=sk.site_names[s],
+            translation=(sk.site_offsets[s] * (1.0 / CM_PER_METRE)).tolist(),
+        )
+        for s in range(sk.n_sites)
+    ]
+    return nodes
+
+
+def _inverse_bind_matrices(
+    parents: np.ndarray, rest_rotation: np.ndarray, rest_translation: np.ndarray
+) -> np.ndarray:
+    """The inverses of the rest pose's world transforms, shape (J, 4, 4), row-major."""
+    J = len(parents)
+    world_r = np.zeros((J, 4))
+    world_t = np.zeros((J, 3))
+    for j in range(J):
+        parent = int(parents[j])
+        if parent < 0:
+            world_r[j], world_t[j] = rest_rotation[j], rest_translation[j]
+        else:
+            world_r[j] = quat.multiply(world_r[parent], rest_rotation[j])
+            world_t[j] = world_t[parent] + quat.rotate(world_r[parent], rest_translation[j])
+    return np.linalg.inv(_matrix(world_r, world_t))
+
+
+def _animation(motion: Motion, blob: _Blob):  # -> pygltflib.Animation
+    """Every joint's rotation over time, and the root's translation (every joint's where the
+    clip moves joints other than the root), linearly interpolated at the clip's frame times."""
+    import pygltflib
+
+    m = 1.0 / CM_PER_METRE
+    times = blob.add(np.arange(motion.n_frames) / motion.fps, "SCALAR", bounds=True)
+    translations = None
+    if motion.joint_translations is not None:
+        translations = motion.joint_translations.copy()
+        translations[:, 0] = motion.root_translation
+    samplers, channels = [], []
+
+    def animate(node: int, path: str, output: int) -> None:
+        samplers.append(
+            pygltflib.AnimationSampler(input=times, output=output, interpolation="LINEAR")
+        )
+        channels.append(
+            pygltflib.AnimationChannel(
+                sampler=len(samplers) - 1,
+                target=pygltflib.AnimationChannelTarget(node=node, path=path),
+            )
+        )
+
+    for j in range(motion.skeleton.n_joints):
+        animate(j, "rotation", blob.add(_xyzw(motion.rotations[:, j]), "VEC4"))
+        if j == 0 or translations is not None:
+            moved = motion.root_translation if j == 0 else translations[:, j]
+            animate(j, "translation", blob.add(moved * m, "VEC3"))
+    return pygltflib.Animation(
+        name=motion.name or "motion",
+        samplers=samplers,
+        channels=channels,
+        extras={"fps": motion.fps, "frames": motion.n_frames},
+    )
 
 
 def write_gltf(motion: Motion, path: str | Path) -> None:
