@@ -517,6 +517,35 @@ class _Reader:
             raise self.fail(f"no animation named {wanted!r}; the file has {names}")
         return names.index(wanted), animations[names.index(wanted)]
 
+    def channels(
+        self, k: int | None, anim: Any, index: dict[int, int]
+    ) -> tuple[dict[int, _Keys], dict[int, _Keys]]:
+        """The animation's rotation and translation keyframes of each joint (by joint number),
+        checked: a sampler that exists, as many values as times, times that never go back."""
+        rotated: dict[int, _Keys] = {}
+        moved: dict[int, _Keys] = {}
+        for c, channel in enumerate((anim.channels or []) if anim is not None else []):
+            target = channel.target
+            j = index.get(target.node)
+            if j is None or target.path not in ("rotation", "translation"):
+                continue  # another node's, or weights and scale
+            field = f"animations[{k}].channels[{c}]"
+            if not 0 <= channel.sampler < len(anim.samplers or []):
+                raise self.fail(f"{field}.sampler names a missing sampler")
+            sampler = anim.samplers[channel.sampler]
+            times = self.accessor(sampler.input, "SCALAR", f"{field} input")[:, 0]
+            kind = "VEC4" if target.path == "rotation" else "VEC3"
+            values = self.accessor(sampler.output, kind, f"{field} output")
+            how = sampler.interpolation or "LINEAR"
+            if how == "CUBICSPLINE":
+                values = values[1::3]
+            if len(values) != len(times) or not len(times):
+                raise self.fail(f"{field}: {len(times)} times but {len(values)} values")
+            if np.any(np.diff(times) < 0):
+                raise self.fail(f"{field}: keyframe times go backwards")
+            (rotated if target.path == "rotation" else moved)[j] = (times, values, how)
+        return rotated, moved
+
     # --- the motion ---------------------------------------------------------------------------
 
     def motion(self, wanted: str | int | None) -> Motion:
@@ -533,47 +562,14 @@ class _Reader:
         offsets[0] = self.metre * (up_t + up_s * quat.rotate(up_r, rests[0][1]))
         site_offsets = np.array([self.rest(n)[1] for n in sites]).reshape(-1, 3) * cm
         k, anim = self.animation(wanted)
-        index = {n: j for j, n in enumerate(order)}
-        rotated: dict[int, tuple[NDArray, NDArray, str]] = {}
-        moved: dict[int, tuple[NDArray, NDArray, str]] = {}
-        fps = 30.0
-        if anim is not None:
-            for c, channel in enumerate(anim.channels or []):
-                target = channel.target
-                j = index.get(target.node)
-                if j is None or target.path not in ("rotation", "translation"):
-                    continue  # another node's, or weights and scale
-                field = f"animations[{k}].channels[{c}]"
-                if not 0 <= channel.sampler < len(anim.samplers or []):
-                    raise self.fail(f"{field}.sampler names a missing sampler")
-                sampler = anim.samplers[channel.sampler]
-                times = self.accessor(sampler.input, "SCALAR", f"{field} input")[:, 0]
-                kind = "VEC4" if target.path == "rotation" else "VEC3"
-                values = self.accessor(sampler.output, kind, f"{field} output")
-                how = sampler.interpolation or "LINEAR"
-                if how == "CUBICSPLINE":
-                    values = values[1::3]
-                if len(values) != len(times) or not len(times):
-                    raise self.fail(f"{field}: {len(times)} times but {len(values)} values")
-                if np.any(np.diff(times) < 0):
-                    raise self.fail(f"{field}: keyframe times go backwards")
-                (rotated if target.path == "rotation" else moved)[j] = (times, values, how)
-            fps = self._fps(anim, [t for t, _, _ in (*rotated.values(), *moved.values())])
+        rotated, moved = self.channels(k, anim, {n: j for j, n in enumerate(order)})
         keys = [t for t, _, _ in (*rotated.values(), *moved.values())]
-        if keys:
-            start = min(float(t[0]) for t in keys)
-            end = max(float(t[-1]) for t in keys)
-            n_frames = int(round((end - start) * fps)) + 1
-        else:
-            start, n_frames = 0.0, 0
-        frames = start + np.arange(n_frames) / fps
-        # Keyframe times are float32: snapped to the frame grid they sit on (within a thousandth
-        # of a frame), so that frames take their keyframes' values exactly, not a mix of two.
+        fps = 30.0 if anim is None else self._fps(anim, keys)
+        frames = _frame_times(keys, fps)
+        n_frames = len(frames)
         for table in (rotated, moved):
             for j, (times, values, how) in table.items():
-                grid = (times - start) * fps
-                if np.all(np.abs(grid - np.round(grid)) < 1e-3):
-                    table[j] = (start + np.round(grid) / fps, values, how)
+                table[j] = (_snapped(times, frames, fps), values, how)
         rotations = np.empty((n_frames, J, 4))
         translations = np.empty((n_frames, J, 3))
         for j, (r, t, _) in enumerate(rests):
@@ -655,6 +651,29 @@ def _sample(times: NDArray, values: NDArray, how: str, at: NDArray) -> NDArray:
         k = np.clip(np.searchsorted(times, at, side="right") - 1, 0, len(times) - 1)
         return values[k]
     return np.stack([np.interp(at, times, values[:, c]) for c in range(values.shape[1])], axis=-1)
+
+
+_Keys = tuple  # (times (K,), values (K, 3 or 4), interpolation): one channel's keyframes
+
+
+def _frame_times(keys: list[NDArray], fps: float) -> NDArray:
+    """The clip's frame times: from the first keyframe to the last at ``fps`` (none without
+    keyframes)."""
+    if not keys:
+        return np.zeros(0)
+    start = min(float(t[0]) for t in keys)
+    end = max(float(t[-1]) for t in keys)
+    return start + np.arange(int(round((end - start) * fps)) + 1) / fps
+
+
+def _snapped(times: NDArray, frames: NDArray, fps: float) -> NDArray:
+    """Keyframe times snapped to the frame grid they sit on (within a thousandth of a frame):
+    they are float32, and a frame should take its keyframe's value exactly, not a mix of two."""
+    start = frames[0] if len(frames) else 0.0
+    grid = (times - start) * fps
+    if np.all(np.abs(grid - np.round(grid)) < 1e-3):
+        return start + np.round(grid) / fps
+    return times
 
 
 def _sample_rotation(times: NDArray, values: NDArray, how: str, at: NDArray) -> NDArray:
