@@ -317,97 +317,114 @@ def table2(quick: bool, seed: int) -> dict[str, Any]:
 
 
 def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
+    """Every figure of a result that has its data: Fig. 1 (error and weight scale), Table 2."""
+    quick = " (quick run)" if results.get("quick") else ""
+    written = []
+    sim = results.get("simulation")
+    if sim:
+        written.append(_fig1_error(out, sim, quick))
+        written.append(_fig1_scale(out, sim, quick))
+    t2 = results.get("table2")
+    if t2:
+        written.append(_table2_figure(out, t2, quick))
+    return written
+
+
+def _fig1_error(out: pathlib.Path, sim: dict[str, Any], quick: str) -> str:
     plt = pyplot()
     from matplotlib.ticker import MaxNLocator
 
-    written = []
-    quick = " (quick run)" if results.get("quick") else ""
-    sim = results.get("simulation")
-    if sim:
-        setting = (
-            f"N={sim['N']} signals, atoms of n={sim['n']} quaternions, K={sim['K']} atoms, "
-            f"L={sim['L']} per signal; mean of {len(sim['seeds'])} seed(s)"
+    setting = (
+        f"N={sim['N']} signals, atoms of n={sim['n']} quaternions, K={sim['K']} atoms, "
+        f"L={sim['L']} per signal; mean of {len(sim['seeds'])} seed(s)"
+    )
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for label, entry in sim["noise"].items():
+        ax.plot(
+            np.arange(1, len(entry["error_curve_deg"]) + 1),
+            entry["error_curve_deg"],
+            label=f"{label}: {entry['restoration_quaternion']:.0%} of atoms restored",
         )
-        fig, ax = plt.subplots(figsize=(7, 4.5))
-        for label, entry in sim["noise"].items():
-            ax.plot(
-                np.arange(1, len(entry["error_curve_deg"]) + 1),
-                entry["error_curve_deg"],
-                label=f"{label}: {entry['restoration_quaternion']:.0%} of atoms restored",
-            )
-        asp = sim["ablation_noiseless"].get("as_printed")
-        if asp:
-            ax.plot(
-                np.arange(1, len(asp["error_curve_deg"]) + 1),
-                asp["error_curve_deg"],
-                "--",
-                label=f"algorithm as printed, noiseless: {asp['restoration_quaternion']:.0%}",
-            )
-        ax.set_yscale("log")
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.set_xlabel("dictionary-learning iteration")
-        ax.set_ylabel("mean angular error per quaternion (degrees, log scale)")
-        ax.set_title(f"QSSD on simulated data (paper Fig. 1){quick}\n{setting}", fontsize=10)
-        ax.legend(title="noise (atoms restored: Eq. 10 distance < 0.01)", fontsize=8)
-        ax.grid(True, which="major", alpha=0.3)
-        path = out.with_name(out.stem + "_fig1_error.png")
-        save_figure(fig, path)
-        written.append(path.name)
-        sweep = sim["weight_scale_sweep"]
-        fig, ax = plt.subplots(figsize=(7, 4.5))
-        for name in ("improved", "as_printed"):
-            ax.plot(
-                sweep["scales"],
-                sweep[name]["restoration_quaternion"],
-                "o-",
-                label=f"{name.replace('_', ' ')}, quaternion space (Eq. 10 < 0.01)",
-            )
-            ax.plot(
-                sweep["scales"],
-                sweep[name]["restoration_log"],
-                "s--",
-                label=f"{name.replace('_', ' ')}, log space (1 - |cos| < 0.01)",
-            )
-        ax.set_xlabel("weight scale s (sparse weights drawn from s x [0.2, 1])")
-        ax.set_ylabel("fraction of atoms restored")
-        ax.set_ylim(-0.02, 1.02)
-        ax.set_title(
-            f"QSSD on simulated data: restored atoms against weight scale{quick}\n"
-            f"{sweep['iterations']} iterations, {len(sweep['seeds'])} seed(s), noiseless",
-            fontsize=10,
+    asp = sim["ablation_noiseless"].get("as_printed")
+    if asp:
+        ax.plot(
+            np.arange(1, len(asp["error_curve_deg"]) + 1),
+            asp["error_curve_deg"],
+            "--",
+            label=f"algorithm as printed, noiseless: {asp['restoration_quaternion']:.0%}",
         )
-        ax.legend(fontsize=8)
-        ax.grid(True, alpha=0.3)
-        path = out.with_name(out.stem + "_fig1_scale.png")
-        save_figure(fig, path)
-        written.append(path.name)
-    t2 = results.get("table2")
-    if t2:
-        fig, ax = plt.subplots(figsize=(8, 4.5))
-        labels = [f"N={r['N']}\nn={r['n']}, K=L={r['K']}" for r in t2["rows"]]
-        x = np.arange(len(labels))
-        for off, key, name, color in (
-            (-0.3, "paper_qssd_seconds", "QSSD, paper (2.8 GHz Core i7, 2012)", "#9ecae1"),
-            (-0.1, "paper_ksvd_seconds", "K-SVD, paper", "#fdae6b"),
-            (0.1, "qssd_seconds", "QSSD, this run", "#3182bd"),
-            (0.3, "ksvd_seconds", "K-SVD, this run", "#e6550d"),
-        ):
-            ax.bar(x + off, [r[key] for r in t2["rows"]], width=0.2, label=name, color=color)
-        ax.set_yscale("log")
-        ax.set_xticks(x, labels, fontsize=7)
-        ax.set_xlabel("problem: N signals, atoms of n quaternions, K atoms, L nonzeros per signal")
-        ax.set_ylabel("seconds per iteration (log scale)")
-        ax.set_title(
-            f"Dictionary-learning speed (paper Table 2){quick}\nthis run: median wall time of "
-            f"{t2['iterations_timed']} iterations on a shared machine; lower is better",
-            fontsize=10,
+    ax.set_yscale("log")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("dictionary-learning iteration")
+    ax.set_ylabel("mean angular error per quaternion (degrees, log scale)")
+    ax.set_title(f"QSSD on simulated data (paper Fig. 1){quick}\n{setting}", fontsize=10)
+    ax.legend(title="noise (atoms restored: Eq. 10 distance < 0.01)", fontsize=8)
+    ax.grid(True, which="major", alpha=0.3)
+    path = out.with_name(out.stem + "_fig1_error.png")
+    save_figure(fig, path)
+    return path.name
+
+
+def _fig1_scale(out: pathlib.Path, sim: dict[str, Any], quick: str) -> str:
+    plt = pyplot()
+
+    sweep = sim["weight_scale_sweep"]
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for name in ("improved", "as_printed"):
+        ax.plot(
+            sweep["scales"],
+            sweep[name]["restoration_quaternion"],
+            "o-",
+            label=f"{name.replace('_', ' ')}, quaternion space (Eq. 10 < 0.01)",
         )
-        ax.legend(fontsize=8)
-        ax.grid(True, axis="y", which="major", alpha=0.3)
-        path = out.with_name(out.stem + "_table2.png")
-        save_figure(fig, path)
-        written.append(path.name)
-    return written
+        ax.plot(
+            sweep["scales"],
+            sweep[name]["restoration_log"],
+            "s--",
+            label=f"{name.replace('_', ' ')}, log space (1 - |cos| < 0.01)",
+        )
+    ax.set_xlabel("weight scale s (sparse weights drawn from s x [0.2, 1])")
+    ax.set_ylabel("fraction of atoms restored")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_title(
+        f"QSSD on simulated data: restored atoms against weight scale{quick}\n"
+        f"{sweep['iterations']} iterations, {len(sweep['seeds'])} seed(s), noiseless",
+        fontsize=10,
+    )
+    ax.legend(fontsize=8)
+    ax.grid(True, alpha=0.3)
+    path = out.with_name(out.stem + "_fig1_scale.png")
+    save_figure(fig, path)
+    return path.name
+
+
+def _table2_figure(out: pathlib.Path, t2: dict[str, Any], quick: str) -> str:
+    plt = pyplot()
+
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    labels = [f"N={r['N']}\nn={r['n']}, K=L={r['K']}" for r in t2["rows"]]
+    x = np.arange(len(labels))
+    for off, key, name, color in (
+        (-0.3, "paper_qssd_seconds", "QSSD, paper (2.8 GHz Core i7, 2012)", "#9ecae1"),
+        (-0.1, "paper_ksvd_seconds", "K-SVD, paper", "#fdae6b"),
+        (0.1, "qssd_seconds", "QSSD, this run", "#3182bd"),
+        (0.3, "ksvd_seconds", "K-SVD, this run", "#e6550d"),
+    ):
+        ax.bar(x + off, [r[key] for r in t2["rows"]], width=0.2, label=name, color=color)
+    ax.set_yscale("log")
+    ax.set_xticks(x, labels, fontsize=7)
+    ax.set_xlabel("problem: N signals, atoms of n quaternions, K atoms, L nonzeros per signal")
+    ax.set_ylabel("seconds per iteration (log scale)")
+    ax.set_title(
+        f"Dictionary-learning speed (paper Table 2){quick}\nthis run: median wall time of "
+        f"{t2['iterations_timed']} iterations on a shared machine; lower is better",
+        fontsize=10,
+    )
+    ax.legend(fontsize=8)
+    ax.grid(True, axis="y", which="major", alpha=0.3)
+    path = out.with_name(out.stem + "_table2.png")
+    save_figure(fig, path)
+    return path.name
 
 
 def summary_tables(data: Mapping[str, Any]) -> list[dict[str, Any]]:
