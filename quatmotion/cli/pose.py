@@ -79,7 +79,7 @@ def index_command(
     metric: Annotated[
         str,
         typer.Option(
-            help="Pose distance to learn: GPD+LOGIT (measured best), GPD+LMS or GPD+RDSR."
+            help="Pose distance to learn: GPD+LOGIT, GPD+LMS or GPD+RDSR (docs/performance.md)."
         ),
     ] = DEFAULT_METRIC,
     rank: Annotated[int, typer.Option(help="Dimensions of RDSR's projection W.")] = 50,
