@@ -1,7 +1,9 @@
 """Where Numba keeps the compiled kernels of quatmotion, and a word when it compiles one.
 
-Infrastructure (any layer may use it); it imports nothing of quatmotion, and Numba only in
-:func:`on_first_compile`.
+Infrastructure (any layer may use it); it imports nothing of quatmotion, and never imports
+Numba itself: :func:`on_first_compile` listens from the moment something else imports it (a
+command that runs no kernel, such as a single query of the default method, spares the 0.7 s
+Numba's import costs).
 
 How Numba finds a ``cache=True`` kernel's cache (``numba.core.caching``): the first of
 ``$NUMBA_CACHE_DIR`` (``numba.config.CACHE_DIR``), the ``__pycache__`` folder beside the
@@ -23,6 +25,8 @@ environment, so pool workers, the fork server and local Dask workers use the sam
 from __future__ import annotations
 
 import contextlib
+import importlib.abc
+import importlib.machinery
 import os
 import sys
 import tempfile
@@ -120,15 +124,29 @@ def on_first_compile(callback: Callable[[], None]) -> None:
     """Call ``callback()`` once in this process, when Numba starts compiling a kernel of
     quatmotion (not when it loads one from the cache).
 
-    A later call replaces the callback; it is not called again after the first compile.
+    A later call replaces the callback; it is not called again after the first compile. Numba
+    is not imported here: when it is not imported yet, the listener is installed right after
+    its import (a kernel compiles at its first call, after its module imported Numba).
     """
-    global _listener_installed, _callback
-    from numba.core import event
-
+    global _callback
     _callback = callback
     with _listener_lock:
         if _listener_installed:
             return
+        if "numba" not in sys.modules:
+            if not any(isinstance(f, _AfterNumbaImport) for f in sys.meta_path):
+                sys.meta_path.insert(0, _AfterNumbaImport())
+            return
+    _install_listener()
+
+
+def _install_listener() -> None:
+    """Register the compile listener with Numba's events (once)."""
+    global _listener_installed
+    with _listener_lock:
+        if _listener_installed:
+            return
+        from numba.core import event
 
         class _FirstCompile(event.Listener):
             def on_start(self, ev: event.Event) -> None:
@@ -144,6 +162,39 @@ def on_first_compile(callback: Callable[[], None]) -> None:
 
         event.register("numba:compile", _FirstCompile())
         _listener_installed = True
+
+
+class _AfterNumbaImport(importlib.abc.MetaPathFinder):
+    """Finds nothing itself: when ``numba`` is about to be imported, wraps its loader so that
+    the compile listener is installed once the package has run (then leaves ``sys.meta_path``)."""
+
+    def find_spec(self, fullname, path, target=None):  # type: ignore[no-untyped-def]
+        if fullname != "numba":
+            return None
+        with contextlib.suppress(ValueError):
+            sys.meta_path.remove(self)
+        spec = importlib.machinery.PathFinder.find_spec(fullname, path, target)
+        if spec is not None and spec.loader is not None:
+            spec.loader = _ThenListen(spec.loader)
+        return spec
+
+
+class _ThenListen(importlib.abc.Loader):
+    """A module loader that installs the compile listener after the module ran."""
+
+    def __init__(self, loader: importlib.abc.Loader) -> None:
+        self._loader = loader
+
+    def __getattr__(self, name: str) -> object:  # resources, is_package... of the real loader
+        return getattr(self._loader, name)
+
+    def create_module(self, spec):  # type: ignore[no-untyped-def]
+        return self._loader.create_module(spec)
+
+    def exec_module(self, module) -> None:  # type: ignore[no-untyped-def]
+        self._loader.exec_module(module)
+        with contextlib.suppress(Exception):  # a message must not fail the import
+            _install_listener()
 
 
 def _nothing() -> None:

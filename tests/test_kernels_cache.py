@@ -237,3 +237,24 @@ def test_warm_up_says_what_it_did_and_nothing_to_do_when_warm(
     assert any(warmup.GROUPS["read"] in line and "3 compiled" in line for line in lines)
     assert any(warmup.GROUPS["pose"] in line and "all from the cache" in line for line in lines)
     assert lines[-1].startswith("kernels ready in") and "3 compiled" in lines[-1]
+
+
+def test_listening_for_compiles_does_not_import_numba_until_something_does() -> None:
+    # the notice is installed lazily: a command that runs no kernel never imports Numba
+    code = (
+        "import sys\n"
+        "from quatmotion import _jit\n"
+        "_jit.on_first_compile(lambda: print('compiling'))\n"
+        "assert 'numba' not in sys.modules\n"
+        "import numba\n"
+        "assert _jit._listener_installed\n"
+        "import types\n"
+        "m = types.ModuleType('quatmotion.fake_kernels')\n"
+        "exec('def f(x):\\n    return x + 1\\n', m.__dict__)\n"
+        "sys.modules[m.__name__] = m\n"
+        "f = numba.njit(m.f)\n"
+        "f(1); f(2)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == ["compiling"]
