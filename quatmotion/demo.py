@@ -249,7 +249,7 @@ def _search_by_example(
     """Index the clips (motion features), search with the first one as the example, and
     write ``view.html``: the example beside its best match."""
     from quatmotion.io import find_motion_files
-    from quatmotion.retrieval import DEFAULT_METHOD, ClipIndex, build_index
+    from quatmotion.retrieval import DEFAULT_METHOD, ClipIndex, IndexSettings
     from quatmotion.retrieval.search import search
     from quatmotion.viz import write_view
 
@@ -261,7 +261,7 @@ def _search_by_example(
         files = [out_dir / "clips" / f"{m.name}.bvh" for m, _ in clips]
     index_path = out_dir / "library.qidx"
     index_path.unlink(missing_ok=True)  # built afresh: the demo runs with --force
-    report = build_index(files, index_path, kinds=("motion",), labels=labels)
+    report = ClipIndex.build(files, index_path, IndexSettings(kinds=("motion",)), labels=labels)
     query = clips[0][0]
     with ClipIndex.open(index_path) as index:
         results = search(index, query.name, k=5)
@@ -508,7 +508,7 @@ def build_library(
     """
     from quatmotion import codec
     from quatmotion.io import find_motion_files
-    from quatmotion.retrieval.build import build_index
+    from quatmotion.retrieval.index import ClipIndex, IndexSettings
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -545,10 +545,10 @@ def build_library(
         where = ", ".join(str(s) for s in sources) or "the generated library"
         raise ValueError(f"{where}: no clip could be read ({next(iter(failed.values()), '')})")
     index = folder / "library.qidx"
-    built = build_index(
+    built = ClipIndex.build(
         good,
         index,
-        kinds=("motion",),
+        IndexSettings(kinds=("motion",)),
         labels=labels,
         workers=workers,
         progress=lambda done, total: report("index", done, total),

@@ -309,7 +309,7 @@ def search_command(
         if skeleton is not None:
             require_file(skeleton)
         at_least("--ef", ef, 1)
-        library = PoseLibrary.load(library_path, ef_search=ef)
+        library = PoseLibrary.open(library_path, ef_search=ef)
         if file is not None:
             motion = read_clip(file, skeleton, units, strict=True)
             check_frame(frame, motion.n_frames, str(file))

@@ -60,6 +60,7 @@ from numpy.typing import ArrayLike, NDArray
 from sklearn.utils._param_validation import Interval, StrOptions
 
 from quatmotion._atomic import atomic_output
+from quatmotion._deprecated import warn_renamed
 from quatmotion._format import FileFormat
 from quatmotion._settings import Settings
 from quatmotion.collection import (
@@ -294,7 +295,39 @@ class PoseLibrary:
         FormatError
             Not a quatmotion pose library, or a version this code does not read.
         """
-        return cls.load(path, ef_search)
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                meta = json.loads(str(data["meta"]))
+                if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
+                    raise FormatError(_NOT_A_LIBRARY, path)
+                version = FORMAT.check(meta.get("format"), meta.get("version"), path)
+                refs = [ClipRef.from_dict(r, path) for r in meta.pop("clips", [])]
+                stored = meta.pop("settings", None)
+                settings = None if stored is None else PoseSettings.from_dict(stored, path)
+                index = HNSWIndex.from_bytes(
+                    data["index"].tobytes(), dim=int(meta["dim"]), ef_search=ef_search
+                )
+                model = {k[6:]: data[k] for k in data.files if k.startswith("model_")}
+                return cls(
+                    index=index,
+                    clip_names=[str(n) for n in data["clip_names"]],
+                    clip_of=data["clip_of"].astype(np.int64),
+                    frame_of=data["frame_of"].astype(np.int64),
+                    model=model,
+                    meta=meta,
+                    refs=refs,
+                    settings=settings,
+                    version=version,
+                    path=pathlib.Path(path),
+                )
+        except FormatError:
+            raise
+        except (IsADirectoryError, FileNotFoundError, PermissionError):
+            raise
+        except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+            # np.load's own message (pickled data, a bad zip...) says nothing about what the
+            # file should have been.
+            raise FormatError(_NOT_A_LIBRARY, path) from exc
 
     @classmethod
     def _build_file(
@@ -846,46 +879,9 @@ class PoseLibrary:
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], ef_search: int = 64) -> PoseLibrary:
-        """Read a library written by :meth:`save`.
-
-        Raises
-        ------
-        FormatError
-            If the file is not a quatmotion pose library, or one of another format version.
-        """
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                meta = json.loads(str(data["meta"]))
-                if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
-                    raise FormatError(_NOT_A_LIBRARY, path)
-                version = FORMAT.check(meta.get("format"), meta.get("version"), path)
-                refs = [ClipRef.from_dict(r, path) for r in meta.pop("clips", [])]
-                stored = meta.pop("settings", None)
-                settings = None if stored is None else PoseSettings.from_dict(stored, path)
-                index = HNSWIndex.from_bytes(
-                    data["index"].tobytes(), dim=int(meta["dim"]), ef_search=ef_search
-                )
-                model = {k[6:]: data[k] for k in data.files if k.startswith("model_")}
-                return cls(
-                    index=index,
-                    clip_names=[str(n) for n in data["clip_names"]],
-                    clip_of=data["clip_of"].astype(np.int64),
-                    frame_of=data["frame_of"].astype(np.int64),
-                    model=model,
-                    meta=meta,
-                    refs=refs,
-                    settings=settings,
-                    version=version,
-                    path=pathlib.Path(path),
-                )
-        except FormatError:
-            raise
-        except (IsADirectoryError, FileNotFoundError, PermissionError):
-            raise
-        except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-            # np.load's own message (pickled data, a bad zip...) says nothing about what the
-            # file should have been.
-            raise FormatError(_NOT_A_LIBRARY, path) from exc
+        """:meth:`open` (the name before 0.4.0; warns)."""
+        warn_renamed("PoseLibrary.load", "PoseLibrary.open")
+        return cls.open(path, ef_search)
 
 
 def _labelled_pairs(

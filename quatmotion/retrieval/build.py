@@ -114,7 +114,7 @@ def _open(out: Path, settings: IndexSettings, report: BuildReport) -> ClipIndex:
         index.write_settings(settings)
         return index
     report.details["resumed"] = False
-    return ClipIndex.create(out, settings)
+    return ClipIndex._create(out, settings)
 
 
 def _plan(index: ClipIndex, found: list[ClipSource], report: BuildReport) -> list[ClipSource]:
@@ -376,8 +376,11 @@ def build_index(
     progress: Callable[[int, int], None] | None = None,
     on_doubt: Callable[[str, Doubt], None] | None = None,
 ) -> BuildReport:
-    """Deprecated: :meth:`ClipIndex.build` with an :class:`IndexSettings` made of the
-    keywords (kept while callers move)."""
+    """:meth:`ClipIndex.build` with an :class:`IndexSettings` made of the keywords (the name
+    before 0.4.0; warns)."""
+    from quatmotion._deprecated import warn_renamed
+
+    warn_renamed("retrieval.build_index", "ClipIndex.build with IndexSettings")
     read = ReadSettings(
         units=units, skeleton=None if skeletons is None else os.fspath(skeletons), strict=False
     )

@@ -290,6 +290,14 @@ class ClipIndex:
 
     @classmethod
     def create(cls, path: str | Path, settings: IndexSettings | None = None) -> ClipIndex:
+        """:meth:`_create` (the name before 0.4.0; warns): build with :meth:`build`."""
+        from quatmotion._deprecated import warn_renamed
+
+        warn_renamed("ClipIndex.create", "ClipIndex.build (or open)")
+        return cls._create(path, settings)
+
+    @classmethod
+    def _create(cls, path: str | Path, settings: IndexSettings | None = None) -> ClipIndex:
         """A new, empty index at ``path``, open for writing.
 
         Raises

@@ -302,7 +302,7 @@ class ClipCatalogue:
                     stored = set().union(*idx.feature_keys().values())
                 methods = [m for m in METHODS if set(method_keys(m)) <= stored]
                 methods.sort(key=lambda m: m != DEFAULT_METHOD)
-            pose_library = PoseLibrary.load(poses) if poses is not None else None
+            pose_library = PoseLibrary.open(poses) if poses is not None else None
         except BaseException:
             if archive is not None:
                 archive.close()
