@@ -115,3 +115,21 @@ def test_a_shell_query_by_name_imports_no_numba_and_answers_as_the_numba_path(in
     done = _cli("search", number, "--index", str(index), "--top", "5", "--json")
     assert done.returncode == 0 and done.stderr.endswith("NUMBA=True"), done.stderr
     _same(json.loads(done.stdout)["results"], doc["results"])
+
+
+def test_stored_arrays_read_as_np_load_reads_them():
+    from quatmotion.retrieval.index import _from_blob, _to_blob
+
+    rng = np.random.default_rng(1)
+    for a in (
+        rng.normal(size=(7, 52)).astype(np.float32),
+        rng.normal(size=156),
+        np.arange(5, dtype=np.int64),
+        np.float32(2.5),
+        np.zeros((0, 3), np.float32),
+        np.asfortranarray(rng.normal(size=(3, 4))),
+    ):
+        blob = _to_blob(a)
+        got, want = quick._array(blob), _from_blob(blob)
+        assert got.dtype == want.dtype and got.shape == want.shape
+        np.testing.assert_array_equal(got, want)
