@@ -19,8 +19,8 @@ Conventions
   query's frames and the band's cells, arrays over clips. No clip is pruned, so the ``k``
   nearest are those of the exact pruned search; distances agree to float32 rounding, except
   where the compiled kernel's fast-math rounds a band's end the other way (the band one cell
-  narrower on a row where the rescaled diagonal falls on a whole frame: 0.2 % on 2 pairs of
-  191 in an HDM05 query; this path keeps the band as written).
+  narrower on a row where the rescaled diagonal falls on a whole frame; this path keeps the
+  band as written; how often, in docs/performance.md, 0.4.0).
 """
 
 from __future__ import annotations
