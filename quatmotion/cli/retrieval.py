@@ -334,6 +334,13 @@ def search_command(
     """
     with user_errors():
         _check_search_options(query, queries, method, within, skeleton, units)
+        quick = _quick_answer(index, query, top, method, within, skeleton, units)
+        if quick is not None:  # a single query by clip name, without Numba
+            if as_json:
+                print_json({"query": query, "method": quick[0], "results": quick[1]})
+            else:
+                _print_results([_Result(**r) for r in quick[1]], within)
+            return
         texts = _query_texts(query, queries)
         method_name, answers = _answer(index, texts, top, method, within, skeleton, units)
     _show_answers(texts, answers, method_name, as_json, batch=queries is not None, within=within)
@@ -348,13 +355,14 @@ def _check_search_options(
     units: str | None,
 ) -> None:
     """Step 1: the options agree (one query or --queries; --within without another method)."""
-    from quatmotion.retrieval.methods import DEFAULT_METHOD
+    from quatmotion.retrieval.quick import METHOD as DEFAULT_METHOD  # no Numba
 
     if within and method not in (None, DEFAULT_METHOD):
         raise CliInputError("--within uses the motion frames; leave out --method")
     if (query is None) == (queries is None):
         raise CliInputError("give one query, or --queries, not both")
-    check_units(units)
+    if units is not None:  # (quatmotion.io imports Numba)
+        check_units(units)
     if skeleton is not None:
         require_file(skeleton)
 
@@ -378,6 +386,36 @@ def _query_texts(query: str | None, queries: Path | None) -> list[str]:
     if not texts:
         raise CliInputError(f"{queries}: no queries in it")
     return texts
+
+
+class _Result:
+    """A result of the quick path, shown like a ``SearchResult``."""
+
+    def __init__(self, rank: int, clip: str, path: str, label: str, distance: float | None):
+        self.rank, self.clip, self.path, self.label = rank, clip, path, label
+        self.distance = float("nan") if distance is None else distance
+
+
+def _quick_answer(
+    index: Path,
+    query: str | None,
+    top: int,
+    method: str | None,
+    within: bool,
+    skeleton: Path | None,
+    units: str | None,
+) -> tuple[str, list[dict[str, object]]] | None:
+    """A single query of the default method by an indexed clip's name, answered without Numba
+    (:mod:`quatmotion.retrieval.quick`: importing Numba and loading its kernels costs more than
+    one search); None when that path does not answer (a file, another method, --within...)."""
+    if query is None or within or skeleton is not None or units is not None:
+        return None
+    from quatmotion.retrieval.quick import METHOD, quick_search
+
+    if method not in (None, METHOD) or Path(query).exists():
+        return None
+    results = quick_search(index, query, k=top)
+    return None if results is None else (METHOD, results)
 
 
 def _answer(

@@ -38,13 +38,15 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion import quat
-from quatmotion.motion import Motion, Skeleton, angular_displacements
-from quatmotion.pose import skeleton16
+if TYPE_CHECKING:
+    from quatmotion.motion import Motion, Skeleton
+# quatmotion.motion, .pose and .quat (whose kernels import Numba) are imported where used: the
+# constants and the fused stream of a query by clip name (retrieval.quick) need none of them.
 
 __all__ = [
     "DICTIONARY_ATOMS",
@@ -100,6 +102,8 @@ def _gradient(x: FloatArray, dt: float) -> FloatArray:
 def _frames_and_velocities(world16: FloatArray, fps: float) -> tuple[FloatArray, FloatArray]:
     """Motion frames ``(T, 52)`` and their velocity counterpart ``(T, 52)`` from world
     positions ``(T, 16, 3)`` (cm, already scaled) sampled at ``fps``."""
+    from quatmotion.pose import skeleton16
+
     T = world16.shape[0]
     dt = 1.0 / fps
     body = skeleton16.to_body_frame(world16)
@@ -142,6 +146,8 @@ def motion_frames(motion: Motion) -> tuple[NDArray[np.float32], NDArray[np.float
     ValueError
         For a skeleton without the 16 pose joints.
     """
+    from quatmotion.pose import skeleton16
+
     step = feature_step(motion.fps)
     scale = skeleton16.height_scale(motion.skeleton, HEIGHT_CM)
     # Kinematics of every frame, then every step-th: cheaper than Motion.slice, whose
@@ -153,6 +159,8 @@ def motion_frames(motion: Motion) -> tuple[NDArray[np.float32], NDArray[np.float
 
 def _leg_length(world16: FloatArray) -> float:
     """Median over frames of thigh plus shin, averaged over both legs (same units)."""
+    from quatmotion.pose import skeleton16
+
     legs = []
     for hip, knee, foot in (("LHip", "LKnee", "LFoot"), ("RHip", "RKnee", "RFoot")):
         h, k, f = (skeleton16.JOINTS_16.index(n) for n in (hip, knee, foot))
@@ -167,6 +175,8 @@ def _leg_length(world16: FloatArray) -> float:
 
 def path_from_world(world16: FloatArray) -> FloatArray:
     """Path frames ``(T, 51)`` (module docstring) from world positions ``(T, 16, 3)``."""
+    from quatmotion.pose import skeleton16
+
     T = world16.shape[0]
     yaw0 = float(skeleton16.facing_yaw(world16[:1])[0])
     hip = world16[:, :1, :]
@@ -179,6 +189,8 @@ def path_from_world(world16: FloatArray) -> FloatArray:
 def path_frames(motion: Motion) -> NDArray[np.float32]:
     """Path frames ``(T', 51)`` of a clip (module docstring), every
     ``feature_step(motion.fps)``-th frame."""
+    from quatmotion.pose import skeleton16
+
     step = feature_step(motion.fps)
     world = skeleton16.world_positions16(motion)[::step]
     return path_from_world(world).astype(np.float32)
@@ -207,6 +219,8 @@ def clip_dictionary(motion: Motion, kind: str = "qssd", seed: int = 0) -> FloatA
         K-SVD atoms are unit as ``4n``-vectors already. Fewer distinct frames than atoms
         still gives five atoms (the estimators fill with random directions).
     """
+    from quatmotion import quat
+    from quatmotion.motion import angular_displacements
     from quatmotion.sparse import KSVD, QSSD
 
     step = max(1, int(np.ceil(motion.fps / DICTIONARY_MAX_FPS - 1e-9)))

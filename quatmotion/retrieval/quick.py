@@ -1,0 +1,234 @@
+"""A single query of the default method by an indexed clip's name, without Numba.
+
+Conventions
+-----------
+* What it answers: :func:`~quatmotion.retrieval.search.search` of ``dtw-fused`` (the default)
+  for a clip of the index named by its name, a unique end of its path or its stem (rules 1-3
+  of :func:`quatmotion.io.names.match_clip`), on a version-2 index that stores the default's
+  model. Anything else (another method, a number, an unknown, ambiguous or damaged name or
+  index, a model to refit) returns ``None``, and the caller takes the full path, which
+  answers or says what is wrong.
+* Why: a shell query is one process per query, and importing Numba and loading its cached
+  kernels costs more than the search itself (docs/performance.md, 0.4.0). This module imports
+  NumPy, SQLite and the fused stream's model only (no ``quatmotion.motion``, ``.io`` or
+  ``.collection``, whose kernels import Numba); a batch (``--queries``) and the server keep
+  the Numba kernels, cheaper once loaded.
+* The same answer: :func:`fused_distances` is ``_kernels.dtw_band32`` (Euclidean frame
+  cost, float32 sums, the band of ``_kernels.band_radius``, cost over ``n + m``) computed for
+  every clip at once: one float64 product gives every frame cost, then a loop over the
+  query's frames and the band's cells, arrays over clips. No clip is pruned, so the ``k``
+  nearest are those of the exact pruned search; distances agree to float32 rounding, except
+  where the compiled kernel's fast-math rounds a band's end the other way (the band one cell
+  narrower on a row where the rescaled diagonal falls on a whole frame; this path keeps the
+  band as written; how often, in docs/performance.md, 0.4.0).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import sqlite3
+from pathlib import Path, PurePath
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quatmotion.retrieval import features as feat
+from quatmotion.retrieval.features_fused import MODEL_KEY, FusedModel
+
+__all__ = ["FORMAT_NAME", "INDEX_VERSION", "METHOD", "fused_distances", "quick_search"]
+
+METHOD = "dtw-fused"
+"""The method answered (:data:`quatmotion.retrieval.methods.DEFAULT_METHOD`; a test checks)."""
+RADIUS = 8
+""":data:`quatmotion.retrieval.methods.FUSED_RADIUS` (a test checks)."""
+FORMAT_NAME = "quatmotion-retrieval-index"
+INDEX_VERSION = 2
+"""The index format answered (:data:`quatmotion.retrieval.index.FORMAT`; a test checks)."""
+_FEATURE_PARAMETERS = {
+    "feature_fps": feat.FEATURE_FPS,
+    "height_cm": feat.HEIGHT_CM,
+    "horizon_s": feat.HORIZON_S,
+    "yaw_radius_cm": feat.YAW_RADIUS_CM,
+    "dictionary_atoms": feat.DICTIONARY_ATOMS,
+    "dictionary_sparsity": feat.DICTIONARY_SPARSITY,
+    "dictionary_max_fps": feat.DICTIONARY_MAX_FPS,
+    "dictionary_max_iter": feat.DICTIONARY_MAX_ITER,
+}
+_SUFFIXES = (".amc", ".bvh", ".glb", ".gltf")
+_NPY_HEADER = re.compile(
+    r"\{'descr': '([<>|][a-z]\d+)', 'fortran_order': False, 'shape': \(([\d, ]*)\), \}"
+)
+_INF32 = np.float32(1e30)
+
+
+def fused_distances(
+    query: NDArray[np.float32], streams: list[NDArray[np.float32]], radius: int = RADIUS
+) -> NDArray[np.float64]:
+    """Banded DTW (``dtw_band32``'s) of ``query`` ``(n, D)`` float32 to every clip of
+    ``streams`` (each ``(m_c, D)`` float32), without abandoning: ``(C,)`` float64."""
+    C, n = len(streams), query.shape[0]
+    if C == 0:
+        return np.zeros(0)
+    m = np.array([len(s) for s in streams], dtype=np.int64)
+    start = np.concatenate(([0], np.cumsum(m)[:-1]))
+    frames = np.concatenate(streams).astype(np.float64)
+    q = query.astype(np.float64)
+    # every frame cost at once, in float64 (the expanded square loses nothing at float32)
+    sq = (q * q).sum(1)[:, None] + (frames * frames).sum(1)[None, :] - 2.0 * (q @ frames.T)
+    cost_all = np.sqrt(np.maximum(sq, 0.0)).astype(np.float32)  # (n, sum m)
+    M = int(m.max())
+    slope = (m - 1) / max(n - 1, 1)
+    r = np.maximum(float(radius), 0.5 * slope + 1.0)
+    clips = np.arange(C)
+    prev = np.full((C, M + 2), _INF32, dtype=np.float32)
+    prev[:, 0] = 0.0
+    cur = np.empty_like(prev)
+    for i in range(1, n + 1):
+        centre = (i - 1) * slope + 1
+        lo = np.maximum(1, np.floor(centre - r).astype(np.int64))
+        hi = np.minimum(m, np.ceil(centre + r).astype(np.int64))
+        width = int((hi - lo).max()) + 1
+        j = lo[:, None] + np.arange(width)[None, :]  # (C, width)
+        inside = j <= hi[:, None]
+        j = np.where(inside, j, M + 1)  # cells past a clip's band: a column kept at inf
+        cost = cost_all[i - 1, np.minimum(start[:, None] + j - 1, len(frames) - 1)]
+        step = np.minimum(prev[clips[:, None], j - 1], prev[clips[:, None], j])
+        step[~inside] = _INF32
+        cur.fill(_INF32)
+        left = np.full(C, _INF32, dtype=np.float32)  # cur[lo - 1]
+        for t in range(width):
+            left = cost[:, t] + np.minimum(step[:, t], left)
+            cur[clips, j[:, t]] = left
+        cur[:, M + 1] = _INF32
+        prev, cur = cur, prev
+    return prev[clips, m].astype(np.float64) / (n + m)
+
+
+def _array(data: bytes) -> np.ndarray:
+    """A stored feature array (``.npy`` bytes, as ``index._from_blob`` reads them): the header
+    read by a pattern (``np.load`` parses it with ``ast``, 0.1 ms an array), else ``np.load``."""
+    if data[:8] == b"\x93NUMPY\x01\x00":
+        size = int.from_bytes(data[8:10], "little")
+        found = _NPY_HEADER.match(data[10 : 10 + size].decode("latin1"))
+        if found is not None:
+            shape = tuple(int(x) for x in found.group(2).split(",") if x.strip())
+            out = np.frombuffer(data, dtype=found.group(1), offset=10 + size)
+            if out.size == int(np.prod(shape)):
+                return out.reshape(shape)
+    return np.load(io.BytesIO(data), allow_pickle=False)
+
+
+def _bare(text: str) -> tuple[str, ...]:
+    parts = PurePath(text).parts
+    last = parts[-1].lower() if parts else ""
+    suffix = next((s for s in _SUFFIXES if last.endswith(s)), None)
+    if suffix is not None:
+        parts = (*parts[:-1], parts[-1][: -len(suffix)])
+    return parts
+
+
+def _ends(name: tuple[str, ...], query: tuple[str, ...]) -> bool:
+    return 0 < len(query) <= len(name) and name[-len(query) :] == query
+
+
+def _match(query: str, names: list[str]) -> int | None:
+    """Rules 1-3 of ``match_clip``: the one clip the first rule with matches finds; None for
+    none or several (the full path says which)."""
+    paths = [PurePath(name).parts for name in names]
+    asked, asked_bare = PurePath(query).parts, _bare(query)
+    rules = (
+        lambda i: names[i] == query,
+        lambda i: _ends(paths[i], asked),
+        lambda i: _ends(_bare(names[i]), asked_bare),
+    )
+    for rule in rules:
+        matches = [i for i in range(len(names)) if rule(i)]
+        if matches:
+            return matches[0] if len(matches) == 1 else None
+    return None
+
+
+def _locate(stored: str | None, base: Path) -> str:
+    """``ClipRef.locate``'s motion file, else the stored path (``ClipRow.path``)."""
+    if not stored:
+        return ""
+    path = Path(stored)
+    if path.is_file():
+        return str(path)
+    parts = path.parts[1:] if path.is_absolute() else path.parts
+    for k in range(len(parts)):
+        candidate = Path(base, *parts[k:])
+        if candidate.is_file():
+            return str(candidate)
+    return stored
+
+
+def quick_search(index: str | Path, query: str, k: int = 20) -> list[dict[str, object]] | None:
+    """The default method's ``k`` nearest clips to the indexed clip ``query`` names, as
+    :meth:`SearchResult.as_dict <quatmotion.retrieval.search.SearchResult.as_dict>` documents,
+    or ``None`` when this path does not answer (module conventions)."""
+    path = Path(index)
+    if k < 1 or not path.is_file():
+        return None
+    try:
+        db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
+    except sqlite3.Error:
+        return None
+    try:
+        return _search(db, path, query, k)
+    except (sqlite3.Error, ValueError, KeyError, TypeError, OSError):
+        return None
+    finally:
+        db.close()
+
+
+def _search(
+    db: sqlite3.Connection, path: Path, query: str, k: int
+) -> list[dict[str, object]] | None:
+    meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
+    if (
+        meta.get("format") != FORMAT_NAME
+        or str(meta.get("version")) != str(INDEX_VERSION)
+        or json.loads(meta.get("features", "{}")) != _FEATURE_PARAMETERS
+    ):
+        return None
+    if db.execute("PRAGMA quick_check").fetchone()[0] != "ok":
+        return None
+    rows = db.execute("SELECT id, name, path, label FROM clips ORDER BY id").fetchall()
+    arrays: dict[int, dict[str, np.ndarray]] = {int(r[0]): {} for r in rows}
+    for clip, key, data in db.execute(
+        "SELECT clip, key, data FROM features WHERE key IN ('frames', 'path')"
+    ):
+        arrays[int(clip)][key] = _array(data)
+    rows = [r for r in rows if len(arrays[int(r[0])]) == 2]
+    if not rows:
+        return None  # an index without the default's features: the full path chooses
+    blob = db.execute("SELECT data FROM blobs WHERE key = ?", (MODEL_KEY,)).fetchone()
+    if blob is None:
+        return None
+    try:
+        model = FusedModel.from_bytes(bytes(blob[0]))
+    except ValueError:  # damaged or mismatched: the full path refits
+        return None
+    own = _match(query, [str(r[1]) for r in rows])
+    if own is None:
+        return None
+    streams = [model.stream(arrays[int(r[0])]["frames"], arrays[int(r[0])]["path"]) for r in rows]
+    if not all(len(s) and np.isfinite(s).all() for s in streams):
+        return None
+    d = fused_distances(streams[own], streams)
+    ids = np.flatnonzero(np.arange(len(rows)) != own)
+    order = ids[np.argsort(d[ids], kind="stable")[:k]]
+    base = path.resolve().parent
+    return [
+        {
+            "rank": rank + 1,
+            "clip": str(rows[c][1]),
+            "path": _locate(rows[c][2], base),
+            "label": str(rows[c][3]),
+            "distance": float(d[c]) if np.isfinite(d[c]) else None,
+        }
+        for rank, c in enumerate(order)
+    ]
