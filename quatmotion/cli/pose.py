@@ -154,6 +154,8 @@ def add_command(
     ],
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
+    skeleton: SkeletonOption = None,
+    units: UnitsOption = None,
 ) -> None:
     """Add clips to a pose library with its stored settings and distance (nothing learned
     again); clips it already holds are skipped. Exits with code 1 if a clip failed."""
@@ -163,13 +165,17 @@ def add_command(
     with user_errors():
         if not library_path.is_file():
             raise CliInputError(f"{library_path}: no pose library there (pose index makes one)")
+        check_units(units)
+        if skeleton is not None and not skeleton.exists():
+            raise CliInputError(f"{skeleton}: no such skeleton file or folder")
         where = resolve_scheduler(scheduler, workers=workers)
         from quatmotion.cli.warmup import ensure_kernels
 
         ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
         with progress_bar(error_console) as bar:
             report = PoseLibrary.add(
-                library_path, paths, runner=where, workers=workers,
+                library_path, paths, skeleton=skeleton, units=units, runner=where,
+                workers=workers,
                 progress=_StageBars(bar), on_doubt=doubt_reporter(bar),
             )  # fmt: skip
     library = report.details["library"]

@@ -401,6 +401,8 @@ class PoseLibrary:
         path: str | os.PathLike[str],
         sources: Sequence[Any],
         *,
+        skeleton: str | os.PathLike[str] | None = None,
+        units: str | float | None = None,
         runner: Runner | str | Scheduler | None = None,
         workers: int | None = None,
         progress: Callable[[str, int, int], None] | None = None,
@@ -412,7 +414,8 @@ class PoseLibrary:
         graph; a clip whose content the library already holds is skipped; a new clip whose
         name a stored clip of another file has is named by the collection's rule
         (:func:`~quatmotion.collection.unique_names` over the two paths). The file is
-        rewritten whole (temporary file, then rename).
+        rewritten whole (temporary file, then rename). ``skeleton`` and ``units``
+        replace the stored :class:`~quatmotion.collection.ReadSettings`' for the new clips.
 
         Raises
         ------
@@ -429,6 +432,11 @@ class PoseLibrary:
         if settings is None:
             raise ValueError(f"{path}: a version-{library.version} library stores no settings; "
                              "build it again to add clips")  # fmt: skip
+        given = {"skeleton": None if skeleton is None else os.fspath(skeleton), "units": units}
+        given = {k: v for k, v in given.items() if v is not None}
+        if given:  # how the new clips are read, over the stored reading settings
+            read = dataclasses.replace(settings.read, **given)
+            settings = dataclasses.replace(settings, read=read)
         report = BuildReport(path=path, settings=settings, details={"resumed": True})
         report.details["clips_before"] = len(library.clip_names)
         errors: list[tuple[str, str]] = []
