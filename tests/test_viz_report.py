@@ -264,7 +264,7 @@ def test_a_benchmark_describes_its_headline_figures_and_the_report_reads_them(tm
     assert table is not None
     assert table.rows == (
         ("codec overhead", "8.3%", "", "lower"),
-        ("codec time", report._fmt(4.25), "s", "lower"),
+        ("codec time", report.format_value(4.25), "s", "lower"),
         ("a figure this run lacks", "missing", "s", "lower"),
     )
     path = tmp_path / "made_up.json"

@@ -8,20 +8,13 @@ the layout of a result and the tables read from it live in one module.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
+from quatmotion.viz.report import format_value as fmt
+from quatmotion.viz.report import value_at as get
+
 __all__ = ["fmt", "get", "table"]
-
-
-def get(data: Any, *keys: str, default: Any = None) -> Any:
-    """``data[k0][k1]...``, or ``default`` where a key is missing or a level is no mapping."""
-    node = data
-    for key in keys:
-        if not isinstance(node, Mapping) or key not in node:
-            return default
-        node = node[key]
-    return node
 
 
 def table(
@@ -33,10 +26,3 @@ def table(
         if len(row) != len(columns):
             raise ValueError(f"{title}: row {number} has {len(row)} cells, not {len(columns)}")
     return {"title": title, "columns": list(columns), "rows": cells, "note": note}
-
-
-def fmt(value: Any) -> str:
-    """A number as a table note shows it (four significant digits)."""
-    if isinstance(value, float):
-        return f"{value:.4g}"
-    return str(value)

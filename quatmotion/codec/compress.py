@@ -1169,22 +1169,11 @@ def add_to_library(
 
 
 def _name_apart(ref: ClipRef, old: Sequence[ClipRef], path: Path) -> ClipRef:
-    """A new clip's reference named apart from the file's clips: where its name is taken by
-    another file's clip, the collection's rule (:func:`~quatmotion.collection.unique_names`)
-    over the two paths names it; a clip given in memory with a taken name is an error."""
-    from dataclasses import replace
+    """A new clip's reference named apart from the file's clips (the collection's rule:
+    :func:`~quatmotion.collection.name_apart`)."""
+    from quatmotion.collection import name_apart
 
-    from quatmotion.collection import unique_names
-
-    names = {r.name: r for r in old}
-    if ref.name not in names:
-        return ref
-    other = names[ref.name]
-    if ref.path is not None and other.path is not None and other.path != ref.path:
-        renamed = unique_names([Path(other.path), Path(ref.path)])[1]
-        if renamed not in names:
-            return replace(ref, name=renamed)
-    raise ValueError(f"{path}: already holds a clip named {ref.name!r}")
+    return name_apart(ref, old, path)
 
 
 def _with_ref(entry: ClipEntry, ref: ClipRef) -> ClipEntry:

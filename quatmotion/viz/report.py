@@ -130,8 +130,8 @@ def _list_summary(values: Sequence[Any]) -> str | None:
             return f"{len(values)} values, none finite"
         median = finite[len(finite) // 2]
         return (
-            f"{len(values)} values: min {_fmt(finite[0])}, median {_fmt(median)}, "
-            f"max {_fmt(finite[-1])}"
+            f"{len(values)} values: min {format_value(finite[0])}, median {format_value(median)}, "
+            f"max {format_value(finite[-1])}"
         )
     return None
 
@@ -157,7 +157,7 @@ def generic_tables(
             scalars.append((key, value))
         elif isinstance(value, list) and all(_is_scalar(v) for v in value):
             if len(value) <= 12:
-                scalars.append((key, ", ".join(_fmt(v) for v in value) or "(empty)"))
+                scalars.append((key, ", ".join(format_value(v) for v in value) or "(empty)"))
             else:
                 scalars.append((key, _list_summary(value) or f"{len(value)} values"))
         else:
@@ -186,7 +186,8 @@ def generic_tables(
 # ---------------------------------------------------------------- what a benchmark publishes
 
 
-def _get(data: Any, *keys: str, default: Any = None) -> Any:
+def value_at(data: Any, *keys: str, default: Any = None) -> Any:
+    """``data[k0][k1]...``, or ``default`` where a key is missing or a level is no mapping."""
     node = data
     for key in keys:
         if not isinstance(node, Mapping) or key not in node:
@@ -224,9 +225,9 @@ def headline_table(data: Mapping[str, Any]) -> Table | None:
             raise ValueError(
                 f"headlines[{number}] ({entry['name']}): better must be one of {_BETTER}"
             )
-        value = _get(data, *path)
+        value = value_at(data, *path)
         if isinstance(value, int | float) and not isinstance(value, bool):
-            shown = f"{value:.1%}" if entry.get("format") == "percent" else _fmt(value)
+            shown = f"{value:.1%}" if entry.get("format") == "percent" else format_value(value)
         else:
             shown = "missing" if value is None else str(value)
         rows.append((entry["name"], shown, str(entry.get("unit", "")), better))
@@ -270,7 +271,9 @@ def published_tables(data: Mapping[str, Any]) -> list[Table]:
 # ---------------------------------------------------------------------------- HTML
 
 
-def _fmt(value: Any) -> str:
+def format_value(value: Any) -> str:
+    """A value as the report prints it (numbers to four significant digits, thousands
+    separated, missing as a dash)."""
     if isinstance(value, bool) or value is None:
         return str(value).lower() if value is not None else "\u2014"
     if isinstance(value, int):
@@ -300,7 +303,7 @@ def _table_html(table: Table) -> str:
 def _cell(value: Any, column: int) -> str:
     numeric = isinstance(value, int | float) and not isinstance(value, bool)
     cls = ' class="num"' if numeric else ""
-    return f"<td{cls}>{html.escape(_fmt(value))}</td>"
+    return f"<td{cls}>{html.escape(format_value(value))}</td>"
 
 
 def _figure_html(path: Path) -> str:
@@ -326,7 +329,9 @@ def _provenance_html(data: Mapping[str, Any]) -> str:
         (
             "machine",
             html.escape(
-                " \u00b7 ".join(f"{k}: {_fmt(v)}" for k, v in machine.items() if _is_scalar(v))
+                " \u00b7 ".join(
+                    f"{k}: {format_value(v)}" for k, v in machine.items() if _is_scalar(v)
+                )
             )
             if isinstance(machine, Mapping)
             else missing,
@@ -334,7 +339,7 @@ def _provenance_html(data: Mapping[str, Any]) -> str:
     ]
     for key in ("started", "quick", "seed", "data", "data_root"):
         if key in data and _is_scalar(data[key]):
-            rows.append((key, html.escape(_fmt(data[key]))))
+            rows.append((key, html.escape(format_value(data[key]))))
     body = "".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in rows)
     return f'<table class="provenance">{body}</table>'
 
