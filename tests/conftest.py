@@ -285,3 +285,18 @@ def v030(tmp_path_factory) -> Path:
         motion = generate_clip(kind, seed, n_frames=40, fps=30.0)
         write_motion(motion, clips / sub / f"{name}.bvh")
     return folder
+
+
+@pytest.fixture(scope="module")
+def dask_cluster() -> Iterator[str]:
+    """A 2-process Dask cluster on 127.0.0.1 (free ports, no dashboard), closed afterwards."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        scheduler_port=0,
+        dashboard_address=None,
+    ) as cluster:
+        yield cluster.scheduler_address

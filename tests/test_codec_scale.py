@@ -5,7 +5,6 @@ bytes."""
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -34,20 +33,6 @@ def clips(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def inline_bytes(clips: Path) -> bytes:
     return Archive.build([clips], None, SETTINGS, runner=Runner.inline()).details["data"]
-
-
-@pytest.fixture(scope="module")
-def dask_cluster() -> Iterator[str]:
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(
-        n_workers=2,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        scheduler_port=0,
-        dashboard_address=None,
-    ) as cluster:
-        yield cluster.scheduler_address
 
 
 def _layouts(data: bytes) -> int:

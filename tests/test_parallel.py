@@ -17,7 +17,6 @@ import sys
 import textwrap
 import threading
 import time
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -100,21 +99,6 @@ def results_bytes(results: list) -> list[bytes]:
     # Each result pickled on its own: a pickled *list* also encodes which of its arrays share a
     # dtype object, which differs between arrays made here and arrays received from workers.
     return [pickle.dumps(r) for r in results]
-
-
-@pytest.fixture(scope="module")
-def dask_cluster() -> Iterator[str]:
-    """A 2-process Dask cluster on 127.0.0.1 (free ports, no dashboard), closed afterwards."""
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(
-        n_workers=2,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        scheduler_port=0,
-        dashboard_address=None,
-    ) as cluster:
-        yield cluster.scheduler_address
 
 
 # --- scheduler names -----------------------------------------------------------------------

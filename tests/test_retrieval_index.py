@@ -90,6 +90,22 @@ def test_bad_file_is_reported_and_skipped(clip_folder, tmp_path):
         assert [c.name for c in idx.clips()] == ["ok"]
 
 
+def _kill_once_rows(proc: subprocess.Popen, out: Path, rows: int, timeout: float, kill) -> None:
+    """Wait until the index at ``out`` holds ``rows`` committed clips, then ``kill`` the build."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and proc.poll() is None:
+        try:
+            with sqlite3.connect(f"{out.resolve().as_uri()}?mode=ro", uri=True) as db:
+                count = db.execute("SELECT count(*) FROM clips").fetchone()[0]
+        except sqlite3.DatabaseError:
+            count = 0
+        if count >= rows:
+            kill()
+            break
+        time.sleep(0.05)
+    proc.wait()
+
+
 def test_add_after_a_killed_build_completes_it_once(tmp_path):
     folder = tmp_path / "many"
     folder.mkdir()
@@ -101,19 +117,7 @@ def test_add_after_a_killed_build_completes_it_once(tmp_path):
         f"build_index([{str(folder)!r}], {str(out)!r}, kinds=('motion',), workers=1, batch=1)\n"
     )
     proc = subprocess.Popen([sys.executable, "-c", code])
-    deadline = time.monotonic() + 120
-    count = 0
-    while time.monotonic() < deadline and proc.poll() is None:
-        try:
-            with sqlite3.connect(f"{out.resolve().as_uri()}?mode=ro", uri=True) as db:
-                count = db.execute("SELECT count(*) FROM clips").fetchone()[0]
-        except sqlite3.DatabaseError:
-            count = 0
-        if count >= 3:
-            os.kill(proc.pid, signal.SIGKILL)
-            break
-        time.sleep(0.05)
-    proc.wait()
+    _kill_once_rows(proc, out, 3, 120, lambda: os.kill(proc.pid, signal.SIGKILL))
     with ClipIndex.open(out) as idx:  # readable after the kill
         partial = len(idx)
     assert partial >= 3
@@ -142,19 +146,7 @@ def test_a_killed_index_build_command_resumes_every_clip_once_with_the_labels_gi
     code = f"import sys\nfrom quatmotion.cli import main\nsys.argv = {argv!r}\nmain()\n"
     # its own session: the kill takes the command and any worker it started
     proc = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
-    deadline = time.monotonic() + 300
-    count = 0
-    while time.monotonic() < deadline and proc.poll() is None:
-        try:
-            with sqlite3.connect(f"{out.resolve().as_uri()}?mode=ro", uri=True) as db:
-                count = db.execute("SELECT count(*) FROM clips").fetchone()[0]
-        except sqlite3.DatabaseError:
-            count = 0
-        if count >= 1:
-            os.killpg(proc.pid, signal.SIGKILL)
-            break
-        time.sleep(0.05)
-    proc.wait()
+    _kill_once_rows(proc, out, 1, 300, lambda: os.killpg(proc.pid, signal.SIGKILL))
     with ClipIndex.open(out) as idx:  # readable after the kill
         partial = len(idx)
     assert 1 <= partial < total
