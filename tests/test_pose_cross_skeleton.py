@@ -58,7 +58,7 @@ def _mean_nearest(library, query: PoseClip, rows: np.ndarray) -> dict[str, float
     """For each kind of the library: the distance from each query pose to its nearest pose of
     that kind, averaged over the query poses."""
     lib, kinds, vectors = library
-    d = cdist(lib.project(query.poses[rows].gpd), vectors)
+    d = cdist(lib.project_poses(query.poses[rows]), vectors)
     return {k: float(d[:, kinds == k].min(axis=1).mean()) for k in np.unique(kinds)}
 
 

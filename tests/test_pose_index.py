@@ -254,7 +254,7 @@ def test_library_file_checks_its_format_version(tmp_path: pathlib.Path) -> None:
 
 
 @pytest.mark.parametrize("n_clips", [1, 3])
-def test_default_metric_is_gpd_logit_with_a_diagonal_projection(n_clips: int) -> None:
+def test_default_metric_is_gpdr_logit_with_a_diagonal_projection(n_clips: int) -> None:
     from quatmotion.pose.data import PoseClip
     from quatmotion.pose.library import DEFAULT_METRIC
     from quatmotion.synthetic import generate_clip
@@ -264,13 +264,15 @@ def test_default_metric_is_gpd_logit_with_a_diagonal_projection(n_clips: int) ->
         for k in ("walk", "squat", "wave")[:n_clips]
     ]
     library = PoseLibrary.build(clips, n_unlabeled=200, n_pairs=60)
-    assert DEFAULT_METRIC == "GPD+LOGIT" and library.meta["metric"] == "GPD+LOGIT"
+    assert DEFAULT_METRIC == "GPDR+LOGIT" and library.metric == "GPDR+LOGIT"
     assert library.meta["n_negative_pairs"] > 0
     W = library.model["W"]
-    # one non-negative weight per kept GPD dimension: each column has a single positive entry
+    # GPD and the root block's copies: 1683 + 2 * 20 rows
+    assert W.shape[0] == 1683 + 40 == library.features(clips[0].poses[:1]).shape[1]
+    # one non-negative weight per kept dimension: each column has a single positive entry
     assert np.all(W >= 0) and np.all(np.count_nonzero(W, axis=0) == 1)
     row = 48 // clips[-1].step  # frame 48 of the file
-    ids, dist = library.search(library.project(clips[-1].poses.gpd[row : row + 1]), k=1)
+    ids, dist = library.search(library.project_poses(clips[-1].poses[row : row + 1]), k=1)
     assert library.frame_of[ids[0, 0]] == 48 and dist[0, 0] < 1e-4
     assert library.clip_of[ids[0, 0]] == n_clips - 1
 
@@ -311,7 +313,7 @@ def test_a_query_far_outside_the_library_range_does_not_swamp_its_pose() -> None
     assert np.mean(ids[:, 0] == np.arange(len(raw))) > 0.8
 
 
-@pytest.mark.parametrize("metric_name", ["GPD+LOGIT", "GPD+LMS", "GPD+RDSR"])
+@pytest.mark.parametrize("metric_name", ["GPDR+LOGIT", "GPD+LOGIT", "GPD+LMS", "GPD+RDSR"])
 def test_pose_index_library_and_the_benchmark_method_give_the_same_distances(
     tmp_path: pathlib.Path, monkeypatch: pytest.MonkeyPatch, metric_name: str
 ) -> None:
@@ -358,7 +360,7 @@ def test_pose_index_library_and_the_benchmark_method_give_the_same_distances(
     method.fit(poses[unl], poses[pairs[:, 0]], poses[pairs[:, 1]], similar)
     rng = np.random.default_rng(3)
     a, b = rng.integers(0, len(poses), 200), rng.integers(0, len(poses), 200)
-    gpd = poses.gpd
+    gpd = lib.features(poses)  # the GPD, with the root block for GPDR
     ours = np.linalg.norm(lib.project(gpd[a]) - lib.project(gpd[b]), axis=1)
     theirs = method.distances(poses[a], poses[b])
     np.testing.assert_allclose(theirs, ours, rtol=1e-6, atol=1e-9)
@@ -368,11 +370,11 @@ def test_pose_index_library_and_the_benchmark_method_give_the_same_distances(
         generate_clip("kick", 7, n_frames=90), fps=lib.meta["fps"], height=lib.meta["height_cm"]
     ).poses
     q = rng.integers(0, len(other), 200)
-    ours = np.linalg.norm(lib.project(other.gpd[q]) - lib.project(gpd[b]), axis=1)
+    ours = np.linalg.norm(lib.project_poses(other[q]) - lib.project(gpd[b]), axis=1)
     np.testing.assert_allclose(method.distances(other[q], poses[b]), ours, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(
         method.pairwise(other[q[:5]], poses[b[:7]]),
-        cdist(lib.project(other.gpd[q[:5]]), lib.project(gpd[b[:7]])), rtol=1e-6, atol=1e-9,
+        cdist(lib.project_poses(other[q[:5]]), lib.project(gpd[b[:7]])), rtol=1e-6, atol=1e-9,
     )  # fmt: skip
     # and the index holds exactly those vectors: every pose finds itself at distance ~0
     ids, dist = lib.search(lib.project(gpd[a[:20]]), k=1)

@@ -49,7 +49,7 @@ def test_streamed_build_is_the_same_inline_and_on_two_workers() -> None:
     np.testing.assert_array_equal(np.bincount(inline.clip_of), lengths)
     # every pose finds itself: the vectors went in under their own catalogue numbers
     clip = LOAD(SPECS[4])
-    query = inline.project(clip.poses.gpd[10:11])
+    query = inline.project_poses(clip.poses[10:11])
     ids, dist = inline.search(query, 1)
     assert inline.clip_of[ids[0, 0]] == 4 and inline.frame_of[ids[0, 0]] == 10
     assert dist[0, 0] < 1e-3

@@ -347,10 +347,10 @@ def _probe(n_poses: int, seed: int, workers: int | None) -> dict[str, Any]:
     # hnswlib's level-0 record per item: 2M links (4 B each) and a count, the vector, a label
     per_item = (2 * index.M * 4 + 4) + index.dim_ * 4 + 8
     graph_mb = index.n_items_ * per_item / 2**20
-    # queries: poses of a clip not in the library, the GPD projected inside the timing
+    # queries: poses of a clip not in the library, its features projected inside the timing
     rng = np.random.default_rng(seed + 1)
     query_clip = generated_pose_clip(("walk", 10**9 + seed, 240), fps=FPS, height=HEIGHT_CM)
-    gpd = query_clip.poses.gpd
+    gpd = library.features(query_clip.poses)
     index.n_threads = 1
     latencies = []
     for r in rng.integers(0, len(gpd), 500):

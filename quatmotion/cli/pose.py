@@ -79,7 +79,8 @@ def index_command(
     metric: Annotated[
         str,
         typer.Option(
-            help="Pose distance to learn: GPD+LOGIT, GPD+LMS or GPD+RDSR (docs/performance.md)."
+            help="Pose distance to learn: GPDR+LOGIT or GPDR+LMS (the GPD with the root's speed "
+            "and turn rate), GPD+LOGIT, GPD+LMS or GPD+RDSR (docs/performance.md)."
         ),
     ] = DEFAULT_METRIC,
     rank: Annotated[int, typer.Option(help="Dimensions of RDSR's projection W.")] = 50,

@@ -10,6 +10,11 @@ Conventions
   carries instead its world vertical motion ``(0, dh/dt, 0)`` and ``(0, d2h/dt2, 0)`` (the GPD
   paper keeps only the Hip's height of the root's absolute state, Eq. 1).
 - ``hip_height`` (cm) is the Hip's world height; zero when unknown.
+- ``root_motion`` is what the body frame removes of the root's travel, per pose: the Hip's
+  horizontal world velocity expressed in the body frame (``x`` left, ``z`` forward, cm/s) and
+  the facing's yaw rate (rad/s, positive turning left, about +Y); zeros when unknown (poses
+  built from body-local positions alone). Derivatives within each clip, as above. The GPD
+  paper's descriptor has none of it: a stooped walk and a stooped stand look alike there.
 - Joint orientations (for the JOD family of baselines) are derived from positions by
   :func:`joint_orientations`: positions alone cannot give the twist about a bone, so each joint
   gets the minimal (swing) rotation from its T-pose bone direction to its current one in its
@@ -32,7 +37,7 @@ from quatmotion.pose import skeleton16
 from quatmotion.pose.gpd import gpd_features
 from quatmotion.pose.skeleton16 import JOINTS_16, PARENTS_16
 
-__all__ = ["PoseClip", "PoseData", "angular_velocities", "joint_orientations"]
+__all__ = ["PoseClip", "PoseData", "angular_velocities", "joint_orientations", "root_motion"]
 
 _N_JOINTS = len(JOINTS_16)
 _J = {name: k for k, name in enumerate(JOINTS_16)}
@@ -166,6 +171,30 @@ def _derivative(x: NDArray[np.float64], fps: float) -> NDArray[np.float64]:
     return np.gradient(x, 1.0 / fps, axis=0)
 
 
+def root_motion(world: ArrayLike, fps: float) -> NDArray[np.float64]:
+    """The root's travel that the body frame removes: ``(vx, vz, yaw rate)`` per frame.
+
+    Parameters
+    ----------
+    world : array_like, shape (T, 16, 3)
+        World positions of one clip, cm, Y up, :data:`JOINTS_16` order.
+    fps : float
+        Its frame rate.
+
+    Returns
+    -------
+    ndarray, shape (T, 3)
+        The Hip's horizontal velocity in the body frame (``x`` left, ``z`` forward, cm/s) and
+        the yaw rate of the facing (rad/s, unwrapped so a turn through +-pi is no jump).
+    """
+    w = _check_positions(world, "world")
+    yaw = np.unwrap(skeleton16.facing_yaw(w))
+    velocity = _derivative(w[:, 0], fps)
+    velocity[:, 1] = 0.0
+    body = skeleton16.rotate_about_y(velocity[:, None, :], -yaw)[:, 0]
+    return np.stack([body[:, 0], body[:, 2], _derivative(yaw, fps)], axis=1)
+
+
 @dataclass(frozen=True, eq=False)
 class PoseData:
     """A set of poses: body-local 16-joint positions and their time derivatives.
@@ -180,6 +209,9 @@ class PoseData:
         cm/s^2; the Hip row is ``(0, vertical world acceleration, 0)``.
     hip_height : ndarray, shape (N,), optional
         World height of the Hip, cm; ``None`` stores zeros.
+    root_motion : ndarray, shape (N, 3), optional
+        ``(vx, vz, yaw rate)``: the Hip's horizontal velocity in the body frame (cm/s) and the
+        facing's yaw rate (rad/s); ``None`` stores zeros (module conventions).
 
     Notes
     -----
@@ -193,6 +225,7 @@ class PoseData:
     velocities: NDArray[np.float64]
     accelerations: NDArray[np.float64]
     hip_height: NDArray[np.float64] | None = None
+    root_motion: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         pos = _check_positions(self.positions)
@@ -212,11 +245,20 @@ class PoseData:
                 raise ValueError(f"hip_height has shape {height.shape}, expected ({n},)")
             if not np.all(np.isfinite(height)):
                 raise ValueError("hip_height must be finite")
+        if self.root_motion is None:
+            root = np.zeros((n, 3))
+        else:
+            root = np.asarray(self.root_motion, dtype=np.float64)
+            if root.shape != (n, 3):
+                raise ValueError(f"root_motion has shape {root.shape}, expected ({n}, 3)")
+            if not np.all(np.isfinite(root)):
+                raise ValueError("root_motion must be finite")
         for name, value in (
             ("positions", pos),
             ("velocities", vel),
             ("accelerations", acc),
             ("hip_height", height),
+            ("root_motion", root),
         ):
             value = np.array(value, dtype=np.float64)  # own copy, so freezing is safe
             value.setflags(write=False)
@@ -230,6 +272,7 @@ class PoseData:
         fps: float,
         *,
         hip_height: ArrayLike | None = None,
+        world: ArrayLike | None = None,
     ) -> PoseData:
         """Poses of one clip, with derivatives taken within the clip.
 
@@ -244,6 +287,9 @@ class PoseData:
         hip_height : array_like, shape (T,), optional
             World height of the Hip, cm. Default: the Hip row's Y. Its time derivatives fill
             the Hip rows of the velocities and accelerations.
+        world : array_like, shape (T, 16, 3), optional
+            The same poses in world coordinates (cm, Y up), for ``root_motion``: the Hip's
+            travel over the floor and the facing's turn. ``None``: zeros.
 
         Returns
         -------
@@ -269,7 +315,10 @@ class PoseData:
         acc[:, 0] = 0.0
         vel[:, 0, 1] = height_vel
         acc[:, 0, 1] = height_acc
-        return cls(pos, vel, acc, height)
+        root = None if world is None else root_motion(world, fps)
+        if root is not None and root.shape[0] != n:
+            raise ValueError(f"world has {root.shape[0]} frames, local_positions {n}")
+        return cls(pos, vel, acc, height, root)
 
     @classmethod
     def concat(cls, parts: Sequence[PoseData]) -> PoseData:
@@ -283,6 +332,7 @@ class PoseData:
             np.concatenate([p.velocities for p in parts]),
             np.concatenate([p.accelerations for p in parts]),
             np.concatenate([p.hip_height for p in parts]),
+            np.concatenate([p.root_motion for p in parts]),
         )
 
     # ----------------------------------------------------------------------------------------
@@ -297,6 +347,7 @@ class PoseData:
             self.velocities[index],
             self.accelerations[index],
             self.hip_height[index],
+            self.root_motion[index],
         )
         cached = self.__dict__.get("gpd")
         if cached is not None:
@@ -413,7 +464,7 @@ class PoseClip:
             step=step,
             world=world,
             local=local,
-            poses=PoseData.from_clip(local, motion.fps),
+            poses=PoseData.from_clip(local, motion.fps, world=world),
             height=height,
             file_frames=file_frames,
             skeleton_kind=skeleton16.skeleton_kind(motion.skeleton),
@@ -434,7 +485,7 @@ class PoseClip:
             step=self.step,
             world=world,
             local=local,
-            poses=PoseData.from_clip(local, self.fps),
+            poses=PoseData.from_clip(local, self.fps, world=world),
             height=self.height,
             file_frames=self.file_frames,
             skeleton_kind=self.skeleton_kind,

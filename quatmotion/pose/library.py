@@ -81,7 +81,7 @@ from quatmotion.parallel import Failure, Runner, Scheduler, imap_batch
 from quatmotion.pose import labels
 from quatmotion.pose.data import PoseClip, PoseData
 from quatmotion.pose.index import HNSWIndex
-from quatmotion.pose.methods import METHODS, project_features
+from quatmotion.pose.methods import METHODS, pose_features, project_features
 from quatmotion.pose.ranges import DEFAULT_METRIC, FPS_RANGE
 
 __all__ = [
@@ -113,7 +113,7 @@ _NOT_A_LIBRARY = (
 _MIN_TRANSITION_PAIRS = 10
 _FAR_APART_S = 1.0  # fallback dissimilar pairs: poses of one clip at least this far apart
 
-METRICS: tuple[str, ...] = ("GPD+LMS", "GPD+LOGIT", "GPD+RDSR")
+METRICS: tuple[str, ...] = ("GPDR+LOGIT", "GPDR+LMS", "GPD+LMS", "GPD+LOGIT", "GPD+RDSR")
 """The pose distances :meth:`PoseLibrary.build` can learn."""
 
 
@@ -470,7 +470,7 @@ class PoseLibrary:
             failed=failed, chunk_size=settings.chunk_size,
             batch={"workers": workers, "scheduler": scheduler},
             progress=None if progress is None else functools.partial(progress, "index"),
-            on_doubt=on_doubt,
+            on_doubt=on_doubt, metric=library.metric,
         )  # fmt: skip
         graph.close()
         if not catalogue.names:
@@ -563,7 +563,7 @@ class PoseLibrary:
             For ``"GPD+RDSR"``: unfitted, with ``fit(X_unlabeled, positive_pairs)`` and
             ``components_`` of shape ``(rank, D)`` after fitting; default
             ``RDSR(n_components=rank)``.
-        metric_name : {"GPD+LOGIT", "GPD+LMS", "GPD+RDSR"}
+        metric_name : {"GPDR+LOGIT", "GPDR+LMS", "GPD+LOGIT", "GPD+LMS", "GPD+RDSR"}
             The pose distance to learn (module docstring); ``rank`` applies to RDSR only.
         log : callable, optional
             Called with progress messages.
@@ -728,6 +728,7 @@ class PoseLibrary:
         catalogue = _index_pass(
             sources, kept, load, model, fps=fps, height=height, graph=graph, failed=failed,
             chunk_size=chunk_size, batch=batch, progress=stage("index"), on_doubt=on_doubt,
+            metric=meta["metric"],
         )  # fmt: skip
         index = graph.close()
         if not catalogue.names:
@@ -742,19 +743,41 @@ class PoseLibrary:
         """``motion`` prepared as the indexed clips were (same frame rate and body height)."""
         return PoseClip.from_motion(motion, fps=self.meta["fps"], height=self.meta.get("height_cm"))
 
-    def project(self, raw_gpd: ArrayLike) -> FloatArray:
-        """Map raw GPD features to the index space.
+    @property
+    def metric(self) -> str:
+        """The registered method (:data:`quatmotion.pose.methods.METHODS`) the library learned;
+        libraries of 0.3.0 that did not record it learned ``GPD+RDSR``."""
+        return str(self.meta.get("metric", "GPD+RDSR"))
+
+    def features(self, poses: PoseData) -> FloatArray:
+        """Raw feature rows of ``poses`` for the library's metric (GPD, or GPD with the root's
+        travel for ``GPDR+...``), shape (N, D): what :meth:`project` maps."""
+        return pose_features(poses, self.metric)
+
+    def project(self, raw: ArrayLike) -> FloatArray:
+        """Map raw feature rows (:meth:`features`) to the index space.
 
         Parameters
         ----------
-        raw_gpd : array_like, shape (N, D)
-            :func:`quatmotion.pose.gpd.gpd_features` output.
+        raw : array_like, shape (N, D)
+            :meth:`features` output (for a ``GPD+...`` library, the GPD itself).
 
         Returns
         -------
         ndarray, shape (N, r)
         """
-        return project_gpd(raw_gpd, self.model)
+        raw = np.asarray(raw, dtype=np.float64)
+        expected = np.shape(self.model["scale"])[0]
+        if raw.ndim != 2 or raw.shape[1] != expected:
+            raise ValueError(
+                f"feature rows have shape {raw.shape}, expected (N, {expected}) "
+                f"({self.metric}: rows of PoseLibrary.features)"
+            )
+        return project_gpd(raw, self.model)
+
+    def project_poses(self, poses: PoseData) -> FloatArray:
+        """``poses`` in the index space, shape (N, r): ``project(features(poses))``."""
+        return self.project(self.features(poses))
 
     def find(self, clip: str | int, frame: int) -> int:
         """Catalogue number of the indexed pose nearest in time to ``frame`` of ``clip``.
@@ -828,7 +851,7 @@ class PoseLibrary:
         frame number (the query prepared as the library was, :meth:`prepare_query`)."""
         clip = self.prepare_query(motion)
         row = min(max(int(round(frame / clip.step)), 0), len(clip) - 1)
-        return self.project(clip.poses[row : row + 1].gpd), row * clip.step
+        return self.project_poses(clip.poses[row : row + 1]), row * clip.step
 
     def nearest(
         self, query: ArrayLike, k: int = 10, *, exclude_clip: int | None = None
@@ -997,11 +1020,11 @@ def _learn_projection(
         raise ValueError("every clip must be prepared at the same frame rate and height")
     poses = PoseData.concat([c.poses for c in clips])
     t0 = time.perf_counter()
-    raw = poses.gpd
-    say(f"GPD of {len(poses)} poses: {time.perf_counter() - t0:.1f} s")
+    raw = pose_features(poses, metric_name)
+    say(f"{metric_name.split('+')[0]} of {len(poses)} poses: {time.perf_counter() - t0:.1f} s")
     # The metric is the registered method of that name (one implementation with the benchmark).
     options: dict[str, Any] = {"random_state": seed}
-    if metric_name == "GPD+RDSR":
+    if metric_name.endswith("+RDSR"):
         options["n_components"] = min(rank, raw.shape[1])
         if metric is not None:
             options = {"estimator": metric}
@@ -1149,10 +1172,11 @@ def _index_pass(
     batch: dict[str, Any],
     progress: Callable[[int, int], None] | None,
     on_doubt: Callable[[str, Doubt], None] | None,
+    metric: str,
 ) -> _Catalogue:
     """Step 2 of the build: every clip loaded and projected in a worker, its vectors inserted
     in input order; failures (and clips prepared at another rate) added to ``failed``."""
-    job = functools.partial(projected_clip, load=load, model=model)
+    job = functools.partial(projected_clip, load=load, model=model, metric=metric)
     if chunk_size is None:
         chunk_size = 8 if len(kept) >= 64 else 1
     catalogue = _Catalogue()
@@ -1186,8 +1210,9 @@ def _none_read(n_sources: int, failed: dict[int, Failure]) -> str:
 
 
 def project_gpd(raw_gpd: ArrayLike, model: dict[str, FloatArray]) -> FloatArray:
-    """Raw GPD features mapped to a library's index space:
-    ``unit(clip(scale * gpd + offset, 0, 1)) @ W``.
+    """Raw feature rows (the GPD, or :func:`~quatmotion.pose.methods.pose_features` of the
+    library's metric) mapped to a library's index space:
+    ``unit(clip(scale * x + offset, 0, 1)) @ W``.
 
     Parameters
     ----------
@@ -1236,10 +1261,13 @@ class ProjectedClip:
     doubts: tuple[Doubt, ...] = ()
 
 
-def projected_clip(source: Any, *, load: Callable[[Any], PoseClip], model: dict) -> ProjectedClip:
-    """Load one clip and project its poses (the per-clip job run by batch workers)."""
+def projected_clip(
+    source: Any, *, load: Callable[[Any], PoseClip], model: dict, metric: str = "GPD+LOGIT"
+) -> ProjectedClip:
+    """Load one clip and project its poses' ``metric`` features (the per-clip job run by batch
+    workers)."""
     clip = load(source)
-    vectors = project_gpd(clip.poses.gpd, model).astype(np.float32)
+    vectors = project_gpd(pose_features(clip.poses, metric), model).astype(np.float32)
     return ProjectedClip(
         clip.name, clip.fps, clip.step, clip.height, clip.file_frames, clip.skeleton_kind,
         vectors, clip.doubts,

@@ -2,7 +2,8 @@
 
 ``METHODS[name](**kwargs)`` builds an unfitted :class:`PoseMethod`:
 
-- ``"F+L"`` for every feature ``F`` in :data:`FEATURES` (``JO``, ``JC``, ``JRF``, ``GPD``) and
+- ``"F+L"`` for every feature ``F`` in :data:`FEATURES` (``JO``, ``JC``, ``JRF``, ``GPD``, and
+  ``GPDR``: the GPD with the root's speed and turn rate, :func:`gpd_root_features`) and
   learner ``L`` in :data:`LEARNERS` (``L2``, ``LMS``, ``Xing``, ``SDA``, ``RDSR``): Fig. 6's
   grid; and ``LOGIT`` (:class:`~quatmotion.pose.metric.PairLogistic`: a weighted L2 learned
   by logistic regression on good and bad pairs, issue 20). Features are normalised as the
@@ -55,10 +56,14 @@ __all__ = [
     "LEARNERS",
     "METHODS",
     "FeatureMetric",
+    "ROOT_COPIES",
     "FeetDistance",
     "JointDistanceMethod",
     "PoseMethod",
+    "gpd_root_features",
+    "pose_features",
     "project_features",
+    "root_features",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -87,13 +92,49 @@ class PoseMethod(Protocol):
         ...
 
 
+#: Copies of the root block in ``GPDR``. The min-max + unit-length scaling gives every
+#: dimension the same say, so two numbers beside GPD's 1683 would count for nothing; 20 copies
+#: (40 dimensions) weigh about as much as one of GPD's joint blocks (``J_c``: 46). The
+#: cross-skeleton benchmark moved little between 10 and 40 copies (docs/performance.md).
+ROOT_COPIES = 20
+
+
+def root_features(data: PoseData) -> FloatArray:
+    """The root block of ``GPDR``, shape (N, 2): the Hip's speed over the floor (cm/s) and the
+    facing's turn rate ``|yaw rate|`` (rad/s), from :attr:`PoseData.root_motion`.
+
+    Speeds, not signed velocities: a pose walking sideways or turning right is of the same kind
+    as its mirror image, and the body frame's heading is the least reliable part of a foreign
+    skeleton's mapping.
+    """
+    root = np.asarray(data.root_motion)
+    return np.stack((np.hypot(root[:, 0], root[:, 1]), np.abs(root[:, 2])), axis=1)
+
+
+def gpd_root_features(data: PoseData) -> FloatArray:
+    """``GPDR`` rows, shape (N, 1683 + 2 * ROOT_COPIES): the GPD and the root's travel the
+    paper's descriptor lacks (:func:`root_features`, repeated :data:`ROOT_COPIES` times)."""
+    return np.concatenate((np.asarray(data.gpd), np.tile(root_features(data), ROOT_COPIES)), axis=1)
+
+
 #: Feature extractors: PoseData -> (N, D) raw rows.
 FEATURES: dict[str, Callable[[PoseData], FloatArray]] = {
     "JO": joint_orientation_features,
     "JC": joint_coordinate_features,
     "JRF": joint_relative_features,
     "GPD": lambda data: np.asarray(data.gpd),
+    "GPDR": gpd_root_features,
 }
+
+
+def pose_features(data: PoseData, metric: str) -> FloatArray:
+    """Raw feature rows of ``data`` for the registered method ``metric`` (``"GPDR+LOGIT"``
+    reads :data:`FEATURES` ``["GPDR"]``), shape (N, D)."""
+    feature = metric.split("+", 1)[0]
+    if feature not in FEATURES:
+        raise ValueError(f"metric {metric!r} names no feature set of {sorted(FEATURES)}")
+    return np.asarray(FEATURES[feature](data), dtype=np.float64)
+
 
 LEARNERS: tuple[str, ...] = ("L2", "LMS", "Xing", "SDA", "RDSR", "LOGIT")
 

@@ -5,6 +5,6 @@ Numba kernels)."""
 FPS_RANGE = (1.0, 1000.0)
 """Frame rates (frames per second) the poses of a library can be sampled at."""
 
-DEFAULT_METRIC = "GPD+LOGIT"
+DEFAULT_METRIC = "GPDR+LOGIT"
 """The metric ``pose index`` learns when none is named (the registered method measured best;
 docs/performance.md)."""
