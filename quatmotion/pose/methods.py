@@ -15,6 +15,8 @@ One implementation: :class:`~quatmotion.pose.library.PoseLibrary` learns its met
 ``METHODS[name]`` (:meth:`FeatureMetric.fit_features`) and stores
 :attr:`FeatureMetric.projection_`; :func:`project_features` maps poses to the index space for
 both, so the library's distances and the benchmark's are the same numbers.
+- ``"PAIR-GBT"``: :class:`~quatmotion.pose.transition.TransitionClassifier`, no metric but a
+  classifier of pairs (the probability that a transition plays badly), for re-ranking.
 - ``"FEET"``: no learning, Euclidean distance of the two feet in the body frame (the baseline
   of the blended-transition labels, :mod:`quatmotion.pose.blend_labels`).
 - ``"JOD"``, ``"WJOD"``, ``"LJOD"``, ``"JCD"``, ``"WJCD"``, ``"LJCD"``: Eq. 40-43 on raw joints.
@@ -49,6 +51,7 @@ from quatmotion.pose.baselines import (
 from quatmotion.pose.data import PoseData
 from quatmotion.pose.metric import RDSR, PairLogistic
 from quatmotion.pose.scaler import MinMaxUnitScaler
+from quatmotion.pose.transition import TransitionClassifier
 
 __all__ = [
     "FEATURES",
@@ -418,6 +421,7 @@ def _build_registry() -> dict[str, Callable[..., PoseMethod]]:
         for learner in LEARNERS:
             registry[f"{feature}+{learner}"] = _feature_method(feature, learner)
     registry["FEET"] = FeetDistance
+    registry["PAIR-GBT"] = TransitionClassifier
     registry["L2"] = registry["GPD+L2"]
     registry["LMS"] = registry["L2+LMS"] = registry["GPD+LMS"]
     registry["Xing"] = registry["GPD+Xing"]
