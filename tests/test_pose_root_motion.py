@@ -86,3 +86,19 @@ def test_gpdr_tells_a_travelling_pose_from_the_same_pose_standing() -> None:
                            world=mirrored)  # fmt: skip
     assert np.all(m.root_motion[5:-5, 2] < 0)
     np.testing.assert_allclose(methods.root_features(m), methods.root_features(a), atol=1e-6)
+
+
+@pytest.mark.needs_data
+@pytest.mark.parametrize("name", ["bandai1_walk", "cmu_walk", "hdm05_jog", "cmu_bvh_walk"])
+def test_root_motion_follows_the_hips_of_every_family(name: str, real_clips) -> None:
+    """The root's travel is the hips' (Bandai's ``joint_Root`` never moves while its hips
+    walk), at walking or jogging speed on the canonical body of every skeleton family."""
+    from quatmotion import io
+    from quatmotion.pose.data import PoseClip
+
+    clip = PoseClip.from_motion(io.read_motion(real_clips[name]), fps=30, height=170)
+    speed = np.hypot(clip.poses.root_motion[:, 0], clip.poses.root_motion[:, 1])
+    hips = clip.world[:, 0]  # the Hip, midway between the hip joints on the canonical body
+    travel = np.linalg.norm(np.diff(hips[:, [0, 2]], axis=0), axis=1).sum() / (len(clip) / 30)
+    assert 50.0 < np.median(speed) < 350.0, name
+    assert np.mean(speed) == pytest.approx(travel, rel=0.1), name
