@@ -297,11 +297,19 @@ def search_command(
         bool, typer.Option(help="Leave out results from the query's own clip.")
     ] = False,
     ef: Annotated[int, typer.Option(help="HNSW search breadth (higher: slower, more exact).")] = 64,
+    transitions: Annotated[
+        bool,
+        typer.Option(
+            help="Rank the nearest poses by the library's transition judge: the probability "
+            "that a jump from the query pose into each plays badly (shown as the distance)."
+        ),
+    ] = False,
     as_json: JsonOption = False,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
 ) -> None:
-    """Find the poses most like frame F of a clip (frames count from 0)."""
+    """Find the poses most like frame F of a clip (frames count from 0), or with
+    --transitions the best poses to jump to from it."""
     import numpy as np
 
     from quatmotion.pose.library import PoseLibrary
@@ -329,10 +337,12 @@ def search_command(
                 )
             with np.errstate(all="ignore"):
                 query, found = library.motion_query(motion, frame)
+                start = library.transition_start(frame, motion=motion) if transitions else None
             own_clip = -1
             query_doc = {"clip": file.stem, "path": str(file), "frame": found}
         else:
             query, own_clip, found = library.pose_query(clip, frame)
+            start = library.transition_start(frame, clip=clip) if transitions else None
             name = library.clip_names[own_clip]
             query_doc = {"clip": Path(name).stem, "path": name, "frame": found}
         n_poses = len(library.clip_of)
@@ -343,7 +353,9 @@ def search_command(
                 f"-k must be from 1 to {available} (the library's poses{where}), got {k}"
             )
         t0 = time.perf_counter()
-        matches = library.nearest(query, k, exclude_clip=own_clip if other_clips else None)
+        matches = library.nearest(
+            query, k, exclude_clip=own_clip if other_clips else None, transition_from=start
+        )
         elapsed = time.perf_counter() - t0
     labels = _labels([m.name for m in matches])
     results = [
@@ -361,7 +373,7 @@ def search_command(
     if as_json:
         doc = {
             "query": query_doc,
-            "method": library.meta.get("metric", "GPD+RDSR"),
+            "method": library.metric + (" re-ranked by PAIR-GBT" if transitions else ""),
             "search_ms": 1e3 * elapsed,
             "results": results,
         }
@@ -371,15 +383,17 @@ def search_command(
 
     used = query_doc["frame"]
     nearest = f", the nearest {'indexed' if file is None else 'sampled'} to {frame}"
+    what = "poses to jump to from" if transitions else "poses like"
     console.print(
-        f"poses like {query_doc['path']} frame {used}{nearest if used != frame else ''} "
+        f"{what} {query_doc['path']} frame {used}{nearest if used != frame else ''} "
         f"({FRAMES_HELP}); {1e3 * elapsed:.2f} ms",
         markup=False,
         highlight=False,
         soft_wrap=True,
     )
     table = Table()
-    for col in ("rank", "clip", "label", "frame", "time (s)", "distance"):
+    score = "P(bad transition)" if transitions else "distance"
+    for col in ("rank", "clip", "label", "frame", "time (s)", score):
         table.add_column(col, justify="left" if col in ("clip", "label") else "right")
     for r in results:
         secs = "" if r["seconds"] is None else f"{r['seconds']:.2f}"

@@ -83,6 +83,7 @@ from quatmotion.pose.data import PoseClip, PoseData
 from quatmotion.pose.index import HNSWIndex
 from quatmotion.pose.methods import METHODS, pose_features, project_features
 from quatmotion.pose.ranges import DEFAULT_METRIC, FPS_RANGE
+from quatmotion.pose.transition import TransitionClassifier
 
 __all__ = [
     "DEFAULT_METRIC",
@@ -236,6 +237,11 @@ class PoseLibrary:
         ``unit(clip(scale * gpd + offset, 0, 1)) @ W``.
     meta : dict
         JSON-serialisable settings (fps, frame step, height, method, labels used...).
+    pose_rows : ndarray of float32, shape (N, m), optional
+        Every indexed pose described for the transition judge (``model``'s ``transition_*``
+        arrays, :class:`~quatmotion.pose.transition.TransitionClassifier`); ``None`` in a
+        library without one (built before it, or from clips that gave no good and bad
+        transitions to learn from).
     """
 
     index: HNSWIndex
@@ -248,6 +254,7 @@ class PoseLibrary:
     settings: PoseSettings | None = None
     version: int = FORMAT.version
     path: pathlib.Path | None = None
+    pose_rows: NDArray[np.float32] | None = None
 
     # -- the collection surface ------------------------------------------------------------
     @property
@@ -308,7 +315,9 @@ class PoseLibrary:
                     data["index"].tobytes(), dim=int(meta["dim"]), ef_search=ef_search
                 )
                 model = {k[6:]: data[k] for k in data.files if k.startswith("model_")}
+                rows = data["pose_rows"] if "pose_rows" in data.files else None
                 return cls(
+                    pose_rows=rows,
                     index=index,
                     clip_names=[str(n) for n in data["clip_names"]],
                     clip_of=data["clip_of"].astype(np.int64),
@@ -489,6 +498,8 @@ class PoseLibrary:
     def _extend(self, catalogue: _Catalogue) -> None:
         """Append the catalogue's clips (their vectors already in the graph)."""
         fields = catalogue.library_fields(self.meta["fps"], {})
+        if self.pose_rows is not None:
+            self.pose_rows = np.concatenate([self.pose_rows, fields["pose_rows"]])
         self.clip_of = np.concatenate([self.clip_of, fields["clip_of"] + len(self.clip_names)])
         self.frame_of = np.concatenate([self.frame_of, fields["frame_of"]])
         self.clip_names = [*self.clip_names, *fields["clip_names"]]
@@ -712,6 +723,10 @@ class PoseLibrary:
             metric_name=metric_name,
             say=say,
         )
+        judge, judged = _learn_transitions(
+            sample.clips, n_pairs=n_pairs, n_unlabeled=n_unlabeled, seed=seed, say=say
+        )
+        model, meta = {**model, **judge}, {**meta, **judged}
         fps, height = sample.clips[0].fps, sample.clips[0].height
         failed = sample.failed
         kept = [i for i in range(len(sources)) if i not in failed]
@@ -853,10 +868,50 @@ class PoseLibrary:
         row = min(max(int(round(frame / clip.step)), 0), len(clip) - 1)
         return self.project_poses(clip.poses[row : row + 1]), row * clip.step
 
+    def transition_start(
+        self, frame: int, *, clip: str | int | None = None, motion: Motion | None = None
+    ) -> NDArray[np.float32]:
+        """The pose a transition leaves from, described for the judge, shape (1, m): the
+        indexed pose of :meth:`pose_query` (``clip``) or the sampled pose of
+        :meth:`motion_query` (``motion``), the same pose those queries use."""
+        if (clip is None) == (motion is None):
+            raise ValueError("give exactly one of clip and motion")
+        self._judge()  # a library without a judge says so first
+        assert self.pose_rows is not None
+        if clip is not None:
+            return self.pose_rows[[self.find(clip, frame)]]
+        prepared = self.prepare_query(motion)
+        row = min(max(int(round(frame / prepared.step)), 0), len(prepared) - 1)
+        return self.describe(prepared.poses[row : row + 1])
+
+    def describe(self, poses: PoseData) -> NDArray[np.float32]:
+        """``poses`` described for the library's transition judge, shape (N, m).
+
+        Raises
+        ------
+        ValueError
+            The library has no transition judge (:attr:`pose_rows` is None), saying why.
+        """
+        return self._judge().describe(poses).astype(np.float32)
+
+    def _judge(self) -> TransitionClassifier:
+        judge = transition_judge(self.model)
+        if judge is None or self.pose_rows is None:
+            why = self.meta.get("transitions", "the library was built before its judge existed")
+            raise ValueError(f"this pose library has no transition judge ({why}); rebuild it")
+        return judge
+
     def nearest(
-        self, query: ArrayLike, k: int = 10, *, exclude_clip: int | None = None
+        self,
+        query: ArrayLike,
+        k: int = 10,
+        *,
+        exclude_clip: int | None = None,
+        transition_from: ArrayLike | None = None,
+        candidates: int = 256,
     ) -> list[PoseMatch]:
-        """The ``k`` indexed poses nearest to one projected query vector.
+        """The ``k`` indexed poses nearest to one projected query vector, or, with
+        ``transition_from``, the ``k`` best poses to jump to from the query.
 
         Parameters
         ----------
@@ -866,6 +921,13 @@ class PoseLibrary:
             Poses wanted, at least 1 (fewer when the library holds fewer).
         exclude_clip : int, optional
             Leave out the poses of this clip (e.g. the query's own).
+        transition_from : array_like, shape (1, m), optional
+            The query pose described for the transition judge (:meth:`describe`, or
+            ``pose_rows[i]`` of an indexed pose): the ``max(candidates, k)`` nearest poses are
+            re-ranked by the judge's probability that a transition from the query into each
+            plays badly, which is then each match's ``distance`` (0 good .. 1 bad).
+        candidates : int
+            Nearest poses the judge re-ranks.
 
         Returns
         -------
@@ -875,11 +937,19 @@ class PoseLibrary:
             raise ValueError(f"k must be at least 1, got {k}")
         n_items = self.index.n_items_
         own = 0 if exclude_clip is None else int(np.sum(self.clip_of == exclude_clip))
-        ids, dist = self.search(query, min(n_items, k + own))
+        wanted = k if transition_from is None else max(k, candidates)
+        ids, dist = self.search(query, min(n_items, wanted + own))
         ids, dist = ids[0], dist[0]
         if exclude_clip is not None:
             keep = self.clip_of[ids] != exclude_clip
             ids, dist = ids[keep], dist[keep]
+        if transition_from is not None:
+            judge = self._judge()
+            assert self.pose_rows is not None  # _judge checked
+            start = np.asarray(transition_from, dtype=np.float64).reshape(1, -1)
+            bad = judge.score_rows(np.repeat(start, len(ids), axis=0), self.pose_rows[ids])
+            order = np.argsort(bad, kind="stable")
+            ids, dist = ids[order], bad[order]
         file_fps = self.meta.get("file_fps")
         out = []
         for rank, (i, d) in enumerate(zip(ids[:k], dist[:k], strict=True), start=1):
@@ -905,6 +975,8 @@ class PoseLibrary:
             "meta": np.asarray(json.dumps(meta)),
         }
         payload.update({f"model_{k}": v for k, v in self.model.items()})
+        if self.pose_rows is not None:
+            payload["pose_rows"] = self.pose_rows
         with atomic_output(path) as temp, temp.open("wb") as fh:
             np.savez(fh, **payload)
 
@@ -1134,8 +1206,11 @@ class _Catalogue:
     steps: list[int] = field(default_factory=list)
     file_frames: list[int | None] = field(default_factory=list)
     kinds: set[str] = field(default_factory=set)
+    rows: list[NDArray[np.float32]] = field(default_factory=list)
 
     def add(self, clip: ProjectedClip) -> None:
+        if clip.rows is not None:
+            self.rows.append(clip.rows)
         self.names.append(clip.name)
         self.lengths.append(len(clip.vectors))
         self.steps.append(clip.step)
@@ -1146,6 +1221,7 @@ class _Catalogue:
         """The :class:`PoseLibrary` fields of the clips (the model and index apart)."""
         offsets = labels.ClipOffsets(np.array(self.lengths))
         return {
+            "pose_rows": np.concatenate(self.rows) if self.rows else None,
             "clip_names": self.names,
             "clip_of": offsets.clip_of(),
             "frame_of": offsets.frame_of() * np.repeat(self.steps, offsets.lengths),
@@ -1259,6 +1335,7 @@ class ProjectedClip:
     skeleton_kind: str | None
     vectors: NDArray[np.float32]
     doubts: tuple[Doubt, ...] = ()
+    rows: NDArray[np.float32] | None = None
 
 
 def projected_clip(
@@ -1268,10 +1345,63 @@ def projected_clip(
     workers)."""
     clip = load(source)
     vectors = project_gpd(pose_features(clip.poses, metric), model).astype(np.float32)
+    judge = transition_judge(model)
+    rows = None if judge is None else judge.describe(clip.poses).astype(np.float32)
     return ProjectedClip(
         clip.name, clip.fps, clip.step, clip.height, clip.file_frames, clip.skeleton_kind,
-        vectors, clip.doubts,
+        vectors, clip.doubts, rows,
     )  # fmt: skip
+
+
+_TRANSITION = "transition_"  # prefix of the transition judge's arrays in a library's model
+
+
+def transition_judge(model: dict[str, Any]) -> TransitionClassifier | None:
+    """The transition judge stored in a library's ``model`` (``transition_*`` arrays), or None."""
+    arrays = {k[len(_TRANSITION) :]: v for k, v in model.items() if k.startswith(_TRANSITION)}
+    return TransitionClassifier.from_arrays(arrays) if arrays else None
+
+
+def _learn_transitions(
+    clips: Sequence[PoseClip],
+    *,
+    n_pairs: int,
+    n_unlabeled: int,
+    seed: int,
+    say: Callable[[str], None],
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Step 1b of the build: the transition judge learned on the sample's blended-transition
+    labels (:mod:`quatmotion.pose.blend_labels`), as ``transition_*`` model arrays, and what
+    ``meta`` records of it; nothing when the clips give too few good or bad transitions."""
+    from quatmotion.pose.blend_labels import blended_transition_labels
+
+    if len(clips) < 2:
+        return {}, {"transitions": "not learned: one clip"}
+    rng = np.random.default_rng([seed, 20])
+    try:
+        found, _ = blended_transition_labels(
+            [c.local for c in clips], [c.world for c in clips], clips[0].fps,
+            n_positive=n_pairs, n_negative=n_pairs, n_queries=max(2000, 4 * n_pairs),
+            random_state=rng,
+        )  # fmt: skip
+    except ValueError as exc:
+        say(f"no transition judge ({exc})")
+        return {}, {"transitions": f"not learned: {exc}"}
+    good = np.asarray(found.labels, dtype=bool)
+    if good.sum() < _MIN_TRANSITION_PAIRS or (~good).sum() < _MIN_TRANSITION_PAIRS:
+        reason = f"{int(good.sum())} good and {int((~good).sum())} bad transitions"
+        say(f"no transition judge ({reason})")
+        return {}, {"transitions": f"not learned: {reason}"}
+    t0 = time.perf_counter()
+    offsets = labels.ClipOffsets(np.array([len(c) for c in clips]))
+    poses = PoseData.concat([c.poses for c in clips])
+    p = found.pairs
+    a, b = offsets(p[:, 0], p[:, 1]), offsets(p[:, 2], p[:, 3])
+    unlabeled = rng.permutation(len(poses))[:n_unlabeled]
+    judge = TransitionClassifier(random_state=seed).fit(poses[unlabeled], poses[a], poses[b], good)
+    say(f"transition judge on {len(good)} blended transitions: {time.perf_counter() - t0:.1f} s")
+    arrays = {f"{_TRANSITION}{k}": v for k, v in judge.to_arrays().items()}
+    return arrays, {"transitions": {"good": int(good.sum()), "bad": int((~good).sum())}}
 
 
 def load_pose_source(

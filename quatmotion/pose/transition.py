@@ -29,10 +29,17 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from threadpoolctl import threadpool_limits
 
 from quatmotion.pose.data import PoseData
 
-__all__ = ["TransitionClassifier", "pose_rows"]
+__all__ = ["SCHEMA", "TransitionClassifier", "pose_rows"]
+
+#: The arrays of a stored classifier (:meth:`TransitionClassifier.to_arrays`).
+SCHEMA = (
+    "components", "mean", "tree_starts", "baseline", "node_value", "node_feature",
+    "node_threshold", "node_missing_left", "node_left", "node_right", "node_leaf",
+)  # fmt: skip
 
 FloatArray = NDArray[np.float64]
 
@@ -100,8 +107,7 @@ class TransitionClassifier:
         self.random_state = random_state
 
     def _pair_rows(self, a: PoseData, b: PoseData) -> FloatArray:
-        ra = pose_rows(a, self.components_, self.mean_)
-        rb = pose_rows(b, self.components_, self.mean_)
+        ra, rb = self.describe(a), self.describe(b)
         return np.concatenate((np.abs(ra - rb), (ra + rb) / 2.0), axis=1)
 
     def fit(
@@ -126,14 +132,74 @@ class TransitionClassifier:
             pca = PCA(k, random_state=self.random_state).fit(np.asarray(unlabeled.gpd))
             self.components_, self.mean_ = pca.components_, pca.mean_
         seed = self.random_state if isinstance(self.random_state, (int, np.integer)) else 0
-        self.classifier_ = HistGradientBoostingClassifier(
-            max_iter=self.max_iter, learning_rate=self.learning_rate, random_state=int(seed)
-        ).fit(self._pair_rows(train_a, train_b), ~good)
+        # One OpenMP thread: a few thousand pairs gain little from more, and on a busy machine
+        # spinning OpenMP workers made a 5 s fit take 40 s.
+        with threadpool_limits(limits=1, user_api="openmp"):
+            self.classifier_ = HistGradientBoostingClassifier(
+                max_iter=self.max_iter, learning_rate=self.learning_rate, random_state=int(seed)
+            ).fit(self._pair_rows(train_a, train_b), ~good)
         return self
 
     def distances(self, a: PoseData, b: PoseData) -> FloatArray:
         """Probability that each transition ``a[i] -> b[i]`` is bad, shape (P,)."""
-        return self.classifier_.predict_proba(self._pair_rows(a, b))[:, 1]
+        return self.score_rows(
+            pose_rows(a, self.components_, self.mean_), pose_rows(b, self.components_, self.mean_)
+        )
+
+    def describe(self, data: PoseData) -> FloatArray:
+        """:func:`pose_rows` with the fitted GPD components: what a library stores per pose."""
+        return pose_rows(data, self.components_, self.mean_)
+
+    def score_rows(self, rows_a: ArrayLike, rows_b: ArrayLike) -> FloatArray:
+        """Probability of bad for pairs of pose descriptions (:meth:`describe`), shape (P,)."""
+        ra = np.asarray(rows_a, dtype=np.float64)
+        rb = np.asarray(rows_b, dtype=np.float64)
+        pairs = np.concatenate((np.abs(ra - rb), (ra + rb) / 2.0), axis=1)
+        if getattr(self, "classifier_", None) is not None:
+            with threadpool_limits(limits=1, user_api="openmp"):
+                return self.classifier_.predict_proba(pairs)[:, 1]
+        return _predict_trees(self.trees_, pairs)
+
+    def to_arrays(self) -> dict[str, FloatArray]:
+        """The fitted model as plain arrays (a file stores these, never a pickle): the GPD
+        components and mean, and every tree's nodes (:func:`from_arrays` reads them back)."""
+        predictors = [tree[0] for tree in self.classifier_._predictors]  # binary: 1 per round
+        nodes = [p.nodes for p in predictors]
+        if any(np.any(n["is_categorical"]) for n in nodes):
+            raise ValueError("categorical splits are not stored")  # none: the features are real
+        starts = np.cumsum([0] + [len(n) for n in nodes])
+        allnodes = np.concatenate(nodes)
+        k = 0 if self.components_ is None else len(self.components_)
+        return {
+            "components": np.zeros((0, 1683)) if k == 0 else self.components_,
+            "mean": np.zeros(1683) if self.mean_ is None else self.mean_,
+            "tree_starts": starts.astype(np.int64),
+            "baseline": np.asarray(self.classifier_._baseline_prediction, np.float64).reshape(1),
+            "node_value": allnodes["value"].astype(np.float64),
+            "node_feature": allnodes["feature_idx"].astype(np.int64),
+            "node_threshold": allnodes["num_threshold"].astype(np.float64),
+            "node_missing_left": allnodes["missing_go_to_left"].astype(np.int64),
+            "node_left": allnodes["left"].astype(np.int64),
+            "node_right": allnodes["right"].astype(np.int64),
+            "node_leaf": allnodes["is_leaf"].astype(np.int64),
+        }
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, ArrayLike]) -> TransitionClassifier:
+        """A fitted classifier from :meth:`to_arrays` (scores by :func:`_predict_trees`).
+
+        Raises ``KeyError`` naming the arrays missing."""
+        missing = [k for k in SCHEMA if k not in arrays]
+        if missing:
+            raise KeyError(f"a stored transition classifier lacks {missing}")
+        out = cls.__new__(cls)
+        components = np.asarray(arrays["components"], dtype=np.float64)
+        out.n_components = len(components)
+        out.components_ = components if len(components) else None
+        out.mean_ = np.asarray(arrays["mean"], dtype=np.float64) if len(components) else None
+        out.classifier_ = None
+        out.trees_ = {k: np.asarray(v) for k, v in arrays.items()}
+        return out
 
     def pairwise(self, query: PoseData, base: PoseData) -> FloatArray:
         """:meth:`distances` of every query pose with every base pose, shape (Q, B)."""
@@ -141,3 +207,30 @@ class TransitionClassifier:
         _ = query.gpd, base.gpd  # computed once, carried by the selections below
         rows = np.repeat(np.arange(q), b), np.tile(np.arange(b), q)
         return self.distances(query[rows[0]], base[rows[1]]).reshape(q, b)
+
+
+def _predict_trees(trees: dict[str, NDArray[Any]], X: FloatArray) -> FloatArray:
+    """Probability of the positive class from stored trees: the baseline plus each tree's leaf
+    value, through the logistic function. The rule is scikit-learn's for numeric splits (go
+    left when ``x <= threshold``, a missing value where ``missing_left`` says); written here
+    because a library file holds arrays, not a pickled estimator, and vectorised over rows,
+    one level of every row at a time."""
+    from scipy.special import expit
+
+    starts = trees["tree_starts"]
+    feature, threshold = trees["node_feature"], trees["node_threshold"]
+    left, right, leaf = trees["node_left"], trees["node_right"], trees["node_leaf"].astype(bool)
+    missing_left, value = trees["node_missing_left"].astype(bool), trees["node_value"]
+    rows = np.arange(len(X))
+    raw = np.full(len(X), float(np.asarray(trees["baseline"]).reshape(-1)[0]))
+    for t in range(len(starts) - 1):
+        node = np.full(len(X), starts[t])
+        active = ~leaf[node]
+        while active.any():
+            n = node[active]
+            x = X[rows[active], feature[n]]
+            go_left = np.where(np.isnan(x), missing_left[n], x <= threshold[n])
+            node[active] = starts[t] + np.where(go_left, left[n], right[n])
+            active = ~leaf[node]
+        raw += value[node]
+    return expit(raw)
