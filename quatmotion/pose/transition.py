@@ -7,8 +7,9 @@ labels (:mod:`quatmotion.pose.blend_labels`) by gradient-boosted trees (scikit-l
 thousand pairs). A weighted distance must add its terms; a blended transition fails on the
 *worst* of foot skating, bone acceleration, root-velocity jumps and penetration, which trees
 model and a sum does not. It is no metric (no triangle inequality, no index can search it): it
-re-ranks candidates a pose index or a window distance found; the pose library keeps its
-learned metric for search.
+re-ranks candidates a pose index found. A pose library learns one on its sample and stores it
+as plain arrays (:meth:`TransitionClassifier.to_arrays`) with every pose's description, for
+``quatmotion pose search --transitions``; its index stays on the learned metric.
 
 Conventions
 -----------
