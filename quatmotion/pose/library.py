@@ -864,9 +864,13 @@ class PoseLibrary:
     def motion_query(self, motion: Motion, frame: int) -> tuple[FloatArray, int]:
         """The projected vector ``(1, r)`` of a clip's pose near ``frame`` and that pose's
         frame number (the query prepared as the library was, :meth:`prepare_query`)."""
-        clip = self.prepare_query(motion)
-        row = min(max(int(round(frame / clip.step)), 0), len(clip) - 1)
+        clip, row = self._sampled_pose(motion, frame)
         return self.project_poses(clip.poses[row : row + 1]), row * clip.step
+
+    def _sampled_pose(self, motion: Motion, frame: int) -> tuple[PoseClip, int]:
+        """``motion`` prepared as the library was, and the row of its pose nearest ``frame``."""
+        clip = self.prepare_query(motion)
+        return clip, min(max(int(round(frame / clip.step)), 0), len(clip) - 1)
 
     def transition_start(
         self, frame: int, *, clip: str | int | None = None, motion: Motion | None = None
@@ -880,8 +884,7 @@ class PoseLibrary:
         assert self.pose_rows is not None
         if clip is not None:
             return self.pose_rows[[self.find(clip, frame)]]
-        prepared = self.prepare_query(motion)
-        row = min(max(int(round(frame / prepared.step)), 0), len(prepared) - 1)
+        prepared, row = self._sampled_pose(motion, frame)
         return self.describe(prepared.poses[row : row + 1])
 
     def describe(self, poses: PoseData) -> NDArray[np.float32]:
