@@ -174,6 +174,16 @@ class _Task:
         )
 
 
+def near_precision(
+    d: NDArray[np.float64], labels: NDArray[np.bool_], near: NDArray[np.bool_] | None
+) -> dict[str, float]:
+    """``{"near_precision": ...}``: transition precision on the ``near`` pairs only, or ``{}``
+    when there is no mask or the near pairs are all of one label."""
+    if near is None or not (labels[near].any() and (~labels[near]).any()):
+        return {}
+    return {"near_precision": evaluate.transition_precision(d[near], labels[near])[0]}
+
+
 def _index_default_entry(
     clips: list[Clip],
     train: list[int],
@@ -212,8 +222,7 @@ def _index_default_entry(
             "precision": prec, "threshold": thr, "fit_seconds": fit_s, "metric": DEFAULT_METRIC,
             "pairs_from": source, "positive_pairs": int(similar.sum()),
         }  # fmt: skip
-        if near is not None and test_labels[near].any() and (~test_labels[near]).any():
-            entry["near_precision"] = evaluate.transition_precision(d[near], test_labels[near])[0]
+        entry.update(near_precision(d, test_labels, near))
         return entry
     except Exception as exc:  # one broken method must not sink the benchmark
         return {"error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc(limit=3)}

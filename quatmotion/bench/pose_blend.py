@@ -38,6 +38,7 @@ from quatmotion.bench.pose import (
     _load,
     _methods,
     _split,
+    near_precision,
 )
 from quatmotion.datasets import data_root
 from quatmotion.pose import evaluate, labels
@@ -138,8 +139,7 @@ def _one_seed(
                 "precision": evaluate.transition_precision(d, te.labels)[0],
                 "fit_seconds": fit_s,
             }
-            if near.any() and te.labels[near].any() and (~te.labels[near]).any():
-                entry["near_precision"] = evaluate.transition_precision(d[near], te.labels[near])[0]
+            entry.update(near_precision(d, te.labels, near))
         except Exception as exc:  # one broken method must not sink the benchmark
             entry = {
                 "error": f"{type(exc).__name__}: {exc}",
@@ -194,8 +194,7 @@ def _index_judge_entry(
             "precision": evaluate.transition_precision(d, test_labels)[0],
             "fit_seconds": fit_s, "transitions": judged["transitions"],
         }  # fmt: skip
-        if near.any() and test_labels[near].any() and (~test_labels[near]).any():
-            entry["near_precision"] = evaluate.transition_precision(d[near], test_labels[near])[0]
+        entry.update(near_precision(d, test_labels, near))
         return entry
     except Exception as exc:  # one broken method must not sink the benchmark
         return {"error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc(limit=3)}

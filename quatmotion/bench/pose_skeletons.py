@@ -203,7 +203,7 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0, verbose: bool = T
             t0 = time.perf_counter()
             library = PoseLibrary.build(clips, seed=library_seed)
             entry["build_seconds"].append(time.perf_counter() - t0)
-            entry["metric"] = library.meta.get("metric", "GPD+RDSR")
+            entry["metric"] = library.metric
             kinds = np.array([k for _, k in files])
             for q, motion, kind, kick in loaded:
                 strict, by_gait = _score(library, kinds, motion, kind, kick)

@@ -59,7 +59,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quatmotion.pose.labels import TransitionPairs, candidate_pairs
-from quatmotion.pose.skeleton16 import JOINTS_16, PARENTS_16
+from quatmotion.pose.skeleton16 import FEET_16, JOINTS_16, PARENTS_16
 
 __all__ = [
     "BAD_RATIO",
@@ -80,7 +80,7 @@ IntArray = NDArray[np.int64]
 QUANTITIES: tuple[str, ...] = ("skate", "bone_acc", "bone_jerk", "root_jump", "penetration")
 GOOD_RATIO = 1.25
 BAD_RATIO = 2.5
-_FEET = (JOINTS_16.index("LFoot"), JOINTS_16.index("RFoot"))
+_FEET = FEET_16
 _HIPS = (JOINTS_16.index("LHip"), JOINTS_16.index("RHip"))
 _PARENTS = np.asarray(PARENTS_16)
 

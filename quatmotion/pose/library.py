@@ -713,7 +713,7 @@ class PoseLibrary:
 
         sample = _draw_sample(sources, load, fit_poses, seed, batch, stage("learn"))
         say(f"learning the distance on {len(sample.clips)} clips ({sample.n_poses} poses)")
-        model, meta, _ = _learn_projection(
+        model, meta, sample_poses = _learn_projection(
             sample.clips,
             rank=rank,
             n_unlabeled=n_unlabeled,
@@ -724,8 +724,10 @@ class PoseLibrary:
             say=say,
         )
         judge, judged = _learn_transitions(
-            sample.clips, n_pairs=n_pairs, n_unlabeled=n_unlabeled, seed=seed, say=say
-        )
+            sample.clips, n_pairs=n_pairs, n_unlabeled=n_unlabeled, seed=seed, say=say,
+            poses=sample_poses,
+        )  # fmt: skip
+        del sample_poses
         model, meta = {**model, **judge}, {**meta, **judged}
         fps, height = sample.clips[0].fps, sample.clips[0].height
         failed = sample.failed
@@ -1078,12 +1080,11 @@ def _learn_projection(
     metric: Any,
     metric_name: str,
     say: Callable[[str], None],
-) -> tuple[dict[str, FloatArray], dict[str, Any], FloatArray]:
+) -> tuple[dict[str, FloatArray], dict[str, Any], PoseData]:
     """The GPD scaling and the metric's projection learned on ``clips``.
 
     Returns the model (``scale``, ``offset``, ``W``), the settings for the library's ``meta``
-    and the scaled GPD of every pose, shape
-    ``(N, D)``.
+    and the clips' poses joined (their GPD computed, for the next step to reuse).
     """
     if metric_name not in METRICS:
         raise ValueError(f"unknown pose metric {metric_name!r}; choose from {', '.join(METRICS)}")
@@ -1113,7 +1114,6 @@ def _learn_projection(
     projection = method.projection_
     W = projection["W"]
     rank = W.shape[1]
-    X = method.normalizer_.transform(raw)
     del raw
     say(f"{metric_name} metric of rank {rank}: {time.perf_counter() - t0:.1f} s")
     model = {"scale": projection["scale"], "offset": projection["offset"], "W": W}
@@ -1128,7 +1128,7 @@ def _learn_projection(
         "positive_pairs_from": pairs_from,
         "seed": seed,
     }
-    return model, meta, X
+    return model, meta, poses
 
 
 def _as_given(clip: PoseClip) -> PoseClip:
@@ -1372,10 +1372,12 @@ def _learn_transitions(
     n_unlabeled: int,
     seed: int,
     say: Callable[[str], None],
+    poses: PoseData | None = None,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Step 1b of the build: the transition judge learned on the sample's blended-transition
     labels (:mod:`quatmotion.pose.blend_labels`), as ``transition_*`` model arrays, and what
-    ``meta`` records of it; nothing when the clips give too few good or bad transitions."""
+    ``meta`` records of it; nothing when the clips give too few good or bad transitions.
+    ``poses``: the clips' poses joined, if step 1 has them (their GPD is not computed again)."""
     from quatmotion.pose.blend_labels import blended_transition_labels
 
     if len(clips) < 2:
@@ -1397,7 +1399,8 @@ def _learn_transitions(
         return {}, {"transitions": f"not learned: {reason}"}
     t0 = time.perf_counter()
     offsets = labels.ClipOffsets(np.array([len(c) for c in clips]))
-    poses = PoseData.concat([c.poses for c in clips])
+    if poses is None:
+        poses = PoseData.concat([c.poses for c in clips])
     p = found.pairs
     a, b = offsets(p[:, 0], p[:, 1]), offsets(p[:, 2], p[:, 3])
     unlabeled = rng.permutation(len(poses))[:n_unlabeled]

@@ -51,6 +51,7 @@ from quatmotion.pose.baselines import (
 from quatmotion.pose.data import PoseData
 from quatmotion.pose.metric import RDSR, PairLogistic
 from quatmotion.pose.scaler import MinMaxUnitScaler
+from quatmotion.pose.skeleton16 import FEET_16
 from quatmotion.pose.transition import TransitionClassifier
 
 __all__ = [
@@ -369,7 +370,7 @@ class FeetDistance:
     """The strong simple baseline of the blended-transition labels: no learning, the Euclidean
     distance between the two feet's body-local positions (cm), the Hip at the origin."""
 
-    _FEET = (12, 15)  # LFoot, RFoot in JOINTS_16 order
+    _FEET = FEET_16
 
     def __init__(self, random_state: Any = None) -> None:
         pass

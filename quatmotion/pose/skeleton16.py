@@ -81,6 +81,8 @@ JOINTS_16: tuple[str, ...] = (
 PARENTS_16: tuple[int, ...] = (-1, 0, 1, 2, 1, 4, 5, 1, 7, 8, 0, 10, 11, 0, 13, 14)
 END_SITES_16: tuple[int, ...] = (3, 6, 9, 12, 15)
 """Indices of the five end sites of the paper: Head, LHand, RHand, LFoot, RFoot."""
+FEET_16: tuple[int, int] = (JOINTS_16.index("LFoot"), JOINTS_16.index("RFoot"))
+"""Indices of the two feet (LFoot, RFoot): what contacts, skating and the feet baseline read."""
 MIRROR_16: tuple[int, ...] = tuple(
     JOINTS_16.index(("R" if n[0] == "L" else "L") + n[1:]) if n[0] in "LR" else k
     for k, n in enumerate(JOINTS_16)

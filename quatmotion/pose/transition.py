@@ -32,7 +32,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
+from quatmotion.pose.baselines import VELOCITY_TIME_UNIT
 from quatmotion.pose.data import PoseData
+from quatmotion.pose.skeleton16 import FEET_16
 
 __all__ = ["SCHEMA", "TransitionClassifier", "pose_rows"]
 
@@ -44,19 +46,18 @@ SCHEMA = (
 
 FloatArray = NDArray[np.float64]
 
-_FEET = (12, 15)  # LFoot, RFoot in JOINTS_16 order
-_PER_FRAME = 1.0 / 30.0  # velocities in units per 30 fps frame, so trees see comparable scales
+_PER_FRAME = VELOCITY_TIME_UNIT  # velocities per 30 fps frame, as the JC features take them
 
 
 def pose_rows(data: PoseData, components: FloatArray | None, mean: FloatArray | None) -> FloatArray:
-    """The description of each pose (module conventions), shape (N, 17 + n_components).
+    """The description of each pose (module conventions), shape (N, 16 + n_components).
 
     ``components`` (k, 1683) and ``mean`` (1683,) project the GPD; ``None`` leaves it out.
     """
     n = len(data)
     parts = [
-        np.asarray(data.positions)[:, _FEET].reshape(n, -1),
-        np.asarray(data.velocities)[:, _FEET].reshape(n, -1) * _PER_FRAME,
+        np.asarray(data.positions)[:, FEET_16].reshape(n, -1),
+        np.asarray(data.velocities)[:, FEET_16].reshape(n, -1) * _PER_FRAME,
         np.asarray(data.hip_height)[:, None],
         np.asarray(data.root_motion) * _PER_FRAME,
     ]
@@ -107,10 +108,6 @@ class TransitionClassifier:
         self.learning_rate = learning_rate
         self.random_state = random_state
 
-    def _pair_rows(self, a: PoseData, b: PoseData) -> FloatArray:
-        ra, rb = self.describe(a), self.describe(b)
-        return np.concatenate((np.abs(ra - rb), (ra + rb) / 2.0), axis=1)
-
     def fit(
         self, unlabeled: PoseData, train_a: PoseData, train_b: PoseData, train_labels: ArrayLike
     ) -> TransitionClassifier:
@@ -138,14 +135,12 @@ class TransitionClassifier:
         with threadpool_limits(limits=1, user_api="openmp"):
             self.classifier_ = HistGradientBoostingClassifier(
                 max_iter=self.max_iter, learning_rate=self.learning_rate, random_state=int(seed)
-            ).fit(self._pair_rows(train_a, train_b), ~good)
+            ).fit(_pair_features(self.describe(train_a), self.describe(train_b)), ~good)
         return self
 
     def distances(self, a: PoseData, b: PoseData) -> FloatArray:
         """Probability that each transition ``a[i] -> b[i]`` is bad, shape (P,)."""
-        return self.score_rows(
-            pose_rows(a, self.components_, self.mean_), pose_rows(b, self.components_, self.mean_)
-        )
+        return self.score_rows(self.describe(a), self.describe(b))
 
     def describe(self, data: PoseData) -> FloatArray:
         """:func:`pose_rows` with the fitted GPD components: what a library stores per pose."""
@@ -153,9 +148,7 @@ class TransitionClassifier:
 
     def score_rows(self, rows_a: ArrayLike, rows_b: ArrayLike) -> FloatArray:
         """Probability of bad for pairs of pose descriptions (:meth:`describe`), shape (P,)."""
-        ra = np.asarray(rows_a, dtype=np.float64)
-        rb = np.asarray(rows_b, dtype=np.float64)
-        pairs = np.concatenate((np.abs(ra - rb), (ra + rb) / 2.0), axis=1)
+        pairs = _pair_features(rows_a, rows_b)
         if getattr(self, "classifier_", None) is not None:
             with threadpool_limits(limits=1, user_api="openmp"):
                 return self.classifier_.predict_proba(pairs)[:, 1]
@@ -208,6 +201,13 @@ class TransitionClassifier:
         _ = query.gpd, base.gpd  # computed once, carried by the selections below
         rows = np.repeat(np.arange(q), b), np.tile(np.arange(b), q)
         return self.distances(query[rows[0]], base[rows[1]]).reshape(q, b)
+
+
+def _pair_features(rows_a: ArrayLike, rows_b: ArrayLike) -> FloatArray:
+    """A pair's row from its two pose descriptions: ``|a - b|`` and ``(a + b) / 2``."""
+    a = np.asarray(rows_a, dtype=np.float64)
+    b = np.asarray(rows_b, dtype=np.float64)
+    return np.concatenate((np.abs(a - b), (a + b) / 2.0), axis=1)
 
 
 def _predict_trees(trees: dict[str, NDArray[Any]], X: FloatArray) -> FloatArray:
