@@ -5,8 +5,9 @@ Conventions
 -----------
 * A settings class is a frozen dataclass deriving from :class:`Settings`, with every field
   given a documented default and a ``_parameter_constraints`` entry in scikit-learn's
-  vocabulary (``Interval``, ``StrOptions``, ``"boolean"``, ``None``, a type...), the one
-  vocabulary :mod:`quatmotion.sparse` validates with. Construction validates every field
+  vocabulary (``Interval``, ``StrOptions``, ``"boolean"``, ``"random_state"``, ``None``, a
+  type), the one vocabulary :mod:`quatmotion.sparse` validates with too
+  (:func:`validate_parameters`). Construction validates every field
   once; code that receives a settings object trusts it.
 * Cross-field rules (``max_error`` or ``ratio``, not both) go in :meth:`Settings._check`.
 * Nested settings are fields whose type is itself a :class:`Settings` (``read`` of the file
@@ -27,20 +28,25 @@ from numbers import Integral, Real
 from pathlib import Path
 from typing import Any, ClassVar, Self
 
+import numpy as np
+
 from quatmotion.errors import FormatError
 
-__all__ = ["Interval", "Settings", "StrOptions"]
+__all__ = ["Interval", "Settings", "StrOptions", "validate_parameters"]
 
 
-# scikit-learn's parameter validation (what its estimators and quatmotion.sparse use): the
-# constraints are declarative and the messages name the parameter, the range and the value.
-# Importing it costs about a second (scikit-learn imports SciPy's statistics), so settings
-# declare their ranges with the two light descriptions below, which become scikit-learn's
-# objects only when a value fails the quick check: a valid settings object (an index opened
-# for one query) is checked without importing scikit-learn.
+# Parameter constraints in scikit-learn's vocabulary (what its estimators and
+# quatmotion.sparse declare), checked here: scikit-learn's own checker lives in a private module
+# that any of its releases may move, and importing it costs about a second. The messages follow
+# scikit-learn's ("The 'x' parameter of C must be ... Got v instead.").
 @dataclasses.dataclass(frozen=True)
 class Interval:
-    """scikit-learn's ``Interval(type, left, right, closed=...)``, built when needed."""
+    """A number of ``type`` (``Integral`` or ``Real``) between ``left`` and ``right``.
+
+    ``None`` ends are infinite; ``closed`` is ``"left"``, ``"right"``, ``"both"`` or
+    ``"neither"``, and an infinite end is compared as the closedness says (so ``inf`` is outside
+    ``[0, inf)``). Booleans and NaN are never inside.
+    """
 
     type: type
     left: float | None
@@ -48,79 +54,108 @@ class Interval:
     closed: str
 
     def __init__(self, type_: type, left: float | None, right: float | None, *, closed: str):
+        if type_ not in (Integral, Real):
+            raise TypeError(f"Interval type must be Integral or Real, got {type_!r}")
+        if closed not in ("left", "right", "both", "neither"):
+            raise ValueError(f"closed must be left, right, both or neither, got {closed!r}")
         for name, value in (("type", type_), ("left", left), ("right", right), ("closed", closed)):
             object.__setattr__(self, name, value)
 
-    def satisfied(self, value: Any) -> bool | None:
-        """True when scikit-learn's would accept ``value``; None: let it decide."""
+    def satisfied(self, value: Any) -> bool:
+        """Whether ``value`` is a number of this type inside the interval."""
         if isinstance(value, bool) or not isinstance(value, self.type):
-            return None
+            return False
         if value != value:  # NaN
-            return None
-        # an open end is an infinite bound, compared as the interval's closedness says (so
-        # inf is outside [0, inf), as scikit-learn has it)
+            return False
         left = -math.inf if self.left is None else self.left
         right = math.inf if self.right is None else self.right
         low_ok = value >= left if self.closed in ("left", "both") else value > left
         high_ok = value <= right if self.closed in ("right", "both") else value < right
-        return True if low_ok and high_ok else None
+        return bool(low_ok and high_ok)
 
-    def sklearn(self) -> Any:
-        from sklearn.utils._param_validation import Interval as SkInterval
-
-        return SkInterval(self.type, self.left, self.right, closed=self.closed)
+    def __str__(self) -> str:
+        kind = "an int" if self.type is Integral else "a float"
+        low = "[" if self.closed in ("left", "both") else "("
+        high = "]" if self.closed in ("right", "both") else ")"
+        left = "-inf" if self.left is None else self.left
+        right = "inf" if self.right is None else self.right
+        return f"{kind} in the range {low}{left}, {right}{high}"
 
 
 @dataclasses.dataclass(frozen=True)
 class StrOptions:
-    """scikit-learn's ``StrOptions(options)``, built when needed."""
+    """One of the strings ``options``."""
 
     options: frozenset[str]
 
     def __init__(self, options: Any):
         object.__setattr__(self, "options", frozenset(options))
 
-    def satisfied(self, value: Any) -> bool | None:
-        return True if isinstance(value, str) and value in self.options else None
+    def satisfied(self, value: Any) -> bool:
+        return isinstance(value, str) and value in self.options
 
-    def sklearn(self) -> Any:
-        from sklearn.utils._param_validation import StrOptions as SkStrOptions
-
-        return SkStrOptions(set(self.options))
+    def __str__(self) -> str:
+        return "a str among {" + ", ".join(repr(o) for o in sorted(self.options)) + "}"
 
 
-def _quick_check(constraint: Any, value: Any) -> bool | None:
-    """Whether ``value`` meets one constraint, when that is plain (None: ask scikit-learn)."""
+def _satisfied(constraint: Any, value: Any) -> bool:
+    """Whether ``value`` meets one constraint of the vocabulary."""
     if constraint is None:
-        return True if value is None else None
+        return value is None
     if constraint == "boolean":
-        return True if isinstance(value, bool) else None
+        return isinstance(value, bool | np.bool_)
+    if constraint == "random_state":
+        return (
+            value is None
+            or isinstance(value, np.random.RandomState)
+            or (
+                isinstance(value, Integral)
+                and not isinstance(value, bool)
+                and 0 <= value <= 2**32 - 1
+            )
+        )
     if isinstance(constraint, Interval | StrOptions):
         return constraint.satisfied(value)
-    if isinstance(constraint, type) and constraint not in (Integral, Real):
-        return True if isinstance(value, constraint) else None
-    return None
+    if isinstance(constraint, type):
+        return isinstance(value, constraint)
+    raise TypeError(f"unknown parameter constraint {constraint!r}")
 
 
-def _validate(constraints: Mapping[str, list[Any]], params: Mapping[str, Any], caller: str) -> None:
-    """scikit-learn's ``validate_parameter_constraints``, imported only when some value is not
-    plainly valid (its message then names the parameter, the range and the value)."""
-    if all(any(_quick_check(c, params[k]) for c in cs) for k, cs in constraints.items()):
-        return
-    from sklearn.utils._param_validation import (
-        InvalidParameterError,
-        validate_parameter_constraints,
-    )
+def _describe(constraint: Any) -> str:
+    if constraint is None:
+        return "None"
+    if constraint == "boolean":
+        return "an instance of 'bool'"
+    if constraint == "random_state":
+        return "an int in the range [0, 4294967295], an instance of 'RandomState' or None"
+    if isinstance(constraint, type):
+        return f"an instance of {constraint.__qualname__!r}"
+    return str(constraint)
 
-    full = {
-        k: [c.sklearn() if isinstance(c, Interval | StrOptions) else c for c in cs]
-        for k, cs in constraints.items()
-    }
-    try:
-        validate_parameter_constraints(full, dict(params), caller_name=caller)
-    except InvalidParameterError as error:
-        # A ValueError (and no TypeError) for the command line's bad-input contract.
-        raise ValueError(str(error)) from None
+
+def validate_parameters(
+    constraints: Mapping[str, list[Any]], params: Mapping[str, Any], caller: str
+) -> None:
+    """Check every parameter named in ``constraints`` against its list (any one may hold).
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter, ``caller``, what it must be and the value given (a ValueError and
+        never a TypeError, for the command line's bad-input contract).
+    """
+    for name, allowed in constraints.items():
+        if name not in params:
+            continue
+        value = params[name]
+        if any(_satisfied(c, value) for c in allowed):
+            continue
+        described = [_describe(c) for c in allowed]
+        must = ", ".join(described[:-1]) + " or " if len(described) > 1 else ""
+        must += described[-1]
+        raise ValueError(
+            f"The {name!r} parameter of {caller} must be {must}. Got {value!r} instead."
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,7 +171,7 @@ class Settings:
                 object.__setattr__(self, f.name, tuple(value))
         params = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         constraints = {k: v for k, v in self._parameter_constraints.items() if k in params}
-        _validate(constraints, params, type(self).__name__)
+        validate_parameters(constraints, params, type(self).__name__)
         self._check()
 
     def _check(self) -> None:

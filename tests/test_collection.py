@@ -11,10 +11,9 @@ from typing import ClassVar
 
 import numpy as np
 import pytest
-from sklearn.utils._param_validation import Interval, StrOptions
 
 from quatmotion._format import FileFormat
-from quatmotion._settings import Settings
+from quatmotion._settings import Interval, Settings, StrOptions
 from quatmotion.collection import (
     ClipRef,
     ReadSettings,

@@ -11,9 +11,7 @@ from dataclasses import dataclass, field
 from numbers import Integral, Real
 from typing import Any, ClassVar
 
-from sklearn.utils._param_validation import Interval, StrOptions
-
-from quatmotion._settings import Settings
+from quatmotion._settings import Interval, Settings, StrOptions
 from quatmotion.codec.methods import METHODS
 from quatmotion.collection import ReadSettings
 

@@ -57,12 +57,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from sklearn.utils._param_validation import Interval, StrOptions
 
 from quatmotion._atomic import atomic_output
 from quatmotion._deprecated import warn_renamed
 from quatmotion._format import FileFormat
-from quatmotion._settings import Settings
+from quatmotion._settings import Interval, Settings, StrOptions
 from quatmotion.collection import (
     BuildReport,
     ClipRef,

@@ -15,10 +15,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from sklearn.base import BaseEstimator, TransformerMixin, _fit_context
+from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils import check_random_state
-from sklearn.utils._param_validation import Interval
 
+from quatmotion._settings import Interval, validate_parameters
 from quatmotion.sparse._common import check_quaternion_samples
 
 __all__ = ["DictionaryLearner"]
@@ -102,7 +102,6 @@ class DictionaryLearner(TransformerMixin, BaseEstimator):
         raise NotImplementedError
 
     # The loop ---------------------------------------------------------------------------------
-    @_fit_context(prefer_skip_nested_validation=True)
     def fit(self, X: ArrayLike, y: object = None) -> DictionaryLearner:
         """Learn the dictionary from ``X``.
 
@@ -116,6 +115,9 @@ class DictionaryLearner(TransformerMixin, BaseEstimator):
         -------
         self
         """
+        validate_parameters(
+            self._parameter_constraints, self.get_params(deep=False), type(self).__name__
+        )
         if self.sparsity > self.n_atoms:
             raise ValueError(f"sparsity ({self.sparsity}) cannot exceed n_atoms ({self.n_atoms})")
         Y = check_quaternion_samples(X, "X")

@@ -82,10 +82,10 @@ from typing import Any, ClassVar
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
-from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
 from quatmotion import quat
+from quatmotion._settings import Interval, StrOptions
 from quatmotion.sparse import _kernels as kern
 from quatmotion.sparse._base import DictionaryLearner
 from quatmotion.sparse._common import (
