@@ -81,6 +81,25 @@ def test_version_is_the_one_in_pyproject_and_the_release_being_documented():
     assert newest and newest.group(1) == declared  # the release the docs are collecting numbers for
 
 
+def test_the_licence_is_an_spdx_expression_and_the_build_backend_reads_it():
+    """PEP 639: ``project.license`` a string holding an SPDX expression (a table is deprecated
+    and fails builds from 2027), which setuptools reads from 77 on."""
+    from packaging.licenses import canonicalize_license_expression
+    from packaging.requirements import Requirement
+    from packaging.version import Version
+
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    licence = pyproject["project"]["license"]
+    assert isinstance(licence, str)
+    assert canonicalize_license_expression(licence) == licence
+    assert not any(c.startswith("License ::") for c in pyproject["project"].get("classifiers", []))
+    setuptools = next(
+        Requirement(r) for r in pyproject["build-system"]["requires"] if r.startswith("setuptools")
+    )
+    assert not setuptools.specifier.contains(Version("76.1"))
+    assert setuptools.specifier.contains(Version("77.0.0"))
+
+
 def _commands(group, prefix=()):
     import click
 
