@@ -17,7 +17,7 @@ Conventions
 * Clips are subsampled to at most 20 frames/s before sampling frames (neighbouring frames at
   120 frames/s are near-duplicates); 80 % of the frames train, 20 % test (random split).
 * Errors are the mean rotation angle between sample and reconstruction, degrees per joint per
-  frame (METRICS.md "Angular error", with the factor 2).
+  frame (docs/metrics.md "Angular error", with the factor 2).
 * Outputs go to ``out_dir``: ``stick_<clip>.png``, the ``.qmz`` files, ``library.qidx``,
   ``view.html``, ``clips/`` (the generated clips as BVH, for the index) and ``summary.json``
   (written atomically).

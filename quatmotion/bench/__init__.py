@@ -3,7 +3,7 @@
 Contract: ``run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict`` measures,
 writes the result as JSON to ``out`` (figures as PNG beside it) and returns the same dict.
 ``quatmotion bench <name> --out F [--quick] [--seed N]`` imports the module lazily and calls
-``run``. Benchmarks are not tests: they report numbers (see METRICS.md for their names), they
+``run``. Benchmarks are not tests: they report numbers (see docs/metrics.md for their names), they
 do not assert them. Every result starts with :func:`provenance` (benchmark name, the command
 that reproduces it, the machine), which ``quatmotion report`` shows beside the numbers.
 """

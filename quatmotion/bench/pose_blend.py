@@ -11,7 +11,7 @@ the training clips, reused on the test clips); every registered method of
 them, and the row ``"pose index default"`` (what ``quatmotion pose index`` ships, trained on
 its own pairs) and ``"pose search --transitions"`` (the transition judge a library learns
 and stores, on its own blended labels of the training clips) are fitted on the training pairs
-and scored on the test pairs by transition precision (METRICS.md). Reported per method: mean
+and scored on the test pairs by transition precision (docs/metrics.md). Reported per method: mean
 and standard deviation over seeds, the share of good labels among decided candidates, and,
 for comparison, the transition precision of the same methods on *near* pairs only (Eq. 35
 mean joint distance under 10 cm, the paper's tau; candidates reach 25 cm).

@@ -223,7 +223,8 @@ def table1(quick: bool, seed: int) -> dict[str, Any]:
         "split": "random 80/20 of frames",
         "qssd_options": "the estimator's defaults (init log-ksvd, keep_best)",
         "paper": PAPER_TABLE1,
-        "error_unit": "degrees per joint per frame; *_rotation = 2 arccos|<q,q'>| (METRICS.md), "
+        "error_unit": "degrees per joint per frame; *_rotation = 2 arccos|<q,q'>| "
+        "(docs/metrics.md), "
         "*_paper = arccos|<q,q'>| as printed in Eq. 11",
     }
     for name, paths in datasets.items():

@@ -3,7 +3,7 @@
 ``quatmotion bench retrieval --out ret.json [--quick]``; from Python, ``run(...,
 methods=...)`` scores a subset (the paper's methods cost most of the run: their dictionaries).
 Leave-one-out on ``hdm05`` (class labels), ``bandai1`` (content labels) and generated
-motions (their kind): each clip queries all the others; METRICS.md's TPR@20 (capped by class
+motions (their kind): each clip queries all the others; docs/metrics.md's TPR@20 (capped by class
 size), precision@10, mAP over the full ranking and 1-NN accuracy, per class and averaged over
 the queries that have a relevant clip; on bandai1 the share of the top 10 taken by a
 neighbouring class (:data:`NEIGHBOURS`). Also the feature time per clip (index build seconds
@@ -187,7 +187,7 @@ def label_learning(data: _Dataset) -> dict[str, Any] | None:
 
 
 def retrieval_scores(rankings: list[Ranking], labels: list[str]) -> dict[str, Any]:
-    """METRICS.md's retrieval measures from leave-one-out rankings (query ``i`` is clip ``i``).
+    """docs/metrics.md's retrieval measures from leave-one-out rankings (query ``i`` is clip ``i``).
 
     Returns
     -------

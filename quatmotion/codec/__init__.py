@@ -4,7 +4,7 @@ Layout (compression and decompression apart, format and math apart):
 
 * the math: :mod:`~quatmotion.codec.channels` (a clip as smooth channels and back),
   :mod:`~quatmotion.codec.spline` (B-splines over frames), :mod:`~quatmotion.codec.entropy`
-  (range coding with constriction), :mod:`~quatmotion.codec.metrics` (METRICS.md);
+  (range coding with constriction), :mod:`~quatmotion.codec.metrics` (docs/metrics.md);
 * the codecs behind one interface: :mod:`quatmotion.codec.methods` (``best``, ``spline``,
   ``naive``, ``qssd``, ``ksvd``);
 * the format: :mod:`~quatmotion.codec.container` (chunks, CRC, header and index),

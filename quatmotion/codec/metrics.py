@@ -1,4 +1,4 @@
-"""Reconstruction and size metrics of ``METRICS.md`` (the one definition each).
+"""Reconstruction and size metrics of ``docs/metrics.md`` (the one definition each).
 
 Conventions
 -----------

@@ -32,7 +32,7 @@ Judged quantities (:data:`QUANTITIES`), over the synthesised window of ``context
 - ``penetration``: deepest joint below the floor, cm (floor: the source clip's 2nd percentile
   of foot heights; the clean-up keeps the feet above it, so this is the rest of the body).
 
-Judgement (:func:`judge`), in the terms of ``../shared/METRICS.md``: every quantity ``q`` is
+Judgement (:func:`judge`), in the terms of ``docs/metrics.md``: every quantity ``q`` is
 divided by its reference ``max(P95 of q over natural windows of the data set, q of the natural
 window of A at i, q of the natural window of B at j)``, with a floor of ``penetration_floor_cm``
 for penetration; the worst of these ratios is the transition's *artefact*. **Good** when the

@@ -1,6 +1,6 @@
 """Evaluation of pose distances: transition precision and retrieval precision@s.
 
-Definitions follow METRICS.md ("Pose distance"), the project's one definition of every metric,
+Definitions follow docs/metrics.md ("Pose distance"), the project's one definition of every metric,
 and the GPD paper:
 
 * **Transition precision** (Eq. 36-37): with test pairs labelled positive (good transition) or

@@ -273,7 +273,7 @@ def exact_knn(
 
 
 def recall_at_k(approx: ArrayLike, exact: ArrayLike) -> float:
-    """Mean overlap of approximate and exact top-k sets (METRICS.md "Recall@10").
+    """Mean overlap of approximate and exact top-k sets (docs/metrics.md "Recall@10").
 
     Parameters
     ----------

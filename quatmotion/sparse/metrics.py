@@ -1,7 +1,7 @@
 """Reconstruction error (paper Eq. 9/11) and dictionary recovery (Eq. 10).
 
 Angles are returned in degrees. The paper's Eq. 11 writes ``arccos(<q, q_hat>)``, which is half
-the rotation angle between the two rotations; the project's metric (METRICS.md) is the rotation
+the rotation angle between the two rotations; the project's metric (docs/metrics.md) is the rotation
 angle ``2 arccos(|<q, q_hat>|)``. Both are available through ``convention``.
 
 Atoms are compared as unit ``4n``-vectors (each of the ``n`` quaternions unit, the whole divided

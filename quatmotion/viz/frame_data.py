@@ -256,7 +256,7 @@ def encode_comparison(
     """Payloads of two clips of one skeleton and the per-point error between them.
 
     The error of a point is the distance between its two positions, cm, over every joint and
-    end site (METRICS.md: positions of the full skeleton); ``arms_cm`` is the paper's ARMS on
+    end site (docs/metrics.md: positions of the full skeleton); ``arms_cm`` is the paper's ARMS on
     them (Eq. 12: RMS over points per frame, mean over frames). Both payloads are framed as
     the reference is (:func:`quatmotion.viz.framing.body_framing`), so the two figures show
     the same points.
