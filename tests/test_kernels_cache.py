@@ -188,7 +188,7 @@ def test_groups_compile_side_by_side_and_report_each(
 def test_a_batch_on_the_pool_compiles_its_groups_first_and_says_so_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from quatmotion.cli import warmup as cli_warmup
+    from quatmotion.cli import _kernels as cli_kernels
 
     calls: list[list[str]] = []
 
@@ -198,7 +198,7 @@ def test_a_batch_on_the_pool_compiles_its_groups_first_and_says_so_once(
 
     monkeypatch.setattr(warmup, "_stamp", lambda group: tmp_path / "no stamps yet" / group)
     monkeypatch.setattr(warmup, "warm_up", fake_warm_up)
-    monkeypatch.setattr(cli_warmup, "_said", False)
+    monkeypatch.setattr(cli_kernels, "_said", False)
     clips = [tmp_path / "walk.bvh"]
     write_motion(generate_clip("walk", seed=1, n_frames=30, fps=30.0), clips[0])
     runner = CliRunner()

@@ -62,7 +62,7 @@ def _root(
 ) -> None:
     """Compress and search human motion-capture libraries."""
     if ctx.invoked_subcommand not in _WITHOUT_KERNELS:
-        from quatmotion.cli.warmup import say_when_compiling
+        from quatmotion.cli._kernels import say_when_compiling
 
         say_when_compiling()
 

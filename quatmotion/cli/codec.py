@@ -203,7 +203,7 @@ def compress(
             ratio=ratio, method=method, seed=seed, on_error="skip", read=read,
         )  # fmt: skip
         check_outputs([out], [*inputs, skeleton], force=force)
-        from quatmotion.cli.warmup import ensure_kernels
+        from quatmotion.cli._kernels import ensure_kernels
 
         groups = ("read", "codec", "learn") if method in ("qssd", "ksvd") else ("read", "codec")
         ensure_kernels(*groups, workers=workers, scheduler=scheduler)
@@ -381,7 +381,7 @@ def append(
             if not path.exists():
                 raise CliInputError(f"{path}: no such file or folder")
         check_outputs([library], [*inputs, skeleton], replace=True)
-        from quatmotion.cli.warmup import ensure_kernels
+        from quatmotion.cli._kernels import ensure_kernels
 
         with Archive.open(library) as archive:
             made = archive.settings

@@ -122,7 +122,7 @@ def index_command(
         where = resolve_scheduler(scheduler, workers=workers)
         files = find_motion_files(paths)
         check_outputs([output], [*files, skeleton], force=force)
-        from quatmotion.cli.warmup import ensure_kernels
+        from quatmotion.cli._kernels import ensure_kernels
 
         ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
         _echo(f"{len(files)} clips, prepared on {where.describe()}")
@@ -170,7 +170,7 @@ def add_command(
         if skeleton is not None and not skeleton.exists():
             raise CliInputError(f"{skeleton}: no such skeleton file or folder")
         where = resolve_scheduler(scheduler, workers=workers)
-        from quatmotion.cli.warmup import ensure_kernels
+        from quatmotion.cli._kernels import ensure_kernels
 
         ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
         with progress_bar(error_console) as bar:

@@ -123,7 +123,7 @@ def _build(
         asf = Path(settings.read.skeleton) if settings.read.skeleton else None
         asf_files = sorted(asf.glob("*.asf")) if asf is not None and asf.is_dir() else [asf]
         check_outputs([output], [*paths, labels, *asf_files], replace=True)
-        from quatmotion.cli.warmup import ensure_kernels
+        from quatmotion.cli._kernels import ensure_kernels
 
         learn = ("learn",) if {"qssd", "ksvd"} & set(settings.kinds) else ()
         ensure_kernels("read", *learn, "retrieval", workers=workers, scheduler=scheduler)

@@ -117,7 +117,7 @@ def serve(
 
 def _build(work: Path, folder: Path | None) -> BuiltLibrary:
     """The demo's library, or ``folder``'s clips, compressed and indexed in ``work``."""
-    from quatmotion.cli.warmup import ensure_kernels
+    from quatmotion.cli._kernels import ensure_kernels
     from quatmotion.demo import build_library
 
     ensure_kernels("read", "codec", "retrieval", "pose")
