@@ -17,11 +17,20 @@ demo: $(STAMP)
 	$(BIN)/quatmotion warm-up
 	$(BIN)/quatmotion demo --force $(DEMO_ARGS)
 
+# A baseline x86-64 processor: Numba's generic target, NumPy's baseline loops, OpenBLAS's
+# oldest kernels (every name NumPy has used for its SIMD levels; unknown ones are ignored).
+BASELINE_CPU := NUMBA_CPU_NAME=generic NUMBA_CACHE_DIR=$(CURDIR)/$(VENV)/numba-generic \
+	NPY_DISABLE_CPU_FEATURES="X86_V3 X86_V4 AVX512_ICL AVX512_SPR AVX512_SKX AVX512F AVX2 FMA3" \
+	OPENBLAS_CORETYPE=Prescott
+
+# The tests that compare the paths to one answer run twice: on this processor, then as on a
+# baseline one (results must not depend on the vector width).
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n 2 -q
+	$(BASELINE_CPU) $(BIN)/python -m pytest -q -m same_answer -p no:randomly
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

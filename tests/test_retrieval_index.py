@@ -244,6 +244,7 @@ def test_bad_file_is_skipped_and_the_pool_builds_the_same_index(clip_folder, tmp
     assert _rows(inline) == _rows(pooled)
 
 
+@pytest.mark.same_answer
 def test_search_queries_in_one_process_equal_one_at_a_time(clip_folder, tmp_path):
     out = tmp_path / "lib.qidx"
     assert _build(clip_folder, out).exit_code == 0

@@ -11,10 +11,13 @@ import numpy as np
 import pytest
 
 from quatmotion.retrieval import _kernels, quick
+from quatmotion.retrieval.distances import pack_sequences
 from quatmotion.retrieval.index import FEATURE_PARAMETERS, FORMAT, ClipIndex
 from quatmotion.retrieval.methods import DEFAULT_METHOD, FUSED_RADIUS
 from quatmotion.retrieval.search import search
 from quatmotion.synthetic import KINDS, generate_clip
+
+pytestmark = pytest.mark.same_answer
 
 
 def test_its_constants_are_the_index_and_the_defaults():
@@ -24,18 +27,21 @@ def test_its_constants_are_the_index_and_the_defaults():
     assert quick._FEATURE_PARAMETERS == FEATURE_PARAMETERS
 
 
-def test_fused_distances_are_the_kernels_dtw_by_definition():
-    # the kernel run as Python (its definition, without fastmath's rounding of the band's ends)
+def test_fused_distances_are_the_kernels_dtw_bit_for_bit():
+    # the compiled kernel and its definition run as Python, without abandoning
     rng = np.random.default_rng(0)
     streams = [rng.normal(size=(m, 7)).astype(np.float32) for m in (3, 9, 17, 30, 61, 120)]
+    frames, offsets = pack_sequences(streams)
+    frames_t = np.ascontiguousarray(frames.T)
     for q in (streams[1], streams[3], streams[5], rng.normal(size=(1, 7)).astype(np.float32)):
         d = quick.fused_distances(q, streams, 4)
         n = len(q)
-        want = [
-            _kernels.dtw_band32.py_func(q, s, _kernels.band_radius.py_func(n, len(s), 4), 1e30)
-            for s in streams
-        ]
-        np.testing.assert_allclose(d, want, rtol=1e-5, atol=1e-6)
+        for kernel in (_kernels.dtw_band32, _kernels.dtw_band32.py_func):
+            want = [
+                kernel(q, frames_t, a, b - a, _kernels.band_radius.py_func(n, b - a, 4), 1e30)
+                for a, b in zip(offsets[:-1], offsets[1:], strict=True)
+            ]
+            np.testing.assert_array_equal(d, want)
 
 
 @pytest.fixture(scope="module")
@@ -56,9 +62,7 @@ def _same(got: list[dict], want: list[dict]) -> None:
     assert [(r["rank"], r["path"], r["label"]) for r in got] == [
         (r["rank"], r["path"], r["label"]) for r in want
     ]
-    np.testing.assert_allclose(
-        [r["distance"] for r in got], [r["distance"] for r in want], rtol=1e-4
-    )
+    assert [r["distance"] for r in got] == [r["distance"] for r in want]
 
 
 def test_it_ranks_as_the_numba_path(index):

@@ -5,6 +5,15 @@ Own kernels rather than a DTW library: the re-rank compares a query with 64 shor
 ``dtaidistance``'s compiled multivariate DTW is called once per pair on float64 copies, where
 this banded float32 kernel reads the library's concatenated frames in place in one call (the
 comparison is in docs/performance.md).
+
+Conventions
+-----------
+* No fast-math: every kernel's arithmetic is the order its code writes (no reassociated sums,
+  no fused multiply-adds), so a distance is the same bits on every x86-64 processor, whatever
+  its vector width, and under any Numba CPU target; the NumPy path of
+  :mod:`quatmotion.retrieval.quick` computes :func:`dtw_band32`'s arithmetic in the same
+  order and agrees with it bit for bit (tests run both under ``NUMBA_CPU_NAME=generic`` and
+  the host's target).
 """
 
 from __future__ import annotations
@@ -15,7 +24,7 @@ import numpy as np
 _INF = 1e30
 
 
-@nb.njit(cache=True, fastmath=True, nogil=True)
+@nb.njit(cache=True, nogil=True)
 def dtw_banded(a, b, band, dims, max_radius):  # pragma: no cover - compiled
     """DTW of ``a`` (n, d) and ``b`` (m, d) on their first ``dims`` columns: squared Euclidean
     local cost, steps (1,0), (0,1), (1,1), a Sakoe-Chiba band around the diagonal rescaled to
@@ -78,7 +87,7 @@ def squared_distances(embeddings, query):  # pragma: no cover - compiled
     return out
 
 
-@nb.njit(cache=True, fastmath=True, nogil=True)
+@nb.njit(cache=True, nogil=True)
 def frame_distances(query, take):  # pragma: no cover - compiled
     """Euclidean distance of every query frame to every take frame, ``(n, m)``."""
     n, m, d = query.shape[0], take.shape[0], query.shape[1]
@@ -93,7 +102,7 @@ def frame_distances(query, take):  # pragma: no cover - compiled
     return dist
 
 
-@nb.njit(cache=True, fastmath=True, nogil=True)
+@nb.njit(cache=True, nogil=True)
 def subsequence_dtw(dist):  # pragma: no cover - compiled
     """Best match of the query anywhere in the take, from their frame distances ``dist``
     (n, m): free start and end in the take, step pattern symmetricP1 (steps (1,1) weight 2;
@@ -135,7 +144,7 @@ def subsequence_dtw(dist):  # pragma: no cover - compiled
     return best, start[n - 1, end], end + 1
 
 
-@nb.njit(cache=True, fastmath=True, nogil=True)
+@nb.njit(cache=True, nogil=True)
 def dtw_euclidean(a, b, weights, cutoff):  # pragma: no cover - compiled
     """Unbanded DTW of ``a`` (n, d) and ``b`` (m, d): local cost the Euclidean distance of the
     two frames with column weights ``weights`` (d,) (``sqrt(sum w_k (a_k - b_k)^2)``), steps
@@ -183,7 +192,7 @@ def dtw_euclidean_to_candidates(query, frames, offsets, candidates, weights):
 _INF32 = np.float32(1e30)
 
 
-@nb.njit(cache=True, fastmath=True, nogil=True)
+@nb.njit(cache=True, nogil=True)
 def band_radius(n, m, radius):  # pragma: no cover - compiled
     """The Sakoe-Chiba radius of :func:`dtw_band32` for lengths ``n``, ``m``: ``radius``
     frames, at least half the slope plus one (so that a path exists)."""
@@ -191,35 +200,50 @@ def band_radius(n, m, radius):  # pragma: no cover - compiled
     return max(float(radius), 0.5 * slope + 1.0)
 
 
-@nb.njit(cache=True, fastmath=True, nogil=True)
-def dtw_band32(a, b, r, cutoff):  # pragma: no cover - compiled
-    """DTW of float32 ``a`` (n, d) and ``b`` (m, d): Euclidean frame cost, steps (1,0), (0,1),
-    (1,1), a band of radius ``r`` frames around the diagonal rescaled to the two lengths,
-    path cost divided by ``n + m``, float32 sums. Returns ``inf`` (abandoned) once every cell
-    of a row exceeds ``cutoff`` (cost per ``n + m``; inf: never)."""
-    n, m, d = a.shape[0], b.shape[0], a.shape[1]
+@nb.njit(cache=True, nogil=True)
+def dtw_band32(a, bt, start, m, r, cutoff):  # pragma: no cover - compiled
+    """DTW of float32 ``a`` (n, d) and the clip of ``m`` frames whose frame ``j`` is column
+    ``start + j`` of ``bt`` (d, total), float32 (frames as columns): Euclidean frame cost,
+    steps (1,0), (0,1), (1,1), a band of radius ``r`` frames around the diagonal rescaled to
+    the two lengths, path cost divided by ``n + m``. Returns ``inf`` (abandoned) once every
+    cell of a row exceeds ``cutoff`` (cost per ``n + m``; inf: never).
+
+    The arithmetic is its definition, in this order (module conventions; what
+    ``retrieval.quick`` computes with NumPy, bit for bit): a cell's squared frame cost is a
+    float32 sum over the columns in order, ``s = s + t * t`` with ``t = a - b`` (no fused
+    multiply-add, no reordering), its square root rounded to float32; a cell's path cost the
+    float32 sum of that and the least of its three predecessors; the distance the float64
+    quotient of the last cell by ``n + m``."""
+    n, d = a.shape[0], a.shape[1]
     slope = (m - 1) / max(n - 1, 1)
     limit = np.float32(cutoff * (n + m) * (1.0 + 1e-5)) if cutoff < 1e29 else _INF32
     prev = np.full(m + 1, _INF32, dtype=np.float32)
     cur = np.full(m + 1, _INF32, dtype=np.float32)
+    cost = np.empty(m + 1, dtype=np.float32)
     prev[0] = 0.0
+    first = start - 1  # column of the clip's frame j (from 1)
     for i in range(1, n + 1):
         centre = (i - 1) * slope + 1
         lo = max(1, int(np.floor(centre - r)))
         hi = min(m, int(np.ceil(centre + r)))
+        for j in range(lo, hi + 1):
+            cost[j] = 0.0
+        # columns outside, cells inside: each cell's sum runs over the columns in order, and
+        # the cells of a row are independent (vectorised without reordering a sum)
+        for k in range(d):
+            x = a[i - 1, k]
+            for j in range(lo, hi + 1):
+                t = x - bt[k, first + j]
+                cost[j] += t * t
         cur[lo - 1] = _INF32
         row_min = _INF32
         for j in range(lo, hi + 1):
-            s = np.float32(0.0)
-            for k in range(d):
-                t = a[i - 1, k] - b[j - 1, k]
-                s += t * t
             best = prev[j - 1]
             if prev[j] < best:
                 best = prev[j]
             if cur[j - 1] < best:
                 best = cur[j - 1]
-            v = np.float32(np.sqrt(s)) + best
+            v = np.float32(np.sqrt(cost[j])) + best
             cur[j] = v
             if v < row_min:
                 row_min = v
@@ -255,7 +279,7 @@ def envelopes(frames, offsets, radius):  # pragma: no cover - compiled
     return upper, lower
 
 
-@nb.njit(cache=True, fastmath=True, nogil=True)
+@nb.njit(cache=True, nogil=True)
 def lb_keogh(qp, upper, lower, a, m, r_env):  # pragma: no cover - compiled
     """LB_Keogh of the projected query ``qp`` (n, p) against one clip's envelopes (rows
     ``a .. a + m`` of ``upper``/``lower``, radius ``r_env``): the distance of each query frame
@@ -279,12 +303,13 @@ def lb_keogh(qp, upper, lower, a, m, r_env):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True, nogil=True)
-def fused_search(q, qp, frames, projected, upper, lower, offsets, radius, k, exclude):
+def fused_search(q, qp, frames_t, projected_t, upper, lower, offsets, radius, k, exclude):
     """Exact ``k`` nearest clips under :func:`dtw_band32` (radius ``radius``), pruned.
 
     ``q`` (n, D) and ``qp`` (n, p) are the query's stream and its projection on orthonormal
-    directions; ``frames``/``projected`` the library's, ``upper``/``lower`` the envelopes of
-    ``projected`` at radius ``radius + 1``. With ``k`` below the number of candidates, clips
+    directions; ``frames_t`` (D, total) and ``projected_t`` (p, total) the library's, frames
+    as columns; ``upper``/``lower`` (total, p) the envelopes of the projection at radius
+    ``radius + 1``. With ``k`` below the number of candidates, clips
     are visited by increasing LB_Keogh (valid where the pair's band radius is ``radius``; 0
     otherwise), skipped when the bound, or the DTW of the projections, exceeds the ``k``-th
     best distance so far, and the full DTW abandons above it. Returns the distance of every
@@ -315,10 +340,10 @@ def fused_search(q, qp, frames, projected, upper, lower, offsets, radius, k, exc
             break  # every later clip's bound is larger
         a, b = offsets[c], offsets[c + 1]
         r = band_radius(n, b - a, radius)
-        if prune and kth < np.inf and dtw_band32(qp, projected[a:b], r, kth) > kth * slack:
+        if prune and kth < np.inf and dtw_band32(qp, projected_t, a, b - a, r, kth) > kth * slack:
             continue
         full += 1
-        d = dtw_band32(q, frames[a:b], r, kth)
+        d = dtw_band32(q, frames_t, a, b - a, r, kth)
         out[c] = d
         if prune and d < best[k - 1]:
             pos = k - 1

@@ -101,6 +101,15 @@ def stream_parts(
     return [f[:, :48], f[:, 48:], p[:, :48], p[:, 48:]]
 
 
+def _ordered_product(x: NDArray[np.float64], w: NDArray[np.floating]) -> NDArray[np.float64]:
+    """``x @ w`` ``(T, c)``, each sum over the columns of ``x`` in order: BLAS orders a sum as
+    the processor's kernel does, and a stream is ranked (the same bits on every processor)."""
+    out = np.zeros((x.shape[0], w.shape[1]))
+    for k in range(x.shape[1]):
+        out += x[:, k, None] * w[k].astype(np.float64)
+    return out
+
+
 def _positive(x: float) -> float:
     return x if np.isfinite(x) and x > 0 else 1.0
 
@@ -126,7 +135,9 @@ class FusedModel:
             [x * (w / s) for x, w, s in zip(parts, self.weights, self.scales, strict=True)], axis=1
         )
         if self.learned is not None:
-            out = np.concatenate((out, LEARNED_WEIGHT * (out @ self.learned)), axis=1)
+            out = np.concatenate(
+                (out, LEARNED_WEIGHT * _ordered_product(out, self.learned)), axis=1
+            )
         return np.ascontiguousarray(out, dtype=np.float32)
 
     def project(self, stream: NDArray[np.float32]) -> NDArray[np.float32]:

@@ -311,7 +311,10 @@ class FusedDTW:
                 upper, lower = _kernels.envelopes(projected, offsets, self.radius + 1)
             else:
                 projected = upper = lower = np.zeros((0, model.projection.shape[0]), np.float32)
-            library._cache[key] = (frames, projected, upper, lower, offsets)
+            # the kernel reads frames as columns (a cell's sum in order, the cells vectorised)
+            frames_t = np.ascontiguousarray(frames.T)
+            projected_t = np.ascontiguousarray(projected.T)
+            library._cache[key] = (frames_t, projected_t, upper, lower, offsets)
         return library._cache[key]  # type: ignore[return-value]
 
     def distances(
@@ -319,12 +322,13 @@ class FusedDTW:
     ) -> tuple[FloatArray, int]:
         """Every clip's distance (``inf``: pruned, never one of the ``k`` nearest, or
         ``exclude``) and the number of full DTWs computed."""
-        frames, projected, upper, lower, offsets = self._packed(library)
+        frames_t, projected_t, upper, lower, offsets = self._packed(library)
         model = fused_model(library, self.learned)
         q = dist._as_frames(model.stream(query.arrays["frames"], query.arrays["path"]), "query")
         kk = len(library) if k is None else max(1, int(k))
+        qp = model.project(q)
         return _kernels.fused_search(
-            q, model.project(q), frames, projected, upper, lower, offsets, self.radius, kk, exclude
+            q, qp, frames_t, projected_t, upper, lower, offsets, self.radius, kk, exclude
         )
 
     def rank(

@@ -13,14 +13,13 @@ Conventions
   NumPy, SQLite and the fused stream's model only (no ``quatmotion.motion``, ``.io`` or
   ``.collection``, whose kernels import Numba); a batch (``--queries``) and the server keep
   the Numba kernels, cheaper once loaded.
-* The same answer: :func:`fused_distances` is ``_kernels.dtw_band32`` (Euclidean frame
-  cost, float32 sums, the band of ``_kernels.band_radius``, cost over ``n + m``) computed for
-  every clip at once: one float64 product gives every frame cost, then a loop over the
-  query's frames and the band's cells, arrays over clips. No clip is pruned, so the ``k``
-  nearest are those of the exact pruned search; distances agree to float32 rounding, except
-  where the compiled kernel's fast-math rounds a band's end the other way (the band one cell
-  narrower on a row where the rescaled diagonal falls on a whole frame; this path keeps the
-  band as written; how often, in docs/performance.md, 0.4.0).
+* The same answer, bit for bit: :func:`fused_distances` is ``_kernels.dtw_band32`` (the
+  band of ``_kernels.band_radius``) computed for every clip at once, in the kernel's
+  arithmetic and order (its docstring): each band cell's squared frame cost a float32 sum
+  over the stream's columns in order, then a loop over the query's frames and the band's
+  cells, arrays over clips. No clip is pruned, so the ``k`` nearest are those of the exact
+  pruned search, with the same distances (NumPy's elementwise float32 operations and the
+  kernel's, compiled without fast-math, round alike on every processor).
 """
 
 from __future__ import annotations
@@ -61,45 +60,58 @@ _NPY_HEADER = re.compile(
     r"\{'descr': '([<>|][a-z]\d+)', 'fortran_order': False, 'shape': \(([\d, ]*)\), \}"
 )
 _INF32 = np.float32(1e30)
+_CELLS = 1 << 20
+"""Band cells whose frame costs are computed at once (memory: a few arrays of this size)."""
 
 
 def fused_distances(
     query: NDArray[np.float32], streams: list[NDArray[np.float32]], radius: int = RADIUS
 ) -> NDArray[np.float64]:
     """Banded DTW (``dtw_band32``'s) of ``query`` ``(n, D)`` float32 to every clip of
-    ``streams`` (each ``(m_c, D)`` float32), without abandoning: ``(C,)`` float64."""
+    ``streams`` (each ``(m_c, D)`` float32), without abandoning: ``(C,)`` float64, the
+    kernel's arithmetic in its order (its docstring), so the same bits."""
     C, n = len(streams), query.shape[0]
     if C == 0:
         return np.zeros(0)
+    q = np.ascontiguousarray(query, dtype=np.float32)
     m = np.array([len(s) for s in streams], dtype=np.int64)
     start = np.concatenate(([0], np.cumsum(m)[:-1]))
-    frames = np.concatenate(streams).astype(np.float64)
-    q = query.astype(np.float64)
-    # every frame cost at once, in float64 (the expanded square loses nothing at float32)
-    sq = (q * q).sum(1)[:, None] + (frames * frames).sum(1)[None, :] - 2.0 * (q @ frames.T)
-    cost_all = np.sqrt(np.maximum(sq, 0.0)).astype(np.float32)  # (n, sum m)
-    M = int(m.max())
+    frames_t = np.ascontiguousarray(np.concatenate(streams).astype(np.float32).T)  # (D, total)
     slope = (m - 1) / max(n - 1, 1)
     r = np.maximum(float(radius), 0.5 * slope + 1.0)
+    rows = np.arange(n, dtype=np.int64)
+    centre = rows[:, None] * slope[None, :] + 1  # (n, C): the kernel's (i - 1) * slope + 1
+    lo = np.maximum(1, np.floor(centre - r).astype(np.int64))
+    hi = np.minimum(m, np.ceil(centre + r).astype(np.int64))
+    width = int((hi - lo).max()) + 1
+    # every band cell's frame cost, rows in blocks (memory), each sum over the columns in order
+    cost = np.empty((n, C, width), dtype=np.float32)
+    block = max(1, _CELLS // (C * width))
+    for a in range(0, n, block):
+        b = min(n, a + block)
+        j = lo[a:b, :, None] + np.arange(width)[None, None, :]  # (rows, C, width)
+        column = np.where(j <= hi[a:b, :, None], start[None, :, None] + j - 1, 0)
+        s = np.zeros(column.shape, dtype=np.float32)
+        for k in range(frames_t.shape[0]):
+            t = q[a:b, k, None, None] - frames_t[k][column]
+            t *= t
+            s += t
+        np.sqrt(s, out=cost[a:b])
+    M = int(m.max())
     clips = np.arange(C)
     prev = np.full((C, M + 2), _INF32, dtype=np.float32)
     prev[:, 0] = 0.0
     cur = np.empty_like(prev)
-    for i in range(1, n + 1):
-        centre = (i - 1) * slope + 1
-        lo = np.maximum(1, np.floor(centre - r).astype(np.int64))
-        hi = np.minimum(m, np.ceil(centre + r).astype(np.int64))
-        width = int((hi - lo).max()) + 1
-        j = lo[:, None] + np.arange(width)[None, :]  # (C, width)
-        inside = j <= hi[:, None]
+    for i in range(n):
+        j = lo[i][:, None] + np.arange(width)[None, :]  # (C, width)
+        inside = j <= hi[i][:, None]
         j = np.where(inside, j, M + 1)  # cells past a clip's band: a column kept at inf
-        cost = cost_all[i - 1, np.minimum(start[:, None] + j - 1, len(frames) - 1)]
         step = np.minimum(prev[clips[:, None], j - 1], prev[clips[:, None], j])
         step[~inside] = _INF32
         cur.fill(_INF32)
         left = np.full(C, _INF32, dtype=np.float32)  # cur[lo - 1]
         for t in range(width):
-            left = cost[:, t] + np.minimum(step[:, t], left)
+            left = cost[i, :, t] + np.minimum(step[:, t], left)
             cur[clips, j[:, t]] = left
         cur[:, M + 1] = _INF32
         prev, cur = cur, prev
