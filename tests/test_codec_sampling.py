@@ -180,3 +180,50 @@ def test_bench_resampling_keeps_the_shared_frames(clips):
     assert half.n_frames == 199
     mid = quat.slerp(clip.rotations[3], clip.rotations[4], 0.5)
     assert quat.angle(half.rotations[7], mid).max() < 1e-9
+
+
+def test_a_bound_sampler_equals_sample(archive):
+    """``Archive.sampler``: every pose, batch and joint subset is ``sample``'s to the bit, in
+    both modes; ``pose`` writes into the sampler's own buffers."""
+    entry = archive.entries[1]
+    T, fps = entry.n_frames, entry.fps
+    rng = np.random.default_rng(3)
+    times = np.r_[np.arange(T) / fps, rng.uniform(-1.0, (T + 5) / fps, 40)]
+    sk = archive.skeleton(entry.skeleton)
+    for joints in (None, [4, 0, sk.joint_names[-1]]):
+        for mode in ("clamp", "loop"):
+            sampler = archive.sampler(entry.name, joints, mode=mode)
+            root, rot = archive.sample(1, times, joints, mode=mode)
+            b_root, b_rot = sampler.poses(times)
+            assert np.array_equal(b_root, root) and np.array_equal(b_rot, rot)
+            for k, t in enumerate(times):
+                r, q = sampler.pose(t)
+                assert np.abs(r - root[k]).max() < 1e-9 and quat.angle(q, rot[k]).max() < 1e-9
+                if mode == "clamp":  # the same arithmetic: to the bit
+                    assert np.array_equal(r, root[k]) and np.array_equal(q, rot[k])
+    r, q = sampler.pose(0.0)
+    kept = q.copy()
+    assert sampler.pose(0.5)[1] is q and not np.array_equal(q, kept)  # one buffer, reused
+    with pytest.raises(ValueError, match="finite"):
+        sampler.pose(float("inf"))
+    with pytest.raises(ValueError, match="mode"):
+        archive.sampler(0, mode="bounce")
+
+
+def test_a_clip_name_is_resolved_once(archive, monkeypatch):
+    import quatmotion.codec.archive as archive_module
+
+    name = archive.entries[1].name
+    expected = archive.sample(1, 0.3)
+    calls = []
+    real = archive_module.match_clip
+    monkeypatch.setattr(
+        archive_module, "match_clip", lambda *a: calls.append(a) or real(*a)
+    )  # a name that is no clip's own still goes through the matcher
+    for _ in range(3):
+        got = archive.sample(name, 0.3)
+        assert np.array_equal(got[0], expected[0]) and np.array_equal(got[1], expected[1])
+    assert calls == []
+    with pytest.raises(KeyError):
+        archive.sample("no such clip", 0.0)
+    assert len(calls) == 1

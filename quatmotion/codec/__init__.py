@@ -17,7 +17,8 @@ Layout (compression and decompression apart, format and math apart):
   :mod:`~quatmotion.codec.settings`, :mod:`~quatmotion.codec.library` (a collection prepared
   for encoding), :mod:`~quatmotion.codec.repair` (per-frame corrections that make the bound
   hold);
-* decompression: :mod:`~quatmotion.codec.archive` (lazy, random access).
+* decompression: :mod:`~quatmotion.codec.archive` (lazy, random access) and
+  :mod:`~quatmotion.codec.sampling` (poses at any time; :class:`Sampler`, one clip bound).
 
 ``compress``, ``append``, ``open`` and ``open_archive`` are the names before 0.4.0 (thin
 wrappers of the above).
@@ -28,6 +29,7 @@ wrappers of the above).
 from quatmotion.codec.archive import Archive, DamagedClip, open_archive
 from quatmotion.codec.compress import CompressionResult, append, compress
 from quatmotion.codec.methods import METHODS
+from quatmotion.codec.sampling import Sampler
 from quatmotion.codec.settings import DEFAULT_MAX_ERROR_CM, CompressSettings
 
 open = open_archive  # noqa: A001 (before 0.4.0; Archive.open now)
@@ -39,6 +41,7 @@ __all__ = [
     "CompressSettings",
     "CompressionResult",
     "DamagedClip",
+    "Sampler",
     "append",
     "compress",
     "open",

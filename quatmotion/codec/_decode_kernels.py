@@ -21,7 +21,7 @@ import numpy as np
 
 from quatmotion.codec.channels import rotation_row
 
-__all__ = ["read_uvarints", "sample_poses"]
+__all__ = ["PACK_HEAD", "pose_packed", "poses_packed", "read_uvarints", "sample_poses"]
 
 
 @numba.njit(inline="always", cache=True)
@@ -182,3 +182,75 @@ def read_uvarints(buf, pos, out):  # pragma: no cover
                 return -2
         out[k] = value
     return pos
+
+
+PACK_HEAD = 16
+"""Integers before the tables in a packed clip (:func:`pose_packed`)."""
+
+
+@numba.njit(inline="always", cache=True)
+def _unpack(I, F):  # pragma: no cover - compiled
+    """The tables of :func:`sample_poses` as views of a packed clip: ``I`` int64 holds a head
+    (segments ``S``, channels ``c``, rows ``n``, joints ``J``, correction rows, layout
+    channels ``C``, selected joints ``k``, knots, loop flag) then ``segs``, ``cols``, ``sel``,
+    ``kinds``, ``starts``, ``counts``, ``dof_axes``; ``F`` float64 holds ``fps``, then
+    ``knots``, ``P``, ``scale``, ``corr``, ``pre``, ``ref``, then one pose's output
+    (``root`` (3,), ``rot`` (k, 4)) and the one position ``u``."""
+    S, c, n, J, nc, C, k, nk = I[0], I[1], I[2], I[3], I[4], I[5], I[6], I[7]
+    o = PACK_HEAD
+    segs = I[o : o + 6 * S].reshape((S, 6))
+    o += 6 * S
+    cols = I[o : o + c]
+    o += c
+    sel = I[o : o + k]
+    o += k
+    kinds = I[o : o + J]
+    o += J
+    starts = I[o : o + J]
+    o += J
+    counts = I[o : o + J]
+    o += J
+    dof_axes = I[o : o + 3 * J].reshape((J, 3))
+    f = 1
+    knots = F[f : f + nk]
+    f += nk
+    P = F[f : f + n * c].reshape((n, c))
+    f += n * c
+    scale = F[f : f + c]
+    f += c
+    corr = F[f : f + nc * C].reshape((nc, C))
+    f += nc * C
+    pre = F[f : f + 12 * J].reshape((J, 4, 3))
+    f += 12 * J
+    ref = F[f : f + 4 * J].reshape((J, 4))
+    f += 4 * J
+    root = F[f : f + 3].reshape((1, 3))
+    f += 3
+    rot = F[f : f + 4 * k].reshape((1, k, 4))
+    f += 4 * k
+    u = F[f : f + 1]
+    return segs, cols, sel, kinds, starts, counts, dof_axes, knots, P, scale, corr, pre, ref, \
+        root, rot, u  # fmt: skip
+
+
+@numba.njit(cache=True)
+def pose_packed(t, I, F):  # pragma: no cover - compiled
+    """One pose of a packed clip (:func:`_unpack`) at ``t`` seconds (finite) into its output
+    slots of ``F``: clamped to the clip, or wrapped with period ``T / fps`` if ``I[8]``."""
+    segs, cols, sel, kinds, starts, counts, dof_axes, knots, P, scale, corr, pre, ref, \
+        root, rot, u = _unpack(I, F)  # fmt: skip
+    S = segs.shape[0]
+    T = segs[S - 1, 0] + segs[S - 1, 1]
+    x = t * F[0]
+    u[0] = x % T if I[8] else min(max(x, 0.0), T - 1.0)
+    sample_poses(u, I[8] != 0, segs, knots, P, cols, scale, corr, sel, kinds, starts, counts,
+                 dof_axes, pre, ref, root, rot)  # fmt: skip
+
+
+@numba.njit(cache=True)
+def poses_packed(u, I, F, out_root, out_rot):  # pragma: no cover - compiled
+    """Poses of a packed clip at frame positions ``u`` (already clamped or wrapped)."""
+    segs, cols, sel, kinds, starts, counts, dof_axes, knots, P, scale, corr, pre, ref, \
+        _, _, _ = _unpack(I, F)  # fmt: skip
+    sample_poses(u, I[8] != 0, segs, knots, P, cols, scale, corr, sel, kinds, starts, counts,
+                 dof_axes, pre, ref, out_root, out_rot)  # fmt: skip

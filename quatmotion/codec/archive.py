@@ -40,7 +40,7 @@ from quatmotion.codec.container import (
 from quatmotion.codec.library import LayoutInfo
 from quatmotion.codec.methods import ClipContext, get_method
 from quatmotion.codec.repair import Corrections, correction_lever, read_clip_prefix
-from quatmotion.codec.sampling import sampler_for
+from quatmotion.codec.sampling import Sampler, sampler_for
 from quatmotion.codec.skeletons import (
     RECORD_BVH,
     RECORD_BVH_GUESSED,
@@ -217,6 +217,7 @@ class Archive:
         self._skeletons: dict[int, Skeleton] = {}
         self._layouts: dict[int, tuple[LayoutInfo, Any]] = {}
         self._samplers: OrderedDict[int, Any] = OrderedDict()
+        self._by_name: dict[str, int] | None = None
 
     def _split(self, chunks: list[ChunkRef]) -> None:
         h = self.header
@@ -386,6 +387,18 @@ class Archive:
         """
         if isinstance(clip, int | np.integer) and 0 <= clip < len(self):
             return int(clip)  # the fast path of every read
+        if isinstance(clip, str):
+            if self._by_name is None:  # a name held by one clip only (version 1 repeats some)
+                names = self.names()
+                once = (
+                    {n for n in names if names.count(n) == 1}
+                    if len(set(names)) < len(names)
+                    else set(names)
+                )
+                self._by_name = {n: i for i, n in enumerate(names) if n in once}
+            i = self._by_name.get(clip)
+            if i is not None:
+                return i
         return match_clip(clip, self.names(), str(self._name))
 
     def chunk_bytes(self, clip: int | str) -> int:
@@ -555,6 +568,15 @@ class Archive:
             A time that is not finite, an unknown mode, or a joint that is not in the skeleton.
         """
         return sampler_for(self, clip).sample(times, joints, mode=mode)
+
+    def sampler(
+        self, clip: int | str, joints: ArrayLike | None = None, *, mode: str = "clamp"
+    ) -> Sampler:
+        """A :class:`~quatmotion.codec.sampling.Sampler` bound to one clip (decoded now), its
+        joints (indices or names; all by default) and mode (as :meth:`sample`) chosen once:
+        ``sampler.pose(t)`` is :meth:`sample` of one time without resolving anything again,
+        into buffers the next call overwrites; ``sampler.poses(times)`` a batch."""
+        return Sampler(sampler_for(self, clip), joints, mode)
 
     def read_rotations(self, clip: int | str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """A clip's root translation ``(T, 3)`` cm and local rotations ``(T, J, 4)``: the

@@ -13,6 +13,9 @@ Conventions
   Where no spline spans ``u`` (segments of a few frames kept frame by frame, the gap between
   two segments, the loop's wrap) and for every other method, the pose is the normalised lerp
   (shorter arc) of the two decoded frames' rotations and the lerp of their root translations.
+* A :class:`Sampler` is one clip bound for sampling (:meth:`Archive.sampler`): its joints and
+  mode chosen once and its tables packed into two arrays, so one pose per call is a check of
+  the time and one compiled call of three arguments, written into buffers allocated once.
 * A clip's spline coefficients are decoded on its first sample (its residuals are one
   adaptive range-coded stream, so no part decodes alone), no frame evaluated, and kept by the
   archive for later samples; each pose evaluates the spline where it is sampled, and a joint
@@ -21,16 +24,18 @@ Conventions
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion.codec._decode_kernels import sample_poses
+from quatmotion.codec._decode_kernels import PACK_HEAD, pose_packed, poses_packed, sample_poses
 from quatmotion.codec.channels import _kernel_tables
 from quatmotion.codec.repair import correction_lever
 from quatmotion.codec.spline import segment_tables
 from quatmotion.errors import FormatError
 
-__all__ = ["ClipSampler", "MODES", "sampler_for"]
+__all__ = ["ClipSampler", "MODES", "Sampler", "sampler_for"]
 
 MODES = ("clamp", "loop")
 _CACHED_CLIPS = 16
@@ -85,6 +90,7 @@ class ClipSampler:
         self._names = {n: j for j, n in enumerate(parts.skeleton.joint_names)}
         self._all = np.arange(parts.skeleton.n_joints, dtype=np.int64)
         self._selections: dict[bytes, tuple] = {}
+        self._bound: Sampler | None = None
         L = layout
         self._rotation = tuple(
             np.ascontiguousarray(x)
@@ -156,8 +162,17 @@ class ClipSampler:
         self._selections[key] = cached
         return cached
 
+    def bound(self) -> Sampler:
+        """The :class:`Sampler` of every joint, clamped (made once)."""
+        if self._bound is None:
+            self._bound = Sampler(self, None, "clamp")
+        return self._bound
+
     def sample(self, times, joints=None, *, mode: str = "clamp"):
         """See :meth:`quatmotion.codec.archive.Archive.sample`."""
+        if joints is None and type(times) is float and mode == "clamp" and math.isfinite(times):
+            root, rot = self.bound().pose(times)  # the one-pose path
+            return root.copy(), rot.copy()
         sel = self._all if joints is None else self._joints(joints)
         u, scalar = self._positions(times, mode)
         P, cols, scale, sel = self._tables(sel)
@@ -177,6 +192,72 @@ class ClipSampler:
         for j in sel:
             cols.append(np.arange(L.starts[j], L.starts[j] + L.counts[j]))
         return np.unique(np.concatenate(cols))
+
+
+class Sampler:
+    """One clip bound for sampling: a joint selection and a mode chosen once, the clip's
+    tables packed into two arrays and the output buffers allocated once (made by
+    :meth:`quatmotion.codec.archive.Archive.sampler`).
+
+    Attributes
+    ----------
+    joints : ndarray of int, shape (k,)
+        The joints sampled, in the order of the rotations returned.
+    fps : float
+    n_frames : int
+    mode : {"clamp", "loop"}
+    """
+
+    def __init__(self, clip: ClipSampler, joints=None, mode: str = "clamp"):
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(map(repr, MODES))}, not {mode!r}")
+        sel = clip._all if joints is None else clip._joints(joints)
+        P, cols, scale, sel = clip._tables(sel)
+        kinds, starts, counts, dof_axes, pre, ref = clip._rotation
+        corr = clip._corr
+        segs, knots = clip._segs, clip._knots
+        J, k = len(kinds), len(sel)
+        head = np.zeros(PACK_HEAD, dtype=np.int64)
+        head[:9] = (len(segs), len(cols), len(P), J, corr.shape[0], corr.shape[1], k,
+                    len(knots), mode == "loop")  # fmt: skip
+        ints = (head, segs, cols, sel, kinds, starts, counts, dof_axes)
+        floats = (np.array([clip.fps]), knots, P, scale, corr, pre, ref)
+        self._I = np.concatenate([np.ravel(a).astype(np.int64) for a in ints])
+        at = sum(np.size(a) for a in floats)
+        self._F = np.concatenate([np.ravel(a).astype(np.float64) for a in floats] +
+                                 [np.zeros(3 + 4 * k + 1)])  # fmt: skip
+        self._root = self._F[at : at + 3]
+        self._rot = self._F[at + 3 : at + 3 + 4 * k].reshape(k, 4)
+        self._clip = clip
+        self.joints = sel
+        self.fps = clip.fps
+        self.n_frames = clip.n_frames
+        self.mode = mode
+
+    def pose(self, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Root translation ``(3,)`` cm and rotations ``(k, 4)`` at ``t`` seconds: views of
+        this sampler's buffers, overwritten by its next call (copy to keep them).
+
+        Raises
+        ------
+        ValueError
+            A time that is not a finite number.
+        """
+        t = float(t)
+        if not math.isfinite(t):
+            raise ValueError("times: every time must be finite (seconds)")
+        pose_packed(t, self._I, self._F)
+        return self._root, self._rot
+
+    def poses(self, times) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Root translations ``(n, 3)`` and rotations ``(n, k, 4)`` at ``times`` ``(n,)``
+        seconds (new arrays)."""
+        u, _ = self._clip._positions(np.atleast_1d(np.asarray(times, dtype=np.float64)),
+                                     self.mode)  # fmt: skip
+        root = np.empty((len(u), 3))
+        rot = np.empty((len(u), len(self.joints), 4))
+        poses_packed(u, self._I, self._F, root, rot)
+        return root, rot
 
 
 def sampler_for(archive, clip: int | str) -> ClipSampler:
