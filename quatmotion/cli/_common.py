@@ -49,6 +49,7 @@ __all__ = [
     "Outputs",
     "SchedulerOption",
     "SkeletonOption",
+    "TakeOption",
     "TranslationsOption",
     "UnitsOption",
     "WorkersOption",
@@ -193,6 +194,16 @@ UnitsOption = Annotated[
 ]
 """``--units`` of every command that reads motion (:func:`read_clip`, and the library's batch
 functions: ``units=``): the command receives a unit name or a float."""
+TakeOption = Annotated[
+    str | None,
+    typer.Option(
+        "--take",
+        help="The take of an FBX file (the animation of a glTF file) to read, by name or by "
+        "number from 0. Default: the first (a warning names the others).",
+        show_default=False,
+    ),
+]
+
 TranslationsOption = Annotated[
     str,
     typer.Option(
@@ -292,6 +303,7 @@ def read_clip(
     *,
     strict: bool = False,
     translations: str = "auto",
+    take: str | None = None,
 ) -> Motion:
     """Read a motion file given on the command line, warning about doubtful content (and
     what the reader tolerated or assumed: :func:`quatmotion.io.read_motion_checked`).
@@ -310,8 +322,12 @@ def read_clip(
         warning about it: for commands that compute on world positions.
     translations : str
         ``--bvh-translations`` (:data:`quatmotion.io.TRANSLATION_MODES` or ``"auto"``).
+    take : str, optional
+        ``--take``: an FBX file's take (a glTF file's animation), by name or number.
     """
     from quatmotion.io import MOTION_SUFFIXES, read_motion_checked
+    from quatmotion.io.fbx import FBX_SUFFIXES
+    from quatmotion.io.gltf import GLTF_SUFFIXES
 
     require_file(path)
     if path.suffix.lower() not in MOTION_SUFFIXES:
@@ -326,7 +342,11 @@ def read_clip(
     check_translations(translations)
     if translations != "auto" and path.suffix.lower() != ".bvh":
         raise CliInputError(f"{path}: --bvh-translations applies to BVH input only")
-    motion, doubts = read_motion_checked(path, skeleton, units=units, translations=translations)
+    if take is not None and path.suffix.lower() not in (*FBX_SUFFIXES, *GLTF_SUFFIXES):
+        raise CliInputError(f"{path}: --take applies to FBX and glTF input only")
+    motion, doubts = read_motion_checked(
+        path, skeleton, units=units, translations=translations, animation=take
+    )
     for doubt in doubts:
         if strict and doubt.kind == "far":
             raise CliInputError(f"{path}: {doubt.message}: not human motion capture")
@@ -358,7 +378,8 @@ def unit_label(skeleton: Skeleton) -> dict[str, object]:
     ``unit``: a name of :data:`quatmotion.io.LENGTH_UNITS`, or ``None`` for another scale;
     ``cm_per_unit``; ``unit_source``: ``"guessed"`` (a BVH's unit guessed from its size),
     ``"given"`` (read with ``--units``), ``"asf"`` (the unit an ASF states), ``"gltf"``
-    (glTF's metres) or ``"cm"`` (a skeleton built in code, in centimetres); ``unit_guessed``.
+    (glTF's metres), ``"fbx"`` (the unit an FBX file states) or ``"cm"`` (a skeleton built
+    in code, in centimetres); ``unit_guessed``.
     """
     from quatmotion.io import unit_reading
 
@@ -571,12 +592,12 @@ def clip_files(out: Path, skeleton: Skeleton) -> list[Path]:
     CliInputError
         For an unknown suffix, or AMC output of a skeleton that did not come from an ASF.
     """
-    from quatmotion.io import MOTION_SUFFIXES
+    from quatmotion.io import WRITTEN_SUFFIXES
 
     suffix = out.suffix.lower()
-    if suffix not in MOTION_SUFFIXES:
+    if suffix not in WRITTEN_SUFFIXES:
         raise CliInputError(
-            f"{out}: unknown output type {out.suffix!r} (expected {', '.join(MOTION_SUFFIXES)})"
+            f"{out}: unknown output type {out.suffix!r} (expected {', '.join(WRITTEN_SUFFIXES)})"
         )
     if suffix == ".amc" and skeleton.extras.get("format") != "asf":
         raise CliInputError(

@@ -16,6 +16,7 @@ from quatmotion.cli._common import (
     JsonOption,
     Outputs,
     SkeletonOption,
+    TakeOption,
     TranslationsOption,
     UnitsOption,
     at_least,
@@ -108,6 +109,19 @@ def _translations_text(skeleton: Skeleton) -> str | None:
     return f"on {joints} joints besides the root, {how} ({said})"
 
 
+def _take_text(skeleton: Skeleton) -> str | None:
+    """Which take of an FBX file was read, of which."""
+    takes = skeleton.extras.get("fbx_takes")
+    if takes is None:
+        return None
+    if not takes:
+        return "none (the file holds no animation)"
+    read = skeleton.extras.get("fbx_take")
+    others = [t for t in takes if t != read]
+    rest = f"; also {', '.join(map(repr, others))} (--take NAME)" if others else ""
+    return f"{read!r} of {len(takes)}{rest}"
+
+
 def _stature(skeleton: Skeleton) -> float | None:
     try:
         from quatmotion.pose.skeleton16 import stature16
@@ -130,6 +144,9 @@ def _skeleton_rows(skeleton: Skeleton, asf: str | None = None) -> list[tuple[str
     translations = _translations_text(skeleton)
     if translations:
         rows.append(("position channels", translations))
+    take = _take_text(skeleton)
+    if take:
+        rows.append(("take", take))
     stature = _stature(skeleton)
     if stature is not None:
         rows.append(("ankle-to-head bone chain (cm)", _cm(stature)))
@@ -150,6 +167,9 @@ def _skeleton_doc(skeleton: Skeleton, asf: str | None = None) -> dict[str, objec
     }
     if asf:
         doc["skeleton_file"] = asf
+    if "fbx_takes" in skeleton.extras:
+        doc["take"] = skeleton.extras["fbx_take"]
+        doc["takes"] = list(skeleton.extras["fbx_takes"])
     if "bvh_translations" in skeleton.extras:
         doc["position_channels"] = skeleton.extras["bvh_translations"]
         doc["position_channels_detected"] = bool(skeleton.extras["bvh_translations_guessed"])
@@ -243,10 +263,11 @@ def _asf_used(file: Path, skeleton: Path | None) -> tuple[Path | None, str | Non
 
 @app.command()
 def info(
-    file: Annotated[Path, typer.Argument(help="A .amc, .bvh or .asf file.")],
+    file: Annotated[Path, typer.Argument(help="A .amc, .bvh, .glb/.gltf, .fbx or .asf file.")],
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
     translations: TranslationsOption = "auto",
+    take: TakeOption = None,
     as_json: JsonOption = False,
 ) -> None:
     """Print a clip's skeleton, unit, frames, fps, duration and body measures (cm)."""
@@ -266,7 +287,7 @@ def info(
             console.print(table)
             return
         asf, asf_text = _asf_used(require_file(file), skeleton)
-        motion = read_clip(file, asf, units, translations=translations)
+        motion = read_clip(file, asf, units, translations=translations, take=take)
         if as_json:
             print_json({"file": str(file), **_motion_doc(motion, asf_text)})
             return
@@ -279,12 +300,14 @@ def convert(
     paths: Annotated[
         list[Path],
         typer.Argument(
-            help="Input clip(s) then the output: a .amc/.bvh file for one input, else a folder."
+            help="Input clip(s) (.amc, .bvh, .glb/.gltf, .fbx) then the output: a .amc, .bvh, "
+            ".glb or .gltf file for one input, else a folder."
         ),
     ],
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
     translations: TranslationsOption = "auto",
+    take: TakeOption = None,
     to: Annotated[str, typer.Option(help="Output format when writing into a folder.")] = "bvh",
     force: ForceOption = False,
 ) -> None:
@@ -293,7 +316,7 @@ def convert(
     An AMC output gets its ASF beside it, same name. Existing files are kept unless --force;
     an input is never overwritten. If a clip fails, nothing written by the command is left.
     """
-    from quatmotion.io import MOTION_SUFFIXES
+    from quatmotion.io import MOTION_SUFFIXES, WRITTEN_SUFFIXES
 
     with user_errors():
         if len(paths) < 2:
@@ -302,15 +325,18 @@ def convert(
         check_units(units)
         check_translations(translations)
         fmt = "." + to.lower().lstrip(".")
-        if fmt not in MOTION_SUFFIXES:
-            raise CliInputError(f"--to must be one of amc, bvh; got {to!r}")
+        if fmt not in WRITTEN_SUFFIXES:
+            written = ", ".join(w.lstrip(".") for w in WRITTEN_SUFFIXES)
+            raise CliInputError(f"--to must be one of {written}; got {to!r}")
         for path in inputs:  # fail before writing anything when an input is missing
             require_file(path)
+        if take is not None and len(inputs) > 1:
+            raise CliInputError("--take names the take of one input; convert several one by one")
         into_folder = len(inputs) > 1 or out.is_dir()
-        if not into_folder and out.suffix.lower() not in MOTION_SUFFIXES:
+        if not into_folder and out.suffix.lower() not in WRITTEN_SUFFIXES:
             raise CliInputError(
                 f"{out}: unknown output type {out.suffix!r} (expected "
-                f"{', '.join(MOTION_SUFFIXES)}, or an existing folder)"
+                f"{', '.join(WRITTEN_SUFFIXES)}, or an existing folder)"
             )
         if into_folder and out.exists() and not out.is_dir():
             raise CliInputError(f"{out}: several inputs need an output folder, not a file")
@@ -333,7 +359,13 @@ def convert(
                 sk = skeleton if alone or not bvh else None
                 how = translations if bvh else "auto"
                 motions.append(
-                    read_clip(path, sk, units if alone or bvh else None, translations=how)
+                    read_clip(
+                        path,
+                        sk,
+                        units if alone or bvh else None,
+                        translations=how,
+                        take=take if alone else None,
+                    )
                 )
                 progress.advance(task)
         planned = [clip_files(t, m.skeleton) for m, t in zip(motions, targets, strict=True)]

@@ -14,6 +14,7 @@ from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
     SkeletonOption,
+    TakeOption,
     UnitsOption,
     check_outputs,
     check_units,
@@ -30,7 +31,9 @@ LIBRARY_SEPARATOR = "::"
 """``LIB.qmz::CLIP`` names one clip of a compressed library."""
 
 
-def _read(spec: str, skeleton: Path | None, units: str | None = None) -> Motion:
+def _read(
+    spec: str, skeleton: Path | None, units: str | None = None, take: str | None = None
+) -> Motion:
     """The clip named on the command line: a motion file, or ``LIB.qmz::CLIP``."""
     if LIBRARY_SEPARATOR in spec:
         library, clip = spec.split(LIBRARY_SEPARATOR, 1)
@@ -41,7 +44,7 @@ def _read(spec: str, skeleton: Path | None, units: str | None = None) -> Motion:
         with codec.Archive.open(require_file(Path(library))) as archive:
             motion = archive.read(clip)
         return dataclasses.replace(motion, name=f"{Path(library).name}::{clip}")
-    return read_clip(Path(spec), skeleton, units)
+    return read_clip(Path(spec), skeleton, units, take=take)
 
 
 def _decoded(motion: Motion) -> Motion:
@@ -60,7 +63,9 @@ def _decoded(motion: Motion) -> Motion:
 def view(
     files: Annotated[
         list[str],
-        typer.Argument(help="Clips: .amc/.bvh files (a .qmz clip as LIB.qmz::CLIP)."),
+        typer.Argument(
+            help="Clips: .amc, .bvh, .glb/.gltf or .fbx files (a .qmz clip as LIB.qmz::CLIP)."
+        ),
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="HTML page to write.")] = Path(
         "view.html"
@@ -86,6 +91,7 @@ def view(
     ] = None,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    take: TakeOption = None,
     force: ForceOption = False,
 ) -> None:
     """Write a standalone 3D viewer page (opens offline; frames count from 0)."""
@@ -100,7 +106,7 @@ def view(
         check_units(units)
         inputs = [Path(spec.split(LIBRARY_SEPARATOR)[0]) for spec in [*files, *(compare or [])]]
         check_outputs([out], [*inputs, skeleton], force=force)
-        motions = [_read(spec, skeleton, units) for spec in files]
+        motions = [_read(spec, skeleton, units, take) for spec in files]
         others = None
         if compare:
             if len(compare) != len(files):

@@ -63,7 +63,7 @@ QMZ_FORMAT = FileFormat("qmz", FORMAT_VERSION, 1, "a .qmz motion library")
 """The ``.qmz`` format's name and versions (the one version check, :mod:`quatmotion._format`)."""
 PREAMBLE_BYTES = len(MAGIC) + 2
 TAGS = {b"H": "header", b"S": "skeleton", b"L": "library", b"C": "clip"}
-SOURCE_FORMATS = ("", "amc", "bvh", "glb", "gltf")  # codes append-only: a code never changes
+SOURCE_FORMATS = ("", "amc", "bvh", "glb", "gltf", "fbx")  # codes append-only: a code never changes
 
 
 @dataclass(frozen=True)

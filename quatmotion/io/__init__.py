@@ -1,4 +1,4 @@
-"""Motion-capture file formats: ASF/AMC and BVH readers and writers.
+"""Motion-capture file formats: ASF/AMC, BVH and glTF readers and writers, FBX in.
 
 Every reader raises :class:`quatmotion.FormatError` (naming the file and line) on malformed
 input; every writer writes a temporary file and renames it over the target.
@@ -35,6 +35,7 @@ from quatmotion.io.files import (
     FAR_CM,
     MOTION_SUFFIXES,
     PLAUSIBLE_FPS,
+    WRITTEN_SUFFIXES,
     Doubt,
     find_motion_files,
     implausible_values,
@@ -63,6 +64,7 @@ __all__ = [
     "PLAUSIBLE_FIGURE_CM",
     "PLAUSIBLE_FPS",
     "TRANSLATION_MODES",
+    "WRITTEN_SUFFIXES",
     "asf_bone_end_positions",
     "asf_extras",
     "asf_text",

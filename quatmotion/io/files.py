@@ -17,6 +17,7 @@ from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.io._text import decode_text
 from quatmotion.io.asf_amc import parse_amc, parse_asf, read_amc, write_amc
 from quatmotion.io.bvh import parse_bvh, read_bvh, write_bvh
+from quatmotion.io.fbx import FBX_SUFFIXES, parse_fbx, read_fbx
 from quatmotion.io.gltf import GLTF_SUFFIXES, parse_gltf, read_gltf, write_gltf
 from quatmotion.io.units import (
     LENGTH_UNITS,
@@ -32,6 +33,7 @@ __all__ = [
     "FAR_CM",
     "MOTION_SUFFIXES",
     "PLAUSIBLE_FPS",
+    "WRITTEN_SUFFIXES",
     "Doubt",
     "find_motion_files",
     "implausible_values",
@@ -43,8 +45,10 @@ __all__ = [
     "write_motion",
 ]
 
-MOTION_SUFFIXES = (".amc", ".bvh", *GLTF_SUFFIXES)
+MOTION_SUFFIXES = (".amc", ".bvh", *GLTF_SUFFIXES, *FBX_SUFFIXES)
 """File suffixes of motion clips (compared case-insensitively)."""
+WRITTEN_SUFFIXES = (".amc", ".bvh", *GLTF_SUFFIXES)
+"""File suffixes :func:`write_motion` writes (FBX is read, not written)."""
 
 
 def find_motion_files(paths: Iterable[str | Path]) -> list[Path]:
@@ -108,19 +112,21 @@ def read_motion(
     ----------
     path : str or Path
         ``.amc`` (Acclaim; the skeleton is found by naming convention unless given),
-        ``.bvh``, or glTF 2.0 ``.glb`` / ``.gltf`` (:func:`quatmotion.io.gltf.read_gltf`).
+        ``.bvh``, glTF 2.0 ``.glb`` / ``.gltf`` (:func:`quatmotion.io.gltf.read_gltf`) or
+        ``.fbx`` (:func:`quatmotion.io.fbx.read_fbx`).
     skeleton : Skeleton, str, Path or None
         For ``.amc`` only: the skeleton or its ASF path (see :func:`read_amc`).
     units : str, float or None
         The file's length unit, a name of :data:`LENGTH_UNITS` or centimetres per unit.
-        ``None``: a BVH's is guessed (see :func:`read_bvh`), an ASF's is the one it states,
-        glTF's is the metre; given, it replaces the ASF's or the metre (an exporter that wrote
-        ``:units length 0.01`` for metres, or centimetres into a glTF).
+        ``None``: a BVH's is guessed (see :func:`read_bvh`), an ASF's and an FBX's is the one
+        it states, glTF's is the metre; given, it replaces the stated one (an exporter that
+        wrote ``:units length 0.01`` for metres, or centimetres into a glTF).
     translations : str
         For ``.bvh`` only: what position channels mean (:data:`TRANSLATION_MODES` or
         ``"auto"``, see :func:`read_bvh`).
     animation : str, int or None
-        For glTF only: the animation's name or position (the first when None).
+        For glTF and FBX: the animation's (an FBX take's) name or position (the first when
+        None).
 
     Returns
     -------
@@ -145,6 +151,10 @@ def read_motion(
         if skeleton is not None:
             raise ValueError("a glTF file carries its own skeleton; do not pass one")
         return read_gltf(path, animation, units=units)
+    if suffix in FBX_SUFFIXES:
+        if skeleton is not None:
+            raise ValueError("an FBX file carries its own skeleton; do not pass one")
+        return read_fbx(path, animation, units=units)
     raise ValueError(
         f"unknown motion file type {path.suffix!r} (expected one of {MOTION_SUFFIXES})"
     )
@@ -182,6 +192,8 @@ def parse_motion(
     name: str,
     skeleton: Skeleton | bytes | None = None,
     skeleton_name: str = "skeleton.asf",
+    *,
+    animation: str | int | None = None,
 ) -> Motion:
     """Read a motion from the bytes of a file: :func:`read_motion` without a file (an upload).
 
@@ -191,8 +203,8 @@ def parse_motion(
     Parameters
     ----------
     data : bytes
-        The whole ``.amc``, ``.bvh``, ``.glb`` or ``.gltf`` file (a ``.gltf`` with its data
-        embedded).
+        The whole ``.amc``, ``.bvh``, ``.glb``, ``.gltf`` (its data embedded) or ``.fbx``
+        file.
     name : str
         Its file name.
     skeleton : Skeleton, bytes or None
@@ -200,6 +212,8 @@ def parse_motion(
         bytes of its ASF file.
     skeleton_name : str
         The ASF's file name, when ``skeleton`` is bytes.
+    animation : str, int or None
+        For glTF and FBX: the animation (take) by name or position, the first when None.
 
     Returns
     -------
@@ -220,7 +234,11 @@ def parse_motion(
     if suffix in GLTF_SUFFIXES:
         if skeleton is not None:
             raise ValueError("a glTF file carries its own skeleton; do not pass one")
-        return parse_gltf(data, name)
+        return parse_gltf(data, name, animation)
+    if suffix in FBX_SUFFIXES:
+        if skeleton is not None:
+            raise ValueError("an FBX file carries its own skeleton; do not pass one")
+        return parse_fbx(data, name, animation)
     if suffix == ".amc":
         if skeleton is None:
             raise FormatError("an AMC holds no skeleton: give its ASF file too", name)
@@ -255,7 +273,7 @@ def write_motion(motion: Motion, path: str | Path) -> None:
         write_gltf(motion, path)
     else:
         raise ValueError(
-            f"unknown motion file type {path.suffix!r} (expected one of {MOTION_SUFFIXES})"
+            f"cannot write motion file type {path.suffix!r} (written: {WRITTEN_SUFFIXES})"
         )
 
 

@@ -18,7 +18,7 @@ from quatmotion.errors import ClipNameError
 __all__ = ["match_clip"]
 
 # io.files.MOTION_SUFFIXES (importing it here would be circular)
-_SUFFIXES = (".amc", ".bvh", ".glb", ".gltf")
+_SUFFIXES = (".amc", ".bvh", ".glb", ".gltf", ".fbx")
 
 
 def _bare(text: str) -> tuple[str, ...]:

@@ -55,7 +55,7 @@ _FEATURE_PARAMETERS = {
     "dictionary_max_fps": feat.DICTIONARY_MAX_FPS,
     "dictionary_max_iter": feat.DICTIONARY_MAX_ITER,
 }
-_SUFFIXES = (".amc", ".bvh", ".glb", ".gltf")
+_SUFFIXES = (".amc", ".bvh", ".glb", ".gltf", ".fbx")  # io.MOTION_SUFFIXES, without importing io
 _NPY_HEADER = re.compile(
     r"\{'descr': '([<>|][a-z]\d+)', 'fortran_order': False, 'shape': \(([\d, ]*)\), \}"
 )

@@ -1,0 +1,542 @@
+"""FBX (``.fbx``, binary or ASCII) in: the skeleton and one take, through ``ufbx``.
+
+``ufbx`` (the Python wheel of the single-file C loader; no FBX SDK) parses the file and
+evaluates every node's local transform as the FBX SDK defines it: pre- and post-rotations,
+rotation order, pivots and offsets, inherit modes. This module only asks it for numbers and
+turns them into a :class:`~quatmotion.motion.Motion`.
+
+Conventions
+-----------
+* The skeleton: the limb and joint nodes (FBX ``LimbNode``/``Limb``/``Root``: ufbx's bone
+  attribute) under one root, parents first, file order among siblings; nodes that are no bone
+  but sit between two bones (a ``Null`` in a chain) are joints too. A file with several
+  skeletons has its largest read (a ``FormatWarning`` names the others' roots); a file with no
+  bone reads the node tree that holds no mesh, camera or light, when it has more than one node.
+  A leaf named as an end (``*_end``, ``*_End``, ``*Nub``, ``*EndSite``) whose translation never
+  moves is an end site, as a BVH's ``End Site``.
+* Space: ufbx converts the file's axes to right-handed Y up (front +Z) and its unit to the
+  centimetre; the transforms of the skeleton root's ancestors (an ``Armature`` node's turn and
+  scale of 100, a scene's up-axis conversion) are composed into the root. The length unit the
+  file states is kept as ``extras["length_scale"]`` (cm per file unit); ``units`` replaces it.
+* Rotations: each joint's world rotation at rest (the nodes' transforms without animation) is
+  taken out, so the skeleton's rest pose (every local rotation the identity) is the file's rest
+  pose, as a BVH's, and the offsets are the rest pose's bones in the world frame. A joint's
+  local rotation per frame is ``W_p R_j W_j^-1`` of its animated local rotation ``R_j`` and
+  the rest world rotations ``W``. Positions are those the FBX SDK computes, to float rounding.
+* A take (an FBX animation stack) is sampled at the file's frame rate (a rate within 0.1 % of
+  a whole number is that number), from its start to its end, every frame evaluated by ufbx: no
+  key reduction, no resampling of our own. A joint whose translation moves relative to its
+  parent (beyond 1e-4 cm) makes the clip carry ``joint_translations``. A file without takes
+  gives a clip of no frames.
+* The skeleton's ``extras``: ``format="fbx"``, ``length_scale``, ``fbx_take`` (the take
+  read), ``fbx_takes`` (every take's name), ``fbx_up`` (the file's up axis, ``"+Y"``...).
+
+ufbx 0.0.5's Python binding has two faults that crash the interpreter (a segmentation fault,
+not an exception), both guarded here and tested in a child process:
+
+1. an element fetched from a list (``scene.nodes[i]``, ``scene.anim_stacks[i]``, iterating
+   them) comes back one reference short: the binding's element cache keeps a pointer it does
+   not own, so the second fetch, or the cache's own clean-up, touches a freed object.
+   :func:`_element` gives the reference back (only when the binding is measured to be short:
+   a fixed release is left alone);
+2. a scene whose elements were fetched and that is left to Python's cycle collector (at
+   interpreter exit, or any collection) crashes it. Every scene is freed explicitly
+   (``scene.free()``) before its last reference goes, and nothing of ufbx outlives the read:
+   everything is copied into NumPy first.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from quatmotion import quat
+from quatmotion.errors import FormatError, FormatWarning
+from quatmotion.io.gltf import _unique
+from quatmotion.io.units import length_unit
+from quatmotion.motion import Motion, Skeleton
+
+__all__ = ["FBX_SUFFIXES", "fbx_takes", "parse_fbx", "read_fbx"]
+
+FBX_SUFFIXES = (".fbx",)
+CM_PER_METRE = 100.0
+MOVING_TRANSLATION_CM = 1e-4
+"""A joint whose offset from its parent varies more than this over a take carries
+``joint_translations`` (float32 keys of centimetre translations vary by ~1e-6 cm)."""
+MAX_SAMPLES = 50_000_000
+"""Frames times nodes evaluated for one take at most: beyond, the file is refused (a take of
+hours at 120 frames per second on a 100-joint rig is 10 times less)."""
+
+_END_NAME = re.compile(r"(?:[_\-.\s]end|nub|end_?site)$", re.IGNORECASE)
+
+
+def read_fbx(
+    path: str | Path, take: str | int | None = None, *, units: str | float | None = None
+) -> Motion:
+    """Read the skeleton and one take of an FBX file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A binary or ASCII ``.fbx`` file.
+    take : str, int or None
+        The take (animation stack) by name or position; None reads the first (a
+        ``FormatWarning`` names the others when there are several).
+    units : str, float or None
+        A length unit replacing the one the file states (a name of
+        :data:`quatmotion.io.units.LENGTH_UNITS` or cm per file unit), for files written in
+        the wrong unit. Kept with ``extras["length_unit_given"] = True``.
+
+    Returns
+    -------
+    Motion
+        Centimetres, Y up, local rotations w first.
+
+    Raises
+    ------
+    FormatError
+        Naming the file: not FBX, truncated or malformed, no skeleton, no such take.
+    """
+    path = Path(path)
+    return parse_fbx(path.read_bytes(), path, take, units=units)
+
+
+def parse_fbx(
+    data: bytes,
+    path: str | Path,
+    take: str | int | None = None,
+    *,
+    units: str | float | None = None,
+) -> Motion:
+    """:func:`read_fbx` of the bytes of a file (``path`` only names it; it is not opened)."""
+    path = Path(path)
+    cm_given = None if units is None else length_unit(units)
+    with _Scene(data, path) as scene:
+        return _Reader(scene, path).motion(take, cm_given)
+
+
+def fbx_takes(data: bytes, path: str | Path) -> list[str]:
+    """The names of the takes (animation stacks) of an FBX file's bytes, in file order."""
+    with _Scene(data, Path(path)) as scene:
+        return [stack.name for stack in _elements(scene, scene.anim_stacks)]
+
+
+# --------------------------------------------------------------------------------------------
+# The ufbx binding, guarded
+# --------------------------------------------------------------------------------------------
+
+
+def _ufbx() -> Any:
+    try:
+        import ufbx
+    except ImportError as error:  # pragma: no cover - a dependency of the package
+        raise ImportError(
+            f"reading FBX needs the ufbx package ({error}): pip install 'ufbx>=0.0.5'"
+        ) from None
+    return ufbx
+
+
+class _Scene:
+    """A loaded ufbx scene, freed on leaving the ``with`` block whatever happened (fault 2)."""
+
+    def __init__(self, data: bytes, path: Path) -> None:
+        self.data = bytes(data)
+        self.path = path
+        self.scene: Any = None
+
+    def __enter__(self) -> Any:
+        ufbx = _ufbx()
+        if not self.data.lstrip()[:1]:
+            raise FormatError("an empty file is no FBX", self.path)
+        try:
+            self.scene = ufbx.load_memory(
+                self.data,
+                file_format=ufbx.FileFormat.FBX,
+                no_format_from_content=True,
+                no_format_from_extension=True,
+                ignore_geometry=True,
+                ignore_embedded=True,
+                load_external_files=False,
+                target_axes=ufbx.axes_right_handed_y_up,
+                target_unit_meters=1.0 / CM_PER_METRE,
+                space_conversion=ufbx.SpaceConversion.TRANSFORM_ROOT,
+                inherit_mode_handling=ufbx.InheritModeHandling.COMPENSATE,
+                pivot_handling=ufbx.PivotHandling.RETAIN,
+            )
+        except ufbx.UfbxError as error:
+            message = str(error).strip().splitlines()[0] if str(error).strip() else ""
+            raise FormatError(
+                f"not a readable FBX file ({type(error).__name__}: {message})", self.path
+            ) from None
+        return self.scene
+
+    def __exit__(self, *exc: object) -> None:
+        if self.scene is not None:
+            self.scene.free()
+            self.scene = None
+
+
+_SHORT_REFERENCE: bool | None = None
+"""Whether the binding returns list elements one reference short (fault 1), measured once."""
+
+
+def _elements(scene: Any, listed: Any) -> list[Any]:
+    """Every element of a ufbx element list, each fetched once, references made whole."""
+    return [_element(listed, i) for i in range(len(listed))]
+
+
+def _element(listed: Any, i: int) -> Any:
+    """``listed[i]`` with the reference the binding forgets given back (fault 1).
+
+    Measured on the first fetch of the process: a correct binding returns a new element with
+    two references (the caller's and its cache's), plus ``getrefcount``'s own.
+    """
+    global _SHORT_REFERENCE
+    element = listed[i]
+    if _SHORT_REFERENCE is None:
+        _SHORT_REFERENCE = sys.getrefcount(element) <= 2
+    if _SHORT_REFERENCE:
+        import ctypes
+
+        increment = ctypes.pythonapi.Py_IncRef
+        increment.argtypes = [ctypes.py_object]
+        increment.restype = None
+        increment(element)
+    return element
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+
+
+def _transform(t: Any) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
+    """A ufbx Transform as (translation xyz, rotation wxyz, scale xyz)."""
+    tr, r, s = t.translation, t.rotation, t.scale
+    return (tr.x, tr.y, tr.z), (r.w, r.x, r.y, r.z), (s.x, s.y, s.z)
+
+
+class _Reader:
+    def __init__(self, scene: Any, path: Path) -> None:
+        self.scene = scene
+        self.path = path
+        ufbx = _ufbx()
+        self.bone_type = ufbx.ElementType.BONE
+        self.other_types = {
+            ufbx.ElementType.MESH,
+            ufbx.ElementType.CAMERA,
+            ufbx.ElementType.LIGHT,
+        }
+
+    def fail(self, message: str) -> FormatError:
+        return FormatError(message, self.path)
+
+    # --- structure ----------------------------------------------------------------------------
+
+    def nodes(self) -> tuple[list[Any], list[int]]:
+        """Every node (fetched once) and its parent's position in that list (-1: none)."""
+        nodes = _elements(self.scene, self.scene.nodes)
+        index = {node.element_id: k for k, node in enumerate(nodes)}
+        parents = []
+        for node in nodes:
+            parent = node.parent
+            parents.append(-1 if parent is None else index.get(parent.element_id, -1))
+        return nodes, parents
+
+    def skeleton_nodes(self, nodes: list[Any], parents: list[int]) -> tuple[list[int], list[int]]:
+        """The joints (node positions, parents first) and their parents (joint positions)."""
+        children: list[list[int]] = [[] for _ in nodes]
+        for k, p in enumerate(parents):
+            if p >= 0:
+                children[p].append(k)
+        bones = {k for k, node in enumerate(nodes) if node.attrib_type == self.bone_type}
+        if bones:
+            roots = [k for k in bones if not self._has_bone_above(k, parents, bones)]
+        else:  # no limb nodes: the node tree of no mesh, camera or light
+            bones = {
+                k
+                for k, node in enumerate(nodes)
+                if parents[k] >= 0 and node.attrib_type not in self.other_types
+            }
+            roots = [k for k in bones if parents[k] not in bones]
+        if not roots:
+            raise self.fail("no skeleton: the file has no limb or joint nodes")
+        members = {root: self._members(root, children, bones) for root in sorted(roots)}
+        root = max(members, key=lambda r: len(members[r]))
+        if len(members[root]) < 2:
+            raise self.fail("no skeleton: no node tree of two joints or more")
+        others = [nodes[r].name for r in members if r != root and len(members[r]) > 1]
+        if others:
+            warnings.warn(
+                FormatWarning(
+                    f"the file holds {len(others) + 1} skeletons: the largest, under "
+                    f"{nodes[root].name!r} ({len(members[root])} joints), is read; not "
+                    f"{', '.join(repr(o) for o in others[:5])}",
+                    self.path,
+                ),
+                stacklevel=4,
+            )
+        keep = members[root]
+        order: list[int] = []
+        joint_parents: list[int] = []
+        stack = [(root, -1)]
+        while stack:
+            k, parent = stack.pop()
+            order.append(k)
+            joint_parents.append(parent)
+            here = len(order) - 1
+            for child in reversed(children[k]):
+                if child in keep:
+                    stack.append((child, here))
+        return order, joint_parents
+
+    @staticmethod
+    def _has_bone_above(k: int, parents: list[int], bones: set[int]) -> bool:
+        p = parents[k]
+        while p >= 0:
+            if p in bones:
+                return True
+            p = parents[p]
+        return False
+
+    @staticmethod
+    def _members(root: int, children: list[list[int]], bones: set[int]) -> set[int]:
+        """The root, the bones below it and the nodes between them (a Null in a chain)."""
+        keep: set[int] = set()
+
+        def visit(k: int) -> bool:  # whether k or a node below is a bone
+            below = [visit(c) for c in children[k]]
+            if k in bones or any(below):
+                keep.add(k)
+                return True
+            return False
+
+        visit(root)
+        return keep
+
+    # --- the motion ---------------------------------------------------------------------------
+
+    def takes(self) -> list[Any]:
+        return _elements(self.scene, self.scene.anim_stacks)
+
+    def choose_take(self, stacks: list[Any], wanted: str | int | None) -> Any:
+        names = [s.name for s in stacks]
+        if wanted is None:
+            if len(stacks) > 1:
+                warnings.warn(
+                    FormatWarning(
+                        f"the file holds {len(stacks)} takes ({', '.join(map(repr, names[:8]))}"
+                        f"{'...' if len(names) > 8 else ''}); the first is read (--take NAME "
+                        "for another)",
+                        self.path,
+                    ),
+                    stacklevel=4,
+                )
+            return stacks[0] if stacks else None
+        number = isinstance(wanted, int) or (isinstance(wanted, str) and wanted.isdigit())
+        if number and wanted not in names:  # a take named "2" is that take, not the third
+            k = int(wanted)
+            if not 0 <= k < len(stacks):
+                raise self.fail(f"no take {k}: the file has {len(stacks)}")
+            return stacks[k]
+        if wanted not in names:
+            raise self.fail(f"no take named {wanted!r}; the file has {names}")
+        return stacks[names.index(wanted)]
+
+    def frame_rate(self) -> tuple[float, float]:
+        """(the rate frames are evaluated at, the rate reported), frames per second."""
+        fps = float(self.scene.settings.frames_per_second)
+        if not np.isfinite(fps) or fps <= 0:
+            raise self.fail(f"the frame rate is {fps!r} frames per second")
+        rounded = float(round(fps))
+        return fps, rounded if rounded and abs(fps - rounded) <= 1e-3 * fps else fps
+
+    def motion(self, wanted: str | int | None, cm_given: float | None) -> Motion:
+        nodes, parents = self.nodes()
+        order, joint_parents = self.skeleton_nodes(nodes, parents)
+        chain = []  # the skeleton root's ancestors, from the scene's root down
+        p = parents[order[0]]
+        while p >= 0:
+            chain.append(p)
+            p = parents[p]
+        chain.reverse()
+        stacks = self.takes()
+        stack = self.choose_take(stacks, wanted)
+        fps_file, fps = self.frame_rate()
+        if stack is None:
+            times = np.zeros(0)
+        else:
+            begin, end = float(stack.time_begin), float(stack.time_end)
+            if not (np.isfinite(begin) and np.isfinite(end)) or end < begin:
+                raise self.fail(f"take {stack.name!r} runs from {begin} s to {end} s")
+            count = int(round((end - begin) * fps_file)) + 1
+            if count * (len(order) + len(chain)) > MAX_SAMPLES:
+                raise self.fail(
+                    f"take {stack.name!r} has {count} frames of {len(order)} joints: over "
+                    f"{MAX_SAMPLES} samples"
+                )
+            times = begin + np.arange(count) / fps_file
+        evaluated = [nodes[k] for k in (*chain, *order)]
+        rest = [_transform(node.local_transform) for node in evaluated]
+        anim = None if stack is None else stack.anim
+        frames = [
+            [_transform(node.evaluate_transform(anim, float(t))) for node in evaluated]
+            for t in times
+        ]
+        up = _axis_name(self.scene.settings.axes.up)  # the file's, before conversion
+        stated_cm = float(self.scene.settings.original_unit_meters) * CM_PER_METRE
+        if not np.isfinite(stated_cm) or stated_cm <= 0:
+            stated_cm = CM_PER_METRE / 100.0  # FBX's default unit: the centimetre
+        scale = 1.0 if cm_given is None else cm_given / stated_cm
+        names = [nodes[k].name or f"node{k}" for k in order]
+        extras = {
+            "format": "fbx",
+            "length_scale": stated_cm if cm_given is None else cm_given,
+            "fbx_take": None if stack is None else stack.name,
+            "fbx_takes": tuple(s.name for s in stacks),
+            "fbx_up": up,
+            **({"length_unit_given": True} if cm_given is not None else {}),
+        }
+        return _build(
+            rest,
+            frames,
+            n_chain=len(chain),
+            joint_parents=joint_parents,
+            names=names,
+            scale=scale,
+            fps=fps,
+            extras=extras,
+            name=self.path.stem,
+            path=self.path,
+        )
+
+
+def _axis_name(axis: Any) -> str | None:
+    name = getattr(axis, "name", "")
+    if not name or name == "UNKNOWN":
+        return None
+    sign, _, letter = name.partition("_")
+    return ("+" if sign == "POSITIVE" else "-") + letter
+
+
+def _world(
+    translations: NDArray, rotations: NDArray, scales: NDArray, parents: list[int]
+) -> tuple[NDArray, NDArray]:
+    """World linear maps ``(T, N, 3, 3)`` and positions ``(T, N, 3)`` of nodes listed parents
+    first (``parents[k] < k``, -1 for none), from local translations, rotations (wxyz) and
+    scales ``(T, N, ...)``: ``M = M_parent @ (T R S)``."""
+    T, N = translations.shape[:2]
+    local = quat.to_matrix(rotations) * scales[..., None, :]
+    linear = np.empty((T, N, 3, 3))
+    position = np.empty((T, N, 3))
+    for k in range(N):
+        p = parents[k]
+        if p < 0:
+            linear[:, k] = local[:, k]
+            position[:, k] = translations[:, k]
+        else:
+            linear[:, k] = linear[:, p] @ local[:, k]
+            position[:, k] = position[:, p] + np.einsum(
+                "tij,tj->ti", linear[:, p], translations[:, k]
+            )
+    return linear, position
+
+
+def _rotation(linear: NDArray) -> NDArray:
+    """The rotation (wxyz) of linear maps that are a rotation times a positive scale."""
+    columns = np.linalg.norm(linear, axis=-2, keepdims=True)
+    return quat.normalize(quat.from_matrix(linear / np.where(columns > 0, columns, 1.0)))
+
+
+def _build(
+    rest: list,
+    frames: list,
+    *,
+    n_chain: int,
+    joint_parents: list[int],
+    names: list[str],
+    scale: float,
+    fps: float,
+    extras: dict,
+    name: str,
+    path: Path,
+) -> Motion:
+    """The Motion of nodes' local transforms: ``rest`` per node, ``frames`` per frame per node
+    (the root's ancestors first, ``n_chain`` of them, then the joints)."""
+    N = len(rest)
+    parents = [k - 1 for k in range(n_chain)]  # the ancestors: a chain
+    parents += [(n_chain - 1) if p < 0 else n_chain + p for p in joint_parents]
+    t_rest = np.array([[r[0] for r in rest]], dtype=np.float64).reshape(1, N, 3)
+    r_rest = np.array([[r[1] for r in rest]], dtype=np.float64).reshape(1, N, 4)
+    s_rest = np.array([[r[2] for r in rest]], dtype=np.float64).reshape(1, N, 3)
+    T = len(frames)
+    t_anim = np.array([[f[0] for f in row] for row in frames], dtype=np.float64).reshape(T, N, 3)
+    r_anim = np.array([[f[1] for f in row] for row in frames], dtype=np.float64).reshape(T, N, 4)
+    s_anim = np.array([[f[2] for f in row] for row in frames], dtype=np.float64).reshape(T, N, 3)
+    for array in (t_rest, r_rest, s_rest, t_anim, r_anim, s_anim):
+        if not np.all(np.isfinite(array)):
+            raise FormatError("a node's transform is not finite", path)
+    rest_linear, rest_position = _world(t_rest, r_rest, s_rest, parents)
+    linear, position = _world(t_anim, r_anim, s_anim, parents)
+    joints = slice(n_chain, N)
+    rest_rotation = _rotation(rest_linear[0, joints])  # W_j, (J, 4)
+    rest_position = rest_position[0, joints] * scale
+    position = position[:, joints] * scale
+    J = N - n_chain
+    # G'_j = G_j W_j^-1: the world rotation relative to the rest pose's
+    world = quat.multiply(_rotation(linear[:, joints]), quat.conjugate(rest_rotation)[None])
+    jp = np.asarray(joint_parents, dtype=np.int64)
+    offsets = np.empty((J, 3))
+    offsets[0] = rest_position[0]
+    offsets[1:] = rest_position[1:] - rest_position[jp[1:]]
+    local = world.copy()
+    local[:, 1:] = quat.multiply(quat.conjugate(world[:, jp[1:]]), world[:, 1:])
+    moved = np.zeros((T, J, 3))
+    moved[:, 1:] = quat.rotate(
+        quat.conjugate(world[:, jp[1:]]), position[:, 1:] - position[:, jp[1:]]
+    )
+    drift = np.abs(moved[:, 1:] - offsets[None, 1:]).max(axis=(0, 2)) if T else np.zeros(J - 1)
+    moving = np.concatenate(([False], drift > MOVING_TRANSLATION_CM))
+    leaves = np.ones(J, dtype=bool)
+    leaves[jp[1:]] = False
+    is_site = leaves & ~moving & np.array([bool(_END_NAME.search(n)) for n in names])
+    is_site[0] = False
+    keep = np.flatnonzero(~is_site)
+    renumber = -np.ones(J, dtype=np.int64)
+    renumber[keep] = np.arange(len(keep))
+    sites = np.flatnonzero(is_site)
+    kept_names = _unique([names[j] for j in keep])
+    skeleton = Skeleton(
+        joint_names=tuple(kept_names),
+        parents=np.array([-1] + [renumber[jp[j]] for j in keep[1:]], dtype=np.int64),
+        offsets=offsets[keep],
+        channels=tuple(
+            (("tx", "ty", "tz") if j == 0 or moving[j] else ()) + ("rz", "ry", "rx") for j in keep
+        ),
+        euler="intrinsic",
+        site_names=tuple(_unique([names[s] for s in sites], taken=set(kept_names))),
+        site_parents=renumber[jp[sites]],
+        site_offsets=offsets[sites],
+        name=name,
+        extras=extras,
+    )
+    translations = None
+    if moving.any():
+        translations = np.where(moving[None, keep, None], moved[:, keep], offsets[None, keep])
+    try:
+        return Motion(
+            skeleton,
+            fps,
+            position[:, 0] if T else np.zeros((0, 3)),
+            local[:, keep] if T else np.zeros((0, len(keep), 4)),
+            translations,
+            name=name,
+        )
+    except ValueError as error:
+        raise FormatError(str(error), path) from None

@@ -1,0 +1,255 @@
+"""FBX in (issue 31): files a real exporter wrote (Blender, tools/make_fbx_fixtures.py) read
+back to the BVH they came from within 0.01 cm at every frame, whatever the names, up axis and
+takes; malformed files refused naming the file; and no command on FBX input ever ends in a
+segmentation fault (ufbx 0.0.5's binding faults, guarded in quatmotion.io.fbx)."""
+
+from __future__ import annotations
+
+import json
+import random
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from quatmotion import io
+from quatmotion.datasets import data_root
+from quatmotion.errors import FormatError, FormatWarning
+from quatmotion.io.fbx import fbx_takes, parse_fbx, read_fbx
+from quatmotion.motion import Motion, forward_kinematics
+
+DATA = data_root(must_exist=False)
+FIXTURES = Path(__file__).parent / "data" / "fbx"
+SPEC = json.loads((FIXTURES / "fixtures.json").read_text())
+TARGET_CM = 0.01
+CASES = [(name, k) for name, spec in sorted(SPEC.items()) for k in range(len(spec["takes"]))]
+
+
+def _bvh_excerpt(spec: dict, take: int) -> Motion:
+    start = list(spec["takes"].values())[take]
+    bvh = io.read_bvh(DATA / spec["bvh"], spec["cm_per_bvh_unit"])
+    return bvh.slice(start, start + spec["frames"])
+
+
+def _read(name: str, take: int | str | None = None) -> Motion:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FormatWarning)
+        return read_fbx(FIXTURES / name, take)
+
+
+def test_the_fixtures_are_small():
+    sizes = {p.name: p.stat().st_size for p in FIXTURES.glob("*.fbx")}
+    assert set(sizes) == set(SPEC)
+    assert max(sizes.values()) < 600_000 and sum(sizes.values()) < 2_000_000
+
+
+@pytest.mark.needs_data
+@pytest.mark.parametrize(("name", "take"), CASES)
+def test_positions_equal_the_bvh_at_every_frame(name, take):
+    spec = SPEC[name]
+    bvh = _bvh_excerpt(spec, take)
+    fbx = _read(name, take)
+    assert fbx.n_frames == bvh.n_frames == spec["frames"]
+    assert fbx.fps == round(bvh.fps)
+    names = spec["names"] or {n: n for n in bvh.skeleton.joint_names}
+    order = [fbx.skeleton.joint_names.index(names[n]) for n in bvh.skeleton.joint_names]
+    ours = forward_kinematics(fbx).positions[:, order]
+    theirs = forward_kinematics(bvh).positions
+    error = np.linalg.norm(ours - theirs, axis=-1)
+    assert error.max() < TARGET_CM, (name, take, error.max())
+
+
+@pytest.mark.needs_data
+def test_end_sites_are_the_leaf_bones_named_as_ends():
+    spec = SPEC["cmu_mixamo.fbx"]
+    bvh, fbx = _bvh_excerpt(spec, 0), _read("cmu_mixamo.fbx")
+    assert fbx.skeleton.n_sites == bvh.skeleton.n_sites == 7
+    assert all(s.endswith("_end") for s in fbx.skeleton.site_names)
+    renamed = {v: k for k, v in spec["names"].items()}
+    ours, theirs = forward_kinematics(fbx), forward_kinematics(bvh)
+    for s, parent in enumerate(fbx.skeleton.site_parents):
+        joint = bvh.skeleton.index(renamed[fbx.skeleton.joint_names[parent]])
+        (match,) = np.flatnonzero(bvh.skeleton.site_parents == joint)
+        gap = np.linalg.norm(ours.site_positions[:, s] - theirs.site_positions[:, match], axis=-1)
+        assert gap.max() < TARGET_CM
+
+
+def test_up_axis_and_names_do_not_change_the_motion():
+    """The Unreal copy is Z up and renamed, the Mixamo copy namespaced with leaf bones: the
+    same joints in the same places as the BVH-named Y-up file."""
+    base = _read("cmu_bvh_names.fbx", 0)
+    for name in ("cmu_mixamo.fbx", "cmu_unreal.fbx"):
+        other = _read(name)
+        names = SPEC[name]["names"]
+        order = [other.skeleton.joint_names.index(names[n]) for n in base.skeleton.joint_names]
+        gap = forward_kinematics(other).positions[:, order] - forward_kinematics(base).positions
+        assert np.abs(gap).max() < TARGET_CM, name
+    assert _read("cmu_unreal.fbx").skeleton.extras["fbx_up"] == "+Z"
+    assert base.skeleton.extras["fbx_up"] == "+Y"
+
+
+def test_takes_by_name_and_number():
+    path = FIXTURES / "cmu_bvh_names.fbx"
+    names = fbx_takes(path.read_bytes(), path)
+    assert names == ["Armature|walk_a", "Armature|walk_b"]
+    with pytest.warns(FormatWarning, match="2 takes"):
+        first = read_fbx(path)
+    assert first.skeleton.extras["fbx_take"] == names[0]
+    second = read_fbx(path, names[1])
+    assert second.skeleton.extras["fbx_take"] == names[1]
+    assert np.array_equal(second.rotations, read_fbx(path, 1).rotations)
+    assert not np.allclose(first.root_translation, second.root_translation)
+    with pytest.raises(FormatError, match=r"cmu_bvh_names.fbx: no take named 'run'.*walk_b"):
+        read_fbx(path, "run")
+    with pytest.raises(FormatError, match="no take 5: the file has 2"):
+        read_fbx(path, 5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FormatWarning)  # one take: nothing to say
+        read_fbx(FIXTURES / "bandai_unreal.fbx")
+
+
+def test_a_unit_given_replaces_the_stated_one():
+    stated = _read("bandai_bvh_names.fbx")
+    assert stated.skeleton.extras["length_scale"] == pytest.approx(1.0)
+    assert io.unit_reading(stated.skeleton)[1] == "stated"
+    inches = read_fbx(FIXTURES / "bandai_bvh_names.fbx", units="in")
+    assert inches.skeleton.extras["length_unit_given"] is True
+    scaled = forward_kinematics(inches).positions
+    # (translations that move less than 1e-4 cm are the rest offsets, in either unit)
+    assert np.allclose(scaled, 2.54 * forward_kinematics(stated).positions, rtol=0, atol=1e-3)
+
+
+def test_bytes_and_files_read_alike():
+    path = FIXTURES / "cmu_unreal.fbx"
+    by_bytes = io.parse_motion(path.read_bytes(), path.name)
+    by_file = io.read_motion(path)
+    assert by_bytes.skeleton.joint_names == by_file.skeleton.joint_names
+    assert np.array_equal(by_bytes.rotations, by_file.rotations)
+    assert ".fbx" in io.MOTION_SUFFIXES and ".fbx" not in io.WRITTEN_SUFFIXES
+    assert io.find_motion_files([FIXTURES]) == sorted(FIXTURES.glob("*.fbx"))
+
+
+def _damaged(seed: int, flips: int) -> bytes:
+    data = bytearray((FIXTURES / "cmu_mixamo.fbx").read_bytes())
+    rng = random.Random(seed)
+    for _ in range(flips):
+        data[rng.randrange(27, len(data))] = rng.randrange(256)
+    return bytes(data)
+
+
+BAD = {
+    "empty": b"",
+    "text": b"; FBX 7.4.0 project file\nnot really\n",
+    "random": random.Random(0).randbytes(3000),
+    "truncated": (FIXTURES / "cmu_mixamo.fbx").read_bytes()[:5000],
+    "cut_in_data": (FIXTURES / "cmu_mixamo.fbx").read_bytes()[:100_000],
+    "damaged": _damaged(1, 200),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD))
+def test_a_malformed_file_is_a_format_error_naming_it(kind):
+    with pytest.raises(FormatError, match=rf"^bad_{kind}\.fbx: "):
+        parse_fbx(BAD[kind], f"bad_{kind}.fbx")
+
+
+def test_writing_fbx_is_refused_with_what_is_written(tmp_path):
+    with pytest.raises(ValueError, match=r"cannot write.*\.fbx.*\.bvh"):
+        io.write_motion(_read("bandai_unreal.fbx"), tmp_path / "out.fbx")
+
+
+# --- ufbx 0.0.5's crashes: every run in a child process, which must end by itself ----------
+
+_READ_TWICE = """
+import gc, sys, warnings
+from pathlib import Path
+from quatmotion.io.fbx import fbx_takes, read_fbx
+warnings.simplefilter("ignore")
+for path in sorted(Path(sys.argv[1]).glob("*.fbx")):
+    for _ in range(3):  # every take's wrapper fetched again and again, every scene freed
+        takes = fbx_takes(path.read_bytes(), path)
+        for take in range(len(takes)):
+            motion = read_fbx(path, take)
+        gc.collect()
+print("read", flush=True)
+"""
+
+
+def _ended_by_itself(result: subprocess.CompletedProcess) -> None:
+    assert result.returncode >= 0, f"killed by signal {-result.returncode}: {result.stderr}"
+    assert "Segmentation fault" not in result.stderr + result.stdout
+
+
+def test_reading_every_take_again_and_again_never_crashes():
+    result = subprocess.run(
+        [sys.executable, "-c", _READ_TWICE, str(FIXTURES)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    _ended_by_itself(result)
+    assert result.returncode == 0 and "read" in result.stdout, result.stderr
+
+
+def test_damaged_files_never_crash_the_interpreter(tmp_path):
+    for seed in range(12):
+        (tmp_path / f"damaged_{seed}.fbx").write_bytes(_damaged(seed, 1 + 8 * seed))
+    code = (
+        "import sys, warnings\nfrom pathlib import Path\nfrom quatmotion.errors import "
+        "FormatError\nfrom quatmotion.io.fbx import read_fbx\nwarnings.simplefilter('ignore')\n"
+        "for p in sorted(Path(sys.argv[1]).glob('*.fbx')):\n    try:\n        read_fbx(p)\n"
+        "    except FormatError as e:\n        assert str(e).startswith(str(p)), e\n"
+        "print('done', flush=True)\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, timeout=300
+    )
+    _ended_by_itself(result)
+    assert result.returncode == 0 and "done" in result.stdout, result.stderr
+
+
+def _quatmotion(*args: object, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", "from quatmotion.cli import main; main()", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=900,
+        cwd=cwd,
+    )
+
+
+def test_every_command_on_fbx_ends_by_itself(tmp_path):
+    """info, convert (to BVH and glTF), compress, view on FBX input, and a bad FBX: each in
+    its own process, each ending with its own exit code; the outputs read back."""
+    fbx = FIXTURES / "cmu_unreal.fbx"
+    runs = {
+        "info": _quatmotion("info", FIXTURES / "cmu_bvh_names.fbx", "--take", "1", cwd=tmp_path),
+        "bvh": _quatmotion("convert", fbx, tmp_path / "out.bvh", cwd=tmp_path),
+        "glb": _quatmotion("convert", fbx, tmp_path / "out.glb", cwd=tmp_path),
+        "compress": _quatmotion(
+            "compress", FIXTURES, "--out", tmp_path / "lib.qmz", "--workers", "1", cwd=tmp_path
+        ),
+        "view": _quatmotion("view", fbx, "--out", tmp_path / "view.html", cwd=tmp_path),
+        "bad": _quatmotion("info", _write(tmp_path / "bad.fbx", BAD["damaged"]), cwd=tmp_path),
+    }
+    for name, result in runs.items():
+        _ended_by_itself(result)
+        expected = 2 if name == "bad" else 0
+        assert result.returncode == expected, (name, result.stdout, result.stderr)
+    assert "'Armature|walk_b' of 2" in runs["info"].stdout
+    assert runs["bad"].stderr.startswith("error: ") and "bad.fbx" in runs["bad"].stderr
+    original = _read("cmu_unreal.fbx")
+    for out in ("out.bvh", "out.glb"):
+        back = io.read_motion(tmp_path / out, units="cm" if out.endswith(".bvh") else None)
+        gap = (
+            forward_kinematics(back).all_positions() - forward_kinematics(original).all_positions()
+        )
+        assert np.abs(gap).max() < TARGET_CM, out
+
+
+def _write(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path
