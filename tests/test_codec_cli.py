@@ -86,3 +86,42 @@ def test_a_bad_file_is_reported_and_skipped_and_the_exit_code_is_1(tmp_path: Pat
     assert again.exit_code == 2 and "--force" in again.stderr
     forced = _invoke("compress", src / f"{clips[0].name}.bvh", "-o", lib, "--force")
     assert forced.exit_code == 0, forced.output
+
+
+def test_append_codes_new_clips_at_the_bound_the_library_was_made_with(tmp_path: Path):
+    """No --max-error: the file's own bound (0.1 cm here), not 1 cm; given, it applies to the
+    new clips and the file keeps the settings it was made with."""
+    import json
+
+    clips = [generate_clip(kind, seed, n_frames=60) for kind, seed in (("walk", 1), ("run", 2))]
+    clips.append(generate_clip("walk", 3, n_frames=60))
+    files = []
+    for clip in clips:
+        files.append(tmp_path / f"{clip.name}.bvh")
+        write_bvh(clip, files[-1])
+    lib = tmp_path / "lib.qmz"
+    result = _invoke("compress", files[0], "-o", lib, "--max-error", "0.1")
+    assert result.exit_code == 0, result.output
+    result = _invoke("append", lib, files[1])
+    assert result.exit_code == 0, result.output
+    assert "every joint within 0.1 cm" in result.stdout
+    result = _invoke("append", lib, files[2], "--max-error", "3")
+    assert result.exit_code == 0, result.output
+    assert "every joint within 3 cm" in result.stdout
+    doc = json.loads(_invoke("ls", lib, "--json").stdout)
+    assert doc["settings"]["max_error"] == 0.1
+    errors = {c["name"]: c["max_error_cm"] for c in doc["clips"]}
+    assert errors[clips[1].name] <= 0.1 + 1e-9
+    assert errors[clips[2].name] > 0.1  # coded at 3 cm: far coarser than the file's bound
+    for clip, bound in ((clips[1], 0.1), (clips[2], 3.0)):  # what was declared, measured
+        out = tmp_path / f"out_{clip.name}"
+        assert _invoke("decompress", lib, "-o", out, "--clip", clip.name).exit_code == 0
+        back, original = (
+            read_motion(out / f"{clip.name}.bvh"),
+            read_motion(tmp_path / f"{clip.name}.bvh"),
+        )
+        err = np.linalg.norm(
+            forward_kinematics(back).all_positions() - forward_kinematics(original).all_positions(),
+            axis=-1,
+        )
+        assert err.max() <= bound + 1e-4

@@ -182,3 +182,36 @@ def test_search_k_and_the_reader_surface(two_sessions, tmp_path):
         hits = index.search("punch", k=1)
         assert len(hits) == 1 and os.path.isabs(hits[0].path)
         assert index.blob("missing") is None
+
+
+def test_index_add_reads_and_indexes_with_the_settings_the_index_was_built_with(
+    two_sessions, tmp_path
+):
+    """``index add`` without options keeps the stored unit, skeleton folder, kinds and label
+    rule (it used to store the command line's defaults over them); an option given replaces
+    its setting."""
+    index = tmp_path / "x.qidx"
+    built = runner.invoke(
+        app,
+        ["index", "build", str(two_sessions / "s1" / "take_001.bvh"), "-o", str(index),
+         "--units", "cm", "--label-folders", "--workers", "1"],
+    )  # fmt: skip
+    assert built.exit_code == 0, built.output
+    with ClipIndex.open(index) as idx:
+        before = idx.settings
+    assert before.read.units == "cm" and before.label_folders
+    added = runner.invoke(
+        app, ["index", "add", str(index), str(two_sessions / "s1" / "punch.bvh"), "--workers", "1"]
+    )
+    assert added.exit_code == 0, added.output
+    doc = json.loads(runner.invoke(app, ["index", "ls", str(index), "--json"]).stdout)
+    assert IndexSettings.from_dict(doc["settings"]) == before
+    assert {c["label"] for c in doc["clips"]} == {"s1"}  # the folder rule applied to the new clip
+    added = runner.invoke(
+        app,
+        ["index", "add", str(index), str(two_sessions / "s2"), "--units", "mm", "--workers", "1",
+         "--no-label-folders"],
+    )  # fmt: skip
+    with ClipIndex.open(index) as idx:
+        after = idx.settings
+    assert after == before.replace(read=before.read.replace(units="mm"), label_folders=False)

@@ -198,10 +198,11 @@ def compress(
         read = ReadSettings(
             units=_units(units), skeleton=None if skeleton is None else str(skeleton)
         )
+        # Neither a bound nor a ratio: CompressSettings' default bound.
+        bound = {} if max_error is None and ratio is None else {"max_error": max_error}
         settings = CompressSettings(
-            max_error=max_error if max_error is not None or ratio is not None else 1.0,
-            ratio=ratio, method=method, seed=seed, on_error="skip", read=read,
-        )  # fmt: skip
+            **bound, ratio=ratio, method=method, seed=seed, on_error="skip", read=read
+        )
         check_outputs([out], [*inputs, skeleton], force=force)
         from quatmotion.cli._kernels import ensure_kernels
 
@@ -361,8 +362,13 @@ def append(
     library: Annotated[Path, typer.Argument(help="The .qmz file to extend (rewritten).")],
     inputs: Annotated[list[Path], typer.Argument(help="AMC/BVH files or folders to add.")],
     max_error: Annotated[
-        float | None, typer.Option(help="Bound on every joint's position error, cm.")
-    ] = 1.0,
+        float | None,
+        typer.Option(
+            help="Bound on every joint's position error of the new clips, cm (default: the "
+            "bound the file was made with).",
+            show_default=False,
+        ),
+    ] = None,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
     workers: WorkersOption = None,
@@ -399,7 +405,10 @@ def append(
             rows = _clip_rows(archive, len(archive) - len(report.added))
             size = archive.size
     skipped = f" ({len(report.skipped)} already in it)" if report.skipped else ""
-    console.print(f"added {len(report.added)} clip(s) to {library}{skipped}: now {size:,} bytes")
+    console.print(
+        f"added {len(report.added)} clip(s) to {library}{skipped}, {_bound_text(settings)}: "
+        f"now {size:,} bytes"
+    )
     console.print(_units_line(rows), markup=False, highlight=False)
 
 
@@ -423,4 +432,13 @@ def _add_settings(made, max_error, units, skeleton):
         read = read.replace(units=_units(units))
     if skeleton is not None:
         read = read.replace(skeleton=str(skeleton))
-    return base.replace(max_error=max_error, ratio=None, read=read)
+    if max_error is not None:  # else the file's bound (or its ratio's quality), never a literal
+        base = base.replace(max_error=max_error, ratio=None)
+    return base.replace(read=read)
+
+
+def _bound_text(settings) -> str:
+    """What bounds the clips just coded, for a success line."""
+    if settings.max_error is None:
+        return "no error bound"
+    return f"every joint within {settings.max_error:g} cm"

@@ -72,16 +72,18 @@ def _kinds(text: str, methods: list[str] | None = None) -> tuple[str, ...]:
 
 
 def _settings(
-    kinds: str,
+    kinds: str | None,
     skeleton: Path | None,
     skeletons: Path | None,
     units: str | None,
-    label_folders: bool,
+    label_folders: bool | None,
     methods: list[str] | None = None,
+    base=None,  # IndexSettings | None
 ):  # -> IndexSettings
-    """The one settings object of a build, from the options (checked once, by the settings'
-    constraints; the ASF option's file-or-folder checked here for its message)."""
-    from quatmotion.collection import ReadSettings
+    """The one settings object of a build, from the options given on top of ``base`` (an
+    index's stored settings for ``index add``; else :class:`IndexSettings`' defaults), checked
+    once by the settings' constraints (the ASF option's file-or-folder checked here for its
+    message). An option not given keeps the base's value."""
     from quatmotion.retrieval.index import IndexSettings
 
     if skeleton is not None and skeletons is not None:
@@ -92,8 +94,21 @@ def _settings(
     if asf is not None and not asf.exists():
         raise CliInputError(f"{asf}: no such skeleton file or folder")
     check_units(units)
-    read = ReadSettings(units=units, skeleton=None if asf is None else str(asf), strict=False)
-    return IndexSettings(kinds=_kinds(kinds, methods), label_folders=label_folders, read=read)
+    if base is None:
+        base = IndexSettings()
+        base = base.replace(read=base.read.replace(strict=False))
+    read = base.read
+    if units is not None:
+        read = read.replace(units=units)
+    if asf is not None:
+        read = read.replace(skeleton=str(asf))
+    given: dict[str, object] = {"read": read}
+    if kinds is not None or methods:
+        asked = ",".join(base.kinds) if kinds is None else kinds
+        given["kinds"] = _kinds(asked, methods)
+    if label_folders is not None:
+        given["label_folders"] = label_folders
+    return base.replace(**given)
 
 
 def _labels_from(labels: Path | None) -> dict[str, str] | None:
@@ -187,7 +202,9 @@ def build_command(
     skeleton: SkeletonPath = None,
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
-    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
+    kinds: Annotated[
+        str | None, typer.Option(help=f"{_KINDS_HELP} Default: motion.", show_default=False)
+    ] = None,
     method: Annotated[list[str] | None, typer.Option(help=_BUILD_METHOD_HELP)] = None,
     label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
     workers: WorkersOption = None,
@@ -212,19 +229,28 @@ def add_command(
     skeleton: SkeletonPath = None,
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
-    kinds: Annotated[str, typer.Option(help=_KINDS_HELP)] = "motion",
+    kinds: Annotated[
+        str | None, typer.Option(help=f"{_KINDS_HELP} Default: the index's.", show_default=False)
+    ] = None,
     method: Annotated[list[str] | None, typer.Option(help=_BUILD_METHOD_HELP)] = None,
-    label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
+    label_folders: Annotated[
+        bool | None,
+        typer.Option(help=f"{_LABEL_FOLDERS_HELP} Default: the index's.", show_default=False),
+    ] = None,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
     """Add clips to an existing index (skipping those already in it with the same content;
-    --labels relabels those too)."""
+    --labels relabels those too). The clips are read and indexed with the settings the index
+    was built with (unit, skeleton, feature kinds); an option given replaces its setting."""
     from quatmotion.retrieval.index import ClipIndex
 
     with user_errors():
-        settings = _settings(kinds, skeleton, skeletons, units, label_folders, method)
-        ClipIndex.open(index).close()
+        options = (kinds, skeleton, skeletons, units, label_folders, method)
+        _settings(*options)  # the options' own errors before the file's
+        with ClipIndex.open(index) as idx:
+            stored = idx.settings
+        settings = _settings(*options, base=stored)
     _build(paths, index, settings, labels, workers, scheduler, add=True)
 
 
