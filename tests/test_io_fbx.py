@@ -222,9 +222,11 @@ def _quatmotion(*args: object, cwd: Path) -> subprocess.CompletedProcess:
 
 
 def test_every_command_on_fbx_ends_by_itself(tmp_path):
-    """info, convert (to BVH and glTF), compress, view on FBX input, and a bad FBX: each in
+    """info, convert (to BVH and glTF), compress, view, index build and pose index on FBX
+    input (the BVH-named files: the names search maps), and a bad FBX: each in
     its own process, each ending with its own exit code; the outputs read back."""
     fbx = FIXTURES / "cmu_unreal.fbx"
+    named = [FIXTURES / "cmu_bvh_names.fbx", FIXTURES / "bandai_bvh_names.fbx"]
     runs = {
         "info": _quatmotion("info", FIXTURES / "cmu_bvh_names.fbx", "--take", "1", cwd=tmp_path),
         "bvh": _quatmotion("convert", fbx, tmp_path / "out.bvh", cwd=tmp_path),
@@ -233,6 +235,12 @@ def test_every_command_on_fbx_ends_by_itself(tmp_path):
             "compress", FIXTURES, "--out", tmp_path / "lib.qmz", "--workers", "1", cwd=tmp_path
         ),
         "view": _quatmotion("view", fbx, "--out", tmp_path / "view.html", cwd=tmp_path),
+        "index": _quatmotion(
+            "index", "build", *named, "-o", tmp_path / "x.qidx", "--workers", "1", cwd=tmp_path
+        ),
+        "pose": _quatmotion(
+            "pose", "index", *named, "-o", tmp_path / "x.qpose", "--workers", "1", cwd=tmp_path
+        ),
         "bad": _quatmotion("info", _write(tmp_path / "bad.fbx", BAD["damaged"]), cwd=tmp_path),
     }
     for name, result in runs.items():
@@ -253,3 +261,17 @@ def test_every_command_on_fbx_ends_by_itself(tmp_path):
 def _write(path: Path, data: bytes) -> Path:
     path.write_bytes(data)
     return path
+
+
+def test_the_readers_limits_hold_for_fbx():
+    from quatmotion import limits
+
+    path = FIXTURES / "cmu_bvh_names.fbx"
+    with limits.raised(frames=39), pytest.raises(FormatError, match=r"cmu_bvh_names.fbx: take"):
+        read_fbx(path, 0)
+    with limits.raised(joints=30), pytest.raises(FormatError, match="joints"):
+        read_fbx(path, 0)
+    with limits.raised(file_bytes=1000), pytest.raises(FormatError, match="size"):
+        read_fbx(path, 0)
+    with limits.raised(frames=40):
+        assert read_fbx(path, 0).n_frames == 40

@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion import quat
+from quatmotion import limits, quat
 from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.io.gltf import _unique
 from quatmotion.io.units import length_unit
@@ -69,9 +69,6 @@ CM_PER_METRE = 100.0
 MOVING_TRANSLATION_CM = 1e-4
 """A joint whose offset from its parent varies more than this over a take carries
 ``joint_translations`` (float32 keys of centimetre translations vary by ~1e-6 cm)."""
-MAX_SAMPLES = 50_000_000
-"""Frames times nodes evaluated for one take at most: beyond, the file is refused (a take of
-hours at 120 frames per second on a 100-joint rig is 10 times less)."""
 
 _END_NAME = re.compile(r"(?:[_\-.\s]end|nub|end_?site)$", re.IGNORECASE)
 
@@ -104,6 +101,7 @@ def read_fbx(
         Naming the file: not FBX, truncated or malformed, no skeleton, no such take.
     """
     path = Path(path)
+    limits.check("file_bytes", path.stat().st_size, path, "the file's size")
     return parse_fbx(path.read_bytes(), path, take, units=units)
 
 
@@ -152,6 +150,7 @@ class _Scene:
 
     def __enter__(self) -> Any:
         ufbx = _ufbx()
+        limits.check("file_bytes", len(self.data), self.path, "the file's size")
         if not self.data.lstrip()[:1]:
             raise FormatError("an empty file is no FBX", self.path)
         try:
@@ -242,6 +241,9 @@ class _Reader:
     def nodes(self) -> tuple[list[Any], list[int]]:
         """Every node (fetched once) and its parent's position in that list (-1: none)."""
         nodes = _elements(self.scene, self.scene.nodes)
+        limits.check("joints", len(nodes), self.path, "the file's nodes")
+        depth = max((int(node.node_depth) for node in nodes), default=0)
+        limits.check("depth", depth, self.path, "the node hierarchy's depth")
         index = {node.element_id: k for k, node in enumerate(nodes)}
         parents = []
         for node in nodes:
@@ -332,8 +334,8 @@ class _Reader:
                 warnings.warn(
                     FormatWarning(
                         f"the file holds {len(stacks)} takes ({', '.join(map(repr, names[:8]))}"
-                        f"{'...' if len(names) > 8 else ''}); the first is read (--take NAME "
-                        "for another)",
+                        f"{'...' if len(names) > 8 else ''}); the first is read (info, convert "
+                        "and view read another with --take NAME)",
                         self.path,
                     ),
                     stacklevel=4,
@@ -352,8 +354,7 @@ class _Reader:
     def frame_rate(self) -> tuple[float, float]:
         """(the rate frames are evaluated at, the rate reported), frames per second."""
         fps = float(self.scene.settings.frames_per_second)
-        if not np.isfinite(fps) or fps <= 0:
-            raise self.fail(f"the frame rate is {fps!r} frames per second")
+        limits.check("fps", fps, self.path, "the frame rate")
         rounded = float(round(fps))
         return fps, rounded if rounded and abs(fps - rounded) <= 1e-3 * fps else fps
 
@@ -366,6 +367,8 @@ class _Reader:
             chain.append(p)
             p = parents[p]
         chain.reverse()
+        evaluated = [nodes[k] for k in (*chain, *order)]
+        limits.check("joints", len(order), self.path, "the skeleton's joints")
         stacks = self.takes()
         stack = self.choose_take(stacks, wanted)
         fps_file, fps = self.frame_rate()
@@ -375,14 +378,13 @@ class _Reader:
             begin, end = float(stack.time_begin), float(stack.time_end)
             if not (np.isfinite(begin) and np.isfinite(end)) or end < begin:
                 raise self.fail(f"take {stack.name!r} runs from {begin} s to {end} s")
+            field = f"take {stack.name!r}'s"
+            limits.check("duration", end - begin, self.path, f"{field} duration")
             count = int(round((end - begin) * fps_file)) + 1
-            if count * (len(order) + len(chain)) > MAX_SAMPLES:
-                raise self.fail(
-                    f"take {stack.name!r} has {count} frames of {len(order)} joints: over "
-                    f"{MAX_SAMPLES} samples"
-                )
+            limits.check("frames", count, self.path, f"{field} frames")
+            nodes_frames = count * len(evaluated)
+            limits.check("joint_frames", nodes_frames, self.path, f"{field} nodes x frames")
             times = begin + np.arange(count) / fps_file
-        evaluated = [nodes[k] for k in (*chain, *order)]
         rest = [_transform(node.local_transform) for node in evaluated]
         anim = None if stack is None else stack.anim
         frames = [
