@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 from quatmotion.cli import app
 from quatmotion.io import write_motion
 from quatmotion.retrieval.index import ClipIndex
-from quatmotion.retrieval.search import search
+from quatmotion.retrieval.search import query_row, search
 from quatmotion.synthetic import generate_clip
 
 pytestmark = pytest.mark.same_answer
@@ -77,6 +77,55 @@ def test_a_file_alone_and_in_a_batch_give_the_same_bits(library):
     batch = _cli("--queries", str(listing), "--index", str(index))["queries"]
     for doc in batch:
         assert _cli(doc["query"], "--index", str(index))["results"] == doc["results"]
+
+
+def test_a_file_of_an_indexed_clip_is_its_name_and_is_left_out(library):
+    """One self-match rule: the file of an indexed clip (matched on its content hash, wherever
+    the file lies) is that clip, left out of its results as a search by its name leaves it
+    out, alone or in --queries, with the same results; the output names it."""
+    folder, index = library
+    elsewhere = folder / "elsewhere"
+    elsewhere.mkdir(exist_ok=True)
+    copy = elsewhere / "renamed take.bvh"
+    copy.write_bytes((folder / "squat_2.bvh").read_bytes())
+    cases = [(str(folder / "walk_1.bvh"), "walk_1"), (str(copy), "squat_2")]
+    listing = folder / "both.txt"
+    listing.write_text("\n".join(t for pair in cases for t in pair) + "\n", encoding="utf-8")
+    batch = _cli("--queries", str(listing), "--index", str(index))["queries"]
+    for i, (file, name) in enumerate(cases):
+        by_file = _cli(file, "--index", str(index))
+        by_name = _cli(name, "--index", str(index))
+        assert by_file["left_out"] == by_name["left_out"] == name
+        assert name not in [r["clip"] for r in by_file["results"]]
+        assert by_file["results"] == by_name["results"]
+        assert batch[2 * i]["left_out"] == batch[2 * i + 1]["left_out"] == name
+        assert batch[2 * i]["results"] == batch[2 * i + 1]["results"] == by_name["results"]
+        # --within: the same rule
+        within = _cli(file, "--index", str(index), "--within")
+        assert within["left_out"] == name
+        assert name not in [r["clip"] for r in within["results"]]
+        # the table says so in one line
+        table = runner.invoke(app, ["search", file, "--index", str(index), "--top", "2"])
+        assert f"left out {name}: the query itself" in table.output
+    other = generate_clip("walk", 11, n_frames=150)  # a take the index does not hold
+    write_motion(other, elsewhere / "new.bvh")
+    fresh = _cli(str(elsewhere / "new.bvh"), "--index", str(index))
+    assert fresh["left_out"] is None and len(fresh["results"]) == TOP
+    table = runner.invoke(app, ["search", str(elsewhere / "new.bvh"), "--index", str(index)])
+    assert "left out" not in table.output
+
+
+def test_the_library_leaves_out_a_clip_made_in_memory_it_indexed(tmp_path):
+    clips = [generate_clip(kind, 0, n_frames=120) for kind in ("walk", "squat", "punch")]
+    out = tmp_path / "memory.qidx"
+    ClipIndex.build(clips, out, workers=1)
+    with ClipIndex.open(out) as idx:
+        results = search(idx, clips[1], k=5)
+        assert query_row(idx, clips[1]).name == clips[1].name
+        assert clips[1].name not in [r.clip for r in results] and len(results) == 2
+        assert [r.as_dict() for r in results] == [
+            r.as_dict() for r in search(idx, clips[1].name, k=5)
+        ]
 
 
 _CHILD = (

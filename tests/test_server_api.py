@@ -164,7 +164,7 @@ def test_search_methods_are_checked(client):
     assert client.get("/api/search", params={"clip": "walk_0", "top": 0}).status_code == 400
 
 
-def test_search_by_an_uploaded_bvh_finds_the_same_clip_first(client, motion_library):
+def test_search_by_an_uploaded_bvh_leaves_out_the_indexed_clip_it_is(client, motion_library):
     before = _files(motion_library["clips"].parent)
     data = (motion_library["clips"] / "squat_1.bvh").read_bytes()
     response = client.post(
@@ -173,8 +173,13 @@ def test_search_by_an_uploaded_bvh_finds_the_same_clip_first(client, motion_libr
     assert response.status_code == 200, response.text
     body = response.json()
     assert body["query"] == "my take" and body["query_id"] is None
-    assert body["results"][0]["clip"] == "squat_1"
-    assert body["results"][0]["distance"] == pytest.approx(0.0, abs=1e-9)
+    # the same bytes are the indexed squat_1: left out, as a search by its id leaves it out
+    assert body["left_out"] == "squat_1"
+    by_id = client.get("/api/search", params={"clip": "squat_1", "top": 3}).json()
+    assert by_id["left_out"] == "squat_1"
+    assert [(r["clip"], r["distance"]) for r in body["results"]] == [
+        (r["clip"], r["distance"]) for r in by_id["results"]
+    ]
     assert len(body["results"]) == 3
     assert frame_data.decode_clip(body["query_clip"]).shape[0] == 120
     assert _files(motion_library["clips"].parent) == before  # nothing stored beside the library
@@ -193,6 +198,7 @@ def test_search_by_an_uploaded_amc_needs_and_takes_its_asf(client, tmp_path):
     )
     assert both.status_code == 200, both.text
     assert both.json()["results"][0]["label"] == "walk"
+    assert both.json()["left_out"] is None  # a take the index does not hold
 
 
 @pytest.mark.parametrize(

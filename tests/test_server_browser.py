@@ -129,6 +129,7 @@ def test_search_page_finds_and_plays_results_in_a_real_browser(
     assert results.count() == 6  # every other indexed clip
     assert results.nth(0).get_attribute("data-id") == "walk_1"
     assert "walk" in results.nth(0).inner_text()
+    assert "walk_0, the query itself, left out" in page.locator("#summary").inner_text()
 
     # Play the first result beside the query; the 3D canvas changes between two frames.
     results.nth(0).locator("button.play-result").click()
@@ -148,13 +149,14 @@ def test_search_page_finds_and_plays_results_in_a_real_browser(
     changed = np.any(np.abs(after - before) > 24, axis=-1).mean()
     assert changed > 0.002, f"only {changed:.4%} of the canvas changed between frames 0 and 60"
 
-    # Search by an uploaded file: the same clip comes first.
+    # Search by an uploaded file of an indexed clip: that clip is left out, as by its id.
     page.check("input[name=source][value=upload]")
     page.set_input_files("input[name=file]", str(motion_library["clips"] / "squat_1.bvh"))
     page.evaluate("document.documentElement.dataset.state = 'asked'")
     page.click("#run")
     _state(page, "ready")
-    assert results.nth(0).get_attribute("data-id") == "squat_1"
+    assert results.nth(0).get_attribute("data-id") == "squat_0"
+    assert "squat_1, the query itself, left out" in page.locator("#summary").inner_text()
     assert page.evaluate("quatmotionViewer.clips[0].name") == "squat_1"  # the query plays
     page.screenshot(path=str(artifact_dir / "server-upload-results.png"))
 

@@ -362,10 +362,14 @@ def search_command(
         _check_search_options(query, queries, method, within, skeleton, units)
         quick = _quick_answer(index, query, top, method, within, skeleton, units)
         if quick is not None:  # a single query by clip name, without Numba
+            method_name, own, results = quick
             if as_json:
-                print_json({"query": query, "method": quick[0], "results": quick[1]})
+                print_json(
+                    {"query": query, "method": method_name, "left_out": own, "results": results}
+                )
             else:
-                _print_results([_Result(**r) for r in quick[1]], within)
+                _say_left_out(own)
+                _print_results([_Result(**r) for r in results], within)
             return
         texts = _query_texts(query, queries)
         method_name, answers = _answer(index, texts, top, method, within, skeleton, units)
@@ -436,12 +440,12 @@ def _quick_answer(
     one search); None when that path does not answer (a file, another method, --within...)."""
     if query is None or within or skeleton is not None or units is not None:
         return None
-    from quatmotion.retrieval.quick import METHOD, quick_search
+    from quatmotion.retrieval.quick import METHOD, quick_query
 
     if method not in (None, METHOD) or Path(query).exists():
         return None
-    results = quick_search(index, query, k=top)
-    return None if results is None else (METHOD, results)
+    answer = quick_query(index, query, k=top)
+    return None if answer is None else (METHOD, *answer)
 
 
 def _answer(
@@ -454,11 +458,13 @@ def _answer(
     units: str | None,
 ) -> tuple[str, list[list]]:
     """Step 3: every query answered on the index opened once (a motion file is read; any other
-    text names an indexed clip). Returns the method's name and each query's results."""
+    text names an indexed clip). Returns the method's name and each query's answer: the
+    indexed clip it is, left out of its results (None: none), and its results."""
+    from quatmotion.collection.reading import file_hash
     from quatmotion.errors import ClipNameError
     from quatmotion.io import MOTION_SUFFIXES
     from quatmotion.retrieval.index import ClipIndex
-    from quatmotion.retrieval.search import default_method, search, search_within
+    from quatmotion.retrieval.search import default_method, query_row, search, search_within
 
     answers = []
     with ClipIndex.open(index) as idx:
@@ -471,12 +477,16 @@ def _answer(
             if not is_file and (skeleton is not None or units is not None):
                 raise CliInputError("--skeleton and --units apply to a query file")
             target = read_clip(path, skeleton, units) if is_file else text
+            sha256 = file_hash(path, skeleton) if is_file else None
+            where = path if is_file else None
             try:
-                answers.append(
-                    search_within(idx, target, k=top)
+                own = query_row(idx, target, sha256=sha256, path=where)
+                found = (
+                    search_within(idx, target, k=top, sha256=sha256, path=where)
                     if within
-                    else search(idx, target, method=name, k=top)
+                    else search(idx, target, method=name, k=top, sha256=sha256, path=where)
                 )
+                answers.append((None if own is None else own.name, found))
             except ClipNameError as error:
                 raise CliInputError(
                     f"{text}: no such file, and {error}" if looks_like_file else str(error)
@@ -490,15 +500,24 @@ def _show_answers(
     """Step 4: the results as JSON (one document) or a table per query."""
     if as_json:
         docs = [
-            {"query": t, "method": method, "results": [r.as_dict() for r in rs]}
-            for t, rs in zip(texts, answers, strict=True)
+            {"query": t, "method": method, "left_out": own, "results": [r.as_dict() for r in rs]}
+            for t, (own, rs) in zip(texts, answers, strict=True)
         ]
         print_json({"method": method, "queries": docs} if batch else docs[0])
         return
-    for text, results in zip(texts, answers, strict=True):
+    for text, (own, results) in zip(texts, answers, strict=True):
         if batch:
             console.print(f"query {text}", markup=False, highlight=False)
+        _say_left_out(own)
         _print_results(results, within)
+
+
+def _say_left_out(own: str | None) -> None:
+    """The one line that says a query is an indexed clip, left out of its own results."""
+    if own is not None:
+        console.print(
+            f"left out {own}: the query itself (an indexed clip)", markup=False, highlight=False
+        )
 
 
 def _print_results(results: list, within: bool) -> None:

@@ -37,6 +37,7 @@ __all__ = [
     "ClipSource",
     "ReadClip",
     "ReadSettings",
+    "file_hash",
     "find_clips",
     "find_skeleton",
     "read_clip",
@@ -137,6 +138,20 @@ def find_skeleton(amc: Path, skeleton: str | Path | None = None) -> Path:
     if not given.is_dir():
         raise FileNotFoundError(2, "no such skeleton file or folder", str(given))
     return find_asf_for_amc(amc, given)
+
+
+def file_hash(path: str | Path, skeleton: str | Path | None = None) -> str:
+    """A motion file's identity as a collection stores it (:func:`content_hash` of the file,
+    and of an AMC's ASF, found by :func:`find_skeleton` from ``skeleton``).
+
+    Raises
+    ------
+    FormatError, OSError
+        As :func:`find_skeleton`; a file that cannot be read.
+    """
+    path = Path(path)
+    asf = find_skeleton(path, skeleton) if path.suffix.lower() == ".amc" else None
+    return content_hash(path, asf)
 
 
 def find_clips(

@@ -36,7 +36,14 @@ from numpy.typing import NDArray
 from quatmotion.retrieval import features as feat
 from quatmotion.retrieval.features_fused import MODEL_KEY, FusedModel
 
-__all__ = ["FORMAT_NAME", "INDEX_VERSION", "METHOD", "fused_distances", "quick_search"]
+__all__ = [
+    "FORMAT_NAME",
+    "INDEX_VERSION",
+    "METHOD",
+    "fused_distances",
+    "quick_query",
+    "quick_search",
+]
 
 METHOD = "dtw-fused"
 """The method answered (:data:`quatmotion.retrieval.methods.DEFAULT_METHOD`; a test checks)."""
@@ -178,9 +185,18 @@ def _locate(stored: str | None, base: Path) -> str:
 
 
 def quick_search(index: str | Path, query: str, k: int = 20) -> list[dict[str, object]] | None:
-    """The default method's ``k`` nearest clips to the indexed clip ``query`` names, as
-    :meth:`SearchResult.as_dict <quatmotion.retrieval.search.SearchResult.as_dict>` documents,
-    or ``None`` when this path does not answer (module conventions)."""
+    """The default method's ``k`` nearest clips to the indexed clip ``query`` names (left out),
+    as :meth:`SearchResult.as_dict <quatmotion.retrieval.search.SearchResult.as_dict>`
+    documents, or ``None`` when this path does not answer (module conventions)."""
+    answer = quick_query(index, query, k)
+    return None if answer is None else answer[1]
+
+
+def quick_query(
+    index: str | Path, query: str, k: int = 20
+) -> tuple[str, list[dict[str, object]]] | None:
+    """:func:`quick_search`'s results after the name of the clip ``query`` names (the clip
+    left out of them), or ``None``."""
     path = Path(index)
     if k < 1 or not path.is_file():
         return None
@@ -198,7 +214,7 @@ def quick_search(index: str | Path, query: str, k: int = 20) -> list[dict[str, o
 
 def _search(
     db: sqlite3.Connection, path: Path, query: str, k: int
-) -> list[dict[str, object]] | None:
+) -> tuple[str, list[dict[str, object]]] | None:
     meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
     if (
         meta.get("format") != FORMAT_NAME
@@ -234,7 +250,7 @@ def _search(
     ids = np.flatnonzero(np.arange(len(rows)) != own)
     order = ids[np.argsort(d[ids], kind="stable")[:k]]
     base = path.resolve().parent
-    return [
+    return str(rows[own][1]), [
         {
             "rank": rank + 1,
             "clip": str(rows[c][1]),

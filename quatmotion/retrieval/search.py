@@ -10,10 +10,13 @@ from 0 (``stop`` exclusive), as the rest of quatmotion counts frames.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from quatmotion.collection.refs import motion_hash
 from quatmotion.motion import Motion
 from quatmotion.retrieval import distances as dist
 from quatmotion.retrieval.features import clip_features, feature_step, skeleton_fingerprint
@@ -25,6 +28,7 @@ __all__ = [
     "default_method",
     "method_keys",
     "query_features",
+    "query_row",
     "search",
     "search_within",
 ]
@@ -95,8 +99,49 @@ def default_method(index: ClipIndex) -> str:
     return DEFAULT_METHOD
 
 
+def _same_content(rows: list[ClipRow], sha256: str | None, path: str | Path | None) -> int:
+    """The row of content hash ``sha256`` (the one at ``path`` first), else -1."""
+    if not sha256:
+        return -1
+    same = [i for i, r in enumerate(rows) if r.sha256 == sha256]
+    if path is not None:
+        where = os.path.abspath(path)
+        same = [i for i in same if where in (rows[i].path, rows[i].ref.path)] or same
+    return same[0] if same else -1
+
+
+def query_row(
+    index: ClipIndex,
+    query: Motion | str,
+    *,
+    sha256: str | None = None,
+    path: str | Path | None = None,
+) -> ClipRow | None:
+    """The indexed clip ``query`` is, which :func:`search` leaves out of its results (one
+    rule whichever way a query comes): the clip a name names; for a clip read from a file or
+    uploaded, the indexed clip with its content hash ``sha256``
+    (:func:`quatmotion.collection.reading.file_hash`), the one at ``path`` first; for a clip
+    made in memory (no ``sha256``), the indexed clip made from the same motion
+    (:func:`~quatmotion.collection.refs.motion_hash`). None: the query is no indexed clip.
+
+    Raises
+    ------
+    ValueError
+        (:class:`~quatmotion.errors.ClipNameError`) A name of no clip, or of several.
+    """
+    rows = index.rows()
+    if isinstance(query, str):
+        return rows[_match(query, rows, str(index.path))]
+    own = _same_content(rows, sha256 or motion_hash(query), path)
+    return rows[own] if own >= 0 else None
+
+
 def _query(
-    index: ClipIndex, query: Motion | str, method: str
+    index: ClipIndex,
+    query: Motion | str,
+    method: str,
+    sha256: str | None = None,
+    path: str | Path | None = None,
 ) -> tuple[list[ClipRow], object, QueryFeatures, int]:
     keys = method_keys(method)
     rows, library = index.load(keys)
@@ -106,27 +151,38 @@ def _query(
             "quatmotion index build --kinds"
         )
     if isinstance(query, Motion):
-        return rows, library, query_features(query, method), -1
+        own = _same_content(rows, sha256 or motion_hash(query), path)
+        return rows, library, query_features(query, method), own
     where = f"{index.path} (the clips with {method} features)"
     i = _match(query, rows, where)
     return rows, library, QueryFeatures(library.features[i], rows[i].skeleton), i
 
 
 def search(
-    index: ClipIndex, query: Motion | str, *, method: str | None = None, k: int = 20
+    index: ClipIndex,
+    query: Motion | str,
+    *,
+    method: str | None = None,
+    k: int = 20,
+    sha256: str | None = None,
+    path: str | Path | None = None,
 ) -> list[SearchResult]:
-    """The ``k`` clips most like ``query`` under ``method``.
+    """The ``k`` clips most like ``query`` under ``method``, the query's own clip left out
+    (:func:`query_row`).
 
     Parameters
     ----------
     index : ClipIndex
     query : Motion or str
         A clip, or an indexed clip as a name, path, file name or number reads it
-        (:func:`quatmotion.io.names.match_clip`; left out of its own results).
+        (:func:`quatmotion.io.names.match_clip`).
     method : str or None
         A key of :data:`~quatmotion.retrieval.methods.METHODS`; None: :func:`default_method`.
     k : int
         Results wanted (fewer when the index has fewer comparable clips).
+    sha256, path : str, optional
+        A clip query's content hash and file (:func:`query_row`): an indexed clip of the same
+        content is the query itself.
 
     Returns
     -------
@@ -142,7 +198,7 @@ def search(
         raise ValueError(f"k must be at least 1, got {k}")
     if method is None:
         method = default_method(index)
-    rows, library, features, own = _query(index, query, method)
+    rows, library, features, own = _query(index, query, method, sha256, path)
     ranking = METHODS[method].rank(library, features, exclude=own, k=k)  # type: ignore[arg-type]
     if ranking.clips.size == 0 and len(rows):
         raise ValueError(
@@ -158,9 +214,16 @@ def search(
     return out
 
 
-def search_within(index: ClipIndex, query: Motion | str, *, k: int = 20) -> list[SearchResult]:
+def search_within(
+    index: ClipIndex,
+    query: Motion | str,
+    *,
+    k: int = 20,
+    sha256: str | None = None,
+    path: str | Path | None = None,
+) -> list[SearchResult]:
     """Where ``query`` matches best inside each indexed clip (subsequence DTW over the motion
-    frames), clips ranked by that match's cost.
+    frames), clips ranked by that match's cost; the query's own clip left out (:func:`search`).
 
     Returns
     -------
@@ -170,7 +233,7 @@ def search_within(index: ClipIndex, query: Motion | str, *, k: int = 20) -> list
     """
     if k < 1:
         raise ValueError(f"k must be at least 1, got {k}")
-    rows, library, features, own = _query(index, query, _WITHIN_METHOD)
+    rows, library, features, own = _query(index, query, _WITHIN_METHOD, sha256, path)
     q = features.arrays["frames"]
     hits = []
     for i, row in enumerate(rows):

@@ -25,6 +25,7 @@ Conventions
 from __future__ import annotations
 
 import functools
+import hashlib
 import ipaddress
 import sys
 import time
@@ -199,6 +200,9 @@ class SearchResponse(BaseModel):
     query_id: str | None = Field(description="Its id when it is a clip of the catalogue.")
     method: str
     seconds: float = Field(description="Time the search took, s.")
+    left_out: str | None = Field(
+        None, description="The indexed clip the query is, left out of its results (None: none)."
+    )
     results: list[SearchHitModel]
     query_clip: dict[str, Any] | None = Field(
         None, description="An uploaded query's frame data (quatmotion-frames/1), to play it."
@@ -576,12 +580,13 @@ def search_clip(
 ) -> SearchResponse:
     """Rank the indexed clips by likeness to an indexed clip (left out of its results)."""
     started = time.perf_counter()
-    used, hits = catalogue.search(clip, method=method, top=top)
+    used, hits, own = catalogue.search(clip, method=method, top=top)
     return SearchResponse(
         query=catalogue.info(clip).name,
         query_id=clip,
         method=used,
         seconds=time.perf_counter() - started,
+        left_out=own,
         results=[SearchHitModel(**h.__dict__) for h in hits],
     )
 
@@ -687,12 +692,18 @@ def _search_upload(
         motion = parse_motion(data, name, asf_data, asf_name)
     except FormatError as error:
         raise HTTPException(400, str(error).splitlines()[0]) from None
-    used, hits = catalogue.search(motion, method=method, top=top)
+    # the file's content_hash (an AMC's with its ASF's bytes), its identity in the index
+    digest = hashlib.sha256(data)
+    if name.lower().endswith(".amc") and asf_data is not None:
+        digest.update(asf_data)
+    sha256 = digest.hexdigest()
+    used, hits, own = catalogue.search(motion, method=method, top=top, sha256=sha256)
     return SearchResponse(
         query=motion.name,
         query_id=None,
         method=used,
         seconds=time.perf_counter() - started,
+        left_out=own,
         results=[SearchHitModel(**h.__dict__) for h in hits],
         query_clip=frame_data.encode_clip(motion),
     )

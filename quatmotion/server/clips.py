@@ -43,7 +43,7 @@ from quatmotion.pose.library import PoseLibrary
 from quatmotion.retrieval.build import skeleton_for
 from quatmotion.retrieval.index import ClipIndex, ClipRow
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS
-from quatmotion.retrieval.search import method_keys, search
+from quatmotion.retrieval.search import method_keys, query_row, search
 from quatmotion.viz import frame_data, view_data
 
 __all__ = [
@@ -529,14 +529,22 @@ class ClipCatalogue:
 
     # ------------------------------------------------------------------ search
     def search(
-        self, query: str | Motion, *, method: str | None = None, top: int = 20
-    ) -> tuple[str, list[SearchHit]]:
-        """Rank the indexed clips by likeness to ``query``: a clip id, or a motion (an upload).
+        self,
+        query: str | Motion,
+        *,
+        method: str | None = None,
+        top: int = 20,
+        sha256: str | None = None,
+    ) -> tuple[str, list[SearchHit], str | None]:
+        """Rank the indexed clips by likeness to ``query``: a clip id, or a motion (an upload,
+        whose bytes hash to ``sha256``); the indexed clip the query is left out
+        (:func:`quatmotion.retrieval.search.query_row`).
 
         Returns
         -------
-        (method, hits)
-            The method used (the index's best when None) and the ranked clips.
+        (method, hits, left_out)
+            The method used (the index's best when None), the ranked clips, and the name of
+            the indexed clip left out as the query itself (None: the query is none).
 
         Raises
         ------
@@ -561,7 +569,8 @@ class ClipCatalogue:
             target = entry.row.path  # unique in the index, unlike a name
         with ClipIndex.open(self.index_path) as index:
             by_path = {r.path: r.id for r in index.rows()}
-            results = search(index, target, method=name, k=top)
+            own = query_row(index, target, sha256=sha256)
+            results = search(index, target, method=name, k=top, sha256=sha256)
         hits = [
             SearchHit(
                 rank=r.rank,
@@ -572,7 +581,7 @@ class ClipCatalogue:
             )
             for r in results
         ]
-        return name, hits
+        return name, hits, None if own is None else own.name
 
     def pose_search(
         self, clip_id: str, frame: int, *, k: int = 10, other_clips: bool = False

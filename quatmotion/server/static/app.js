@@ -262,7 +262,8 @@
         r.id ? el('button', { class: 'play-result', type: 'button', text: 'play beside', onclick: (ev) => playResult(ev.target.closest('li'), r).catch(fail) }) : null,
       ])));
       $('#summary').textContent = response.results.length + ' results for ' + response.query + ' by ' + response.method +
-        ' in ' + (1000 * response.seconds).toFixed(0) + ' ms';
+        ' in ' + (1000 * response.seconds).toFixed(0) + ' ms' +
+        (response.left_out ? '; ' + response.left_out + ', the query itself, left out' : '');
       status('');
       await show(viewerNode, view([query.payload]));
       ready();
