@@ -58,8 +58,9 @@ class Limits:
     joints : int
         Joints (bones, skin joints, hierarchy nodes read as joints) of one skeleton (10,000).
     joint_frames : int
-        Frames times joints of one clip, the size of its arrays (16,000,000: some 900 MB of
-        rotations and translations in float64).
+        Frames times joints of one clip, the size of its arrays (8,000,000: 36 minutes at 120
+        frames/s of CMU's 31 joints; some 450 MB of rotations and translations in float64),
+        and keyframes of all a clip's channels together.
     fps : float
         Frame rate in frames per second (10,000; high-speed capture runs at some thousands).
     duration : float
@@ -75,7 +76,7 @@ class Limits:
 
     frames: int = 1_000_000
     joints: int = 10_000
-    joint_frames: int = 16_000_000
+    joint_frames: int = 8_000_000
     fps: float = 10_000.0
     duration: float = 86_400.0
     decompressed_bytes: int = _GIB

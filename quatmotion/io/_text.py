@@ -27,6 +27,7 @@ Conventions
 from __future__ import annotations
 
 import codecs
+import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -35,7 +36,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion import quat
+from quatmotion import limits, quat
 from quatmotion._atomic import atomic_write_bytes
 from quatmotion.errors import FormatError
 from quatmotion.quat.jit import about_axis, multiply
@@ -88,7 +89,27 @@ def read_text(path: str | Path) -> str:
     OSError
         If the file cannot be read.
     """
-    return decode_text(Path(path).read_bytes(), path)
+    return decode_text(read_bytes(path), path)
+
+
+def read_bytes(path: str | Path) -> bytes:
+    """The whole file, its size checked against the limits first (``file_bytes``); a file that
+    is no regular file (a pipe, a device) is read up to the limit and refused beyond it.
+
+    Raises
+    ------
+    FormatError
+        A file larger than :func:`quatmotion.limits.current` allows.
+    OSError
+        If the file cannot be read.
+    """
+    ceiling = limits.current().file_bytes
+    with open(path, "rb") as file:
+        size = os.fstat(file.fileno()).st_size
+        limits.check("file_bytes", size, path, "the file's size")
+        data = file.read(ceiling + 1)
+    limits.check("file_bytes", len(data), path, "the file's size")
+    return data
 
 
 def decode_text(data: bytes, path: str | Path) -> str:

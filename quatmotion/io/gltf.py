@@ -2,9 +2,11 @@
 an animation.
 
 glTF is the open interchange format Blender, three.js, Unity, Unreal and Godot read. The JSON
-structure is built and parsed with ``pygltflib`` (its dataclasses spell every field of the
-specification); the binary data (times, rotations, translations) are NumPy arrays written and
-read as raw little-endian float32, which is all the specification asks of them.
+structure is built with ``pygltflib`` (its dataclasses spell every field of the specification)
+and read as plain JSON, each field checked where it is used (pygltflib's parser checks no
+type and takes a millisecond a node); the binary data (times, rotations, translations) are
+NumPy arrays written and read as raw little-endian float32, which is all the specification
+asks of them.
 
 Conventions
 -----------
@@ -25,6 +27,13 @@ Conventions
   its frame rate (``extras`` if there, else the median step of its keyframe times): linear
   and step samplers by interpolation, cubic splines at their keyframes' values. A joint with
   no channel keeps its node's rest rotation and translation in every frame.
+* Reading trusts nothing in the file: the JSON is read as plain data (its depth checked
+  before parsing), every field is checked for its type and range where it is used, and every
+  count, frame rate, duration and buffer length against :func:`quatmotion.limits.current`
+  before anything is allocated; a failure is a ``FormatError`` naming the field. A buffer in
+  another file is read only for a file on disk, only inside its folder (symbolic links
+  followed), only a regular file and no further than its ``byteLength``; a glTF given as bytes
+  (an upload) reads no other file.
 * The skeleton's ``extras``: ``format="gltf"``, ``length_scale`` (cm per file unit: 100 times
   the ancestors' scale), ``gltf_animation`` (the name read).
 """
@@ -33,16 +42,21 @@ from __future__ import annotations
 
 import base64
 import json
+import os
+import re
+import stat
 import struct
-from pathlib import Path
+from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
+from urllib.parse import unquote
 
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion import quat
+from quatmotion import limits, quat
 from quatmotion._atomic import atomic_write_bytes
 from quatmotion.errors import FormatError
+from quatmotion.io._text import read_bytes
 from quatmotion.io.units import length_unit
 from quatmotion.motion import Motion, Skeleton
 
@@ -272,7 +286,8 @@ def read_gltf(
     Parameters
     ----------
     path : str or Path
-        ``.glb`` or ``.gltf`` (its buffers embedded or in files beside it).
+        ``.glb`` or ``.gltf``: its buffers embedded, or in files inside its folder (a relative
+        ``uri`` that stays there once symbolic links are followed; anything else is refused).
     animation : str, int or None
         The animation's name or position; None takes the first.
     units : str, float or None
@@ -290,10 +305,11 @@ def read_gltf(
     ------
     FormatError
         Naming the file and the field: not glTF 2.0, indices out of range, accessors of the
-        wrong type, no such animation.
+        wrong type or out of their buffer, a buffer outside the file's folder, counts, frame
+        rates or durations over :func:`quatmotion.limits.current`, no such animation.
     """
     path = Path(path)
-    return parse_gltf(path.read_bytes(), path, animation, units=units)
+    return parse_gltf(read_bytes(path), path, animation, units=units, folder=path.parent)
 
 
 def parse_gltf(
@@ -302,99 +318,257 @@ def parse_gltf(
     animation: str | int | None = None,
     *,
     units: str | float | None = None,
+    folder: str | Path | None = None,
 ) -> Motion:
-    """:func:`read_gltf` of the bytes of a file (``path`` names it and finds buffers beside
-    it; it is not opened)."""
-    import pygltflib
-
+    """:func:`read_gltf` of the bytes of a file. ``path`` names it in messages and is not
+    opened; ``folder`` is where buffers in other files may be read from (the file's own folder,
+    for a file on disk). Without one (an upload), a buffer in another file is refused."""
     path = Path(path)
-    try:
-        if data[:4] == b"glTF":
-            gltf = pygltflib.GLTF2.load_from_bytes(data)
-        else:
-            text = data.decode("utf-8-sig")
-            json.loads(text)  # a clear error for text that is no JSON
-            gltf = pygltflib.GLTF2.from_json(text)
-    except (ValueError, TypeError, KeyError, IndexError, AttributeError, struct.error) as error:
-        raise FormatError(f"not a glTF 2.0 file ({error})", path) from None
-    version = str(getattr(gltf.asset, "version", "") or "")
-    if not version.startswith("2."):
+    limits.check("file_bytes", len(data), path, "the file's size")
+    document, chunk = _document(data, path)
+    version = (
+        document.get("asset", {}).get("version") if _is_object(document.get("asset")) else None
+    )
+    if not (isinstance(version, str) and version.startswith("2.")):
         raise FormatError(f"asset.version is {version!r}: only glTF 2.0 is read", path)
-    reader = _Reader(gltf, path, None if units is None else length_unit(units))
+    reader = _Reader(
+        document,
+        chunk,
+        path,
+        None if units is None else length_unit(units),
+        None if folder is None else Path(folder),
+    )
+    return reader.motion(animation)
+
+
+_GLB_JSON = 0x4E4F534A
+_GLB_BIN = 0x004E4942
+
+
+def _document(data: bytes, path: Path) -> tuple[dict[str, Any], bytes | None]:
+    """The JSON document (its depth checked before parsing) and the GLB's binary chunk."""
+    chunk = None
+    if data[:4] == b"glTF":
+        if len(data) < 20:
+            raise FormatError(f"not a glTF 2.0 file: a GLB of {len(data)} bytes", path)
+        _, version, length = struct.unpack_from("<4sII", data)
+        if version != 2:
+            raise FormatError(f"GLB version {version}: only glTF 2.0 is read", path)
+        if length > len(data):
+            raise FormatError(f"the GLB header says {length} bytes, the file has {len(data)}", path)
+        chunks: list[tuple[int, int, bytes]] = []
+        offset = 12
+        while offset + 8 <= length:
+            size, kind = struct.unpack_from("<II", data, offset)
+            if offset + 8 + size > length:
+                raise FormatError(f"the GLB chunk at byte {offset} runs past the file's end", path)
+            chunks.append((offset, kind, data[offset + 8 : offset + 8 + size]))
+            offset += 8 + size
+        if not chunks or chunks[0][1] != _GLB_JSON:
+            raise FormatError("the GLB's first chunk (byte 12) is not its JSON chunk", path)
+        text = chunks[0][2]
+        chunk = next((body for _, kind, body in chunks[1:] if kind == _GLB_BIN), None)
+    else:
+        text = data[3:] if data[:3] == b"\xef\xbb\xbf" else data
+    limits.check("depth", limits.json_depth(text), path, "the JSON's nesting depth")
     try:
-        return reader.motion(animation)
-    except (IndexError, TypeError, KeyError) as error:
-        raise FormatError(f"malformed glTF ({type(error).__name__}: {error})", path) from None
+        document = json.loads(text)
+    except ValueError as error:  # UnicodeDecodeError included
+        raise FormatError(f"not a glTF 2.0 file ({error})", path) from None
+    if not _is_object(document):
+        raise FormatError("not a glTF 2.0 file (its JSON is no object)", path)
+    return document, chunk
+
+
+def _is_object(value: Any) -> bool:
+    return isinstance(value, dict)
+
+
+def _is_index(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 class _Reader:
-    def __init__(self, gltf: Any, path: Path, cm_per_unit: float | None) -> None:
-        self.gltf = gltf
+    """The document's fields, each checked for its type and range where it is read: a field
+    of the wrong type is a FormatError naming it, never an exception of the code using it."""
+
+    def __init__(
+        self,
+        document: dict[str, Any],
+        chunk: bytes | None,
+        path: Path,
+        cm_per_unit: float | None,
+        folder: Path | None,
+    ) -> None:
+        self.document = document
+        self.chunk = chunk
         self.path = path
+        self.folder = folder
         self.metre = CM_PER_METRE if cm_per_unit is None else cm_per_unit
         self.given = cm_per_unit is not None
         self._buffers: dict[int, bytes] = {}
+        self._accessors: dict[tuple[int, str], NDArray[np.float64]] = {}
+        self.keys_read = 0
+        self.nodes = self.objects(document, "nodes", "")
 
     def fail(self, message: str) -> FormatError:
         return FormatError(message, self.path)
 
+    # --- typed fields -------------------------------------------------------------------------
+
+    def objects(self, owner: dict[str, Any], key: str, where: str) -> list[dict[str, Any]]:
+        """``owner[key]``: a list of objects (empty if absent)."""
+        items = owner.get(key, [])
+        if not isinstance(items, list) or not all(_is_object(item) for item in items):
+            raise self.fail(f"{where}{key} is not a list of objects")
+        return items
+
+    def index(self, owner: dict[str, Any], key: str, size: int, where: str, into: str) -> int:
+        """``owner[key]``: a required index of one of ``size`` items of ``into``."""
+        value = owner.get(key)
+        if not _is_index(value) or not 0 <= value < size:
+            raise self.fail(f"{where}.{key} is {value!r}: no index of {into} (it has {size})")
+        return value
+
+    def indices(self, owner: dict[str, Any], key: str, size: int, where: str) -> list[int]:
+        values = owner.get(key, [])
+        if not isinstance(values, list) or not all(_is_index(v) and 0 <= v < size for v in values):
+            raise self.fail(f"{where}.{key} is not a list of node indices (0 to {size - 1})")
+        return values
+
+    def count(self, owner: dict[str, Any], key: str, where: str, default: int | None = None) -> int:
+        """``owner[key]``: a whole number, 0 or more."""
+        value = owner.get(key, default)
+        if not _is_index(value) or value < 0:
+            raise self.fail(f"{where}.{key} is {value!r}: expected a whole number, 0 or more")
+        return value
+
+    def numbers(self, owner: dict[str, Any], key: str, n: int, where: str) -> NDArray | None:
+        """``owner[key]``: ``n`` finite numbers, or None if absent."""
+        value = owner.get(key)
+        if value is None:
+            return None
+        if not (
+            isinstance(value, list)
+            and len(value) == n
+            and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+            and np.all(np.isfinite(value))
+        ):
+            raise self.fail(f"{where}.{key} is not {n} finite numbers")
+        return np.asarray(value, dtype=np.float64)
+
     # --- data ---------------------------------------------------------------------------------
 
     def buffer(self, index: int) -> bytes:
-        if index not in self._buffers:
-            buffers = self.gltf.buffers or []
-            if not 0 <= index < len(buffers):
-                raise self.fail(f"buffers[{index}] does not exist")
-            uri = buffers[index].uri
-            if uri is None:
-                blob = self.gltf.binary_blob()
-                if blob is None:
-                    raise self.fail(f"buffers[{index}] has no uri and the file no binary chunk")
-            elif uri.startswith("data:"):
-                try:
-                    blob = base64.b64decode(uri.split(",", 1)[1])
-                except (IndexError, ValueError):
-                    raise self.fail(f"buffers[{index}].uri is not a base64 data URI") from None
-            else:
-                from urllib.parse import unquote
+        if index in self._buffers:
+            return self._buffers[index]
+        where = f"buffers[{index}]"
+        buffer = self.objects(self.document, "buffers", "")[index]
+        length = self.count(buffer, "byteLength", where)
+        limits.check("file_bytes", length, self.path, f"{where}.byteLength")
+        uri = buffer.get("uri")
+        if uri is None:
+            if self.chunk is None or index != 0:
+                raise self.fail(f"{where} has no uri and is not the GLB's binary chunk")
+            blob = self.chunk
+        elif not isinstance(uri, str):
+            raise self.fail(f"{where}.uri is not a string")
+        elif uri.startswith("data:"):
+            head, comma, payload = uri.partition(",")
+            if not comma or not head.endswith(";base64"):
+                raise self.fail(f"{where}.uri is a data URI that is not base64")
+            try:
+                blob = base64.b64decode(payload)
+            except ValueError:
+                raise self.fail(f"{where}.uri is not a valid base64 data URI") from None
+        else:
+            blob = self.external(where, uri, length)
+        self._buffers[index] = blob
+        return blob
 
-                sidecar = self.path.parent / unquote(uri)
-                try:
-                    blob = sidecar.read_bytes()
-                except OSError as error:
-                    raise self.fail(f"buffers[{index}]: cannot read {sidecar}: {error}") from None
-            self._buffers[index] = blob
-        return self._buffers[index]
+    def external(self, where: str, uri: str, length: int) -> bytes:
+        """The first ``length`` bytes of a regular file inside the glTF's folder, symbolic
+        links followed. The messages for a path outside are the same whatever is there."""
+        if self.folder is None:
+            raise self.fail(
+                f"{where}.uri names another file, which is not read for a glTF given as bytes "
+                "(an upload): embed the buffers (a .glb, or a .gltf with data URIs)"
+            )
+        outside = self.fail(f"{where}.uri must be a relative path inside the glTF's folder")
+        name = unquote(uri)
+        if (
+            "\0" in name
+            or _SCHEME.match(name)
+            or PurePosixPath(name).is_absolute()
+            or PureWindowsPath(name).anchor
+        ):
+            raise outside
+        folder = self.folder.resolve()
+        target = (folder / name).resolve()
+        if not target.is_relative_to(folder) or target == folder:
+            raise outside
+        try:  # non-blocking: a FIFO named by a file must not hang the reader
+            handle = os.open(target, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        except OSError as error:
+            raise self.fail(f"{where}: cannot read {name}: {error.strerror}") from None
+        with os.fdopen(handle, "rb") as file:
+            if not stat.S_ISREG(os.fstat(handle).st_mode):
+                raise self.fail(f"{where}.uri names {name}, which is not a regular file")
+            return file.read(length)
+
+    def accessor_count(self, index: int, field: str) -> int:
+        accessors = self.objects(self.document, "accessors", "")
+        if not _is_index(index) or not 0 <= index < len(accessors):
+            raise self.fail(f"{field}: accessors[{index}] does not exist")
+        return self.count(accessors[index], "count", f"accessors[{index}]")
 
     def accessor(self, index: int, kind: str, field: str) -> NDArray[np.float64]:
-        accessors = self.gltf.accessors or []
-        if not 0 <= index < len(accessors):
-            raise self.fail(f"{field}: accessors[{index}] does not exist")
-        acc = accessors[index]
+        """The accessor's values as float64 ``(count, width)``; its count bounded by the
+        caller (:meth:`accessor_count`) before this reads it."""
+        key = (index, kind)
+        if key not in self._accessors:
+            self._accessors[key] = self._read_accessor(index, kind, field)
+        return self._accessors[key]
+
+    def _read_accessor(self, index: int, kind: str, field: str) -> NDArray[np.float64]:
+        count = self.accessor_count(index, field)
+        acc = self.document["accessors"][index]
         where = f"{field} (accessors[{index}])"
-        if acc.type != kind:
-            raise self.fail(f"{where} is {acc.type}, expected {kind}")
-        if acc.componentType not in _DTYPES:
-            raise self.fail(f"{where} has componentType {acc.componentType}")
-        if acc.sparse is not None:
+        if acc.get("type") != kind:
+            raise self.fail(f"{where} is {acc.get('type')!r}, expected {kind}")
+        component = acc.get("componentType")
+        if component not in _DTYPES or isinstance(component, bool):
+            raise self.fail(f"{where} has componentType {component!r}")
+        if acc.get("sparse") is not None:
             raise self.fail(f"{where} is sparse, which is not read")
         width = _COMPONENTS[kind]
-        dtype = np.dtype(_DTYPES[acc.componentType]).newbyteorder("<")
-        count = int(acc.count)
-        if acc.bufferView is None:
-            return np.zeros((count, width))
-        views = self.gltf.bufferViews or []
-        if not 0 <= acc.bufferView < len(views):
-            raise self.fail(f"{where}: bufferViews[{acc.bufferView}] does not exist")
-        view = views[acc.bufferView]
-        blob = self.buffer(view.buffer)
-        start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+        dtype = np.dtype(_DTYPES[component]).newbyteorder("<")
+        if acc.get("bufferView") is None:
+            return np.zeros((count, width))  # the specification's default
+        views = self.objects(self.document, "bufferViews", "")
+        v = self.index(acc, "bufferView", len(views), f"accessors[{index}]", "bufferViews")
+        view = views[v]
+        view_where = f"bufferViews[{v}]"
+        buffers = self.objects(self.document, "buffers", "")
+        blob = self.buffer(self.index(view, "buffer", len(buffers), view_where, "buffers"))
+        view_start = self.count(view, "byteOffset", view_where, 0)
+        view_length = self.count(view, "byteLength", view_where)
+        if view_start + view_length > len(blob):
+            raise self.fail(
+                f"{view_where} (bytes {view_start} to {view_start + view_length}) runs past the "
+                f"end of its buffer ({len(blob)} bytes)"
+            )
         element = width * dtype.itemsize
-        stride = view.byteStride or element
+        stride = view.get("byteStride", element)
+        if not _is_index(stride) or not element <= stride <= 252:
+            raise self.fail(f"{view_where}.byteStride is {stride!r}: expected {element} to 252")
+        start = self.count(acc, "byteOffset", f"accessors[{index}]", 0)
         end = start + (stride * (count - 1) + element if count else 0)
-        if end > (view.byteOffset or 0) + view.byteLength or end > len(blob):
-            raise self.fail(f"{where} reads past the end of its buffer")
-        raw = np.frombuffer(blob, dtype=np.uint8, count=end - start, offset=start)
+        if end > view_length:
+            raise self.fail(
+                f"{where} reads bytes {start} to {end} of {view_where}, which has {view_length}"
+            )
+        raw = np.frombuffer(blob, dtype=np.uint8, count=end - start, offset=view_start + start)
         if stride == element:
             values = raw.view(dtype).reshape(count, width)
         else:
@@ -402,8 +576,8 @@ class _Reader:
             padded[: len(raw)] = raw
             values = padded.reshape(count, stride)[:, :element].copy().view(dtype)
         values = values.astype(np.float64)
-        if acc.normalized and acc.componentType in _NORMALIZED_MAX:
-            values = np.maximum(values / _NORMALIZED_MAX[acc.componentType], -1.0)
+        if acc.get("normalized") is True and component in _NORMALIZED_MAX:
+            values = np.maximum(values / _NORMALIZED_MAX[component], -1.0)
         if not np.all(np.isfinite(values)):
             raise self.fail(f"{where} holds values that are not finite")
         return values
@@ -413,35 +587,43 @@ class _Reader:
     def joints(self) -> tuple[list[int], list[int], list[int], list[int]]:
         """Joint nodes parents first, their parents (joint positions), end-site nodes and their
         joints."""
-        nodes = self.gltf.nodes or []
+        nodes = self.nodes
         if not nodes:
             raise self.fail("the file holds no nodes")
+        children = [
+            self.indices(node, "children", len(nodes), f"nodes[{n}]")
+            for n, node in enumerate(nodes)
+        ]
         parent_of: dict[int, int] = {}
-        for n, node in enumerate(nodes):
-            for child in node.children or []:
-                if not 0 <= child < len(nodes):
-                    raise self.fail(f"nodes[{n}].children names nodes[{child}], which is missing")
+        for n, kids in enumerate(children):
+            for child in kids:
                 if child in parent_of:
                     raise self.fail(f"nodes[{child}] has two parents")
                 parent_of[child] = n
-        skins = self.gltf.skins or []
+        skins = self.objects(self.document, "skins", "")
         if skins:
-            members = set(skins[0].joints or [])
-            if not members or not all(0 <= j < len(nodes) for j in members):
-                raise self.fail("skins[0].joints is empty or names missing nodes")
+            members = set(self.indices(skins[0], "joints", len(nodes), "skins[0]"))
+            if not members:
+                raise self.fail("skins[0].joints is empty")
         else:
-            scene = (self.gltf.scenes or [None])[self.gltf.scene or 0]
-            roots = list(scene.nodes or []) if scene is not None else []
-            roots = [r for r in roots if nodes[r].mesh is None] or roots
+            scenes = self.objects(self.document, "scenes", "")
+            roots: list[int] = []
+            if scenes:
+                scene = self.index(
+                    {"scene": 0, **self.document}, "scene", len(scenes), "", "scenes"
+                )
+                roots = self.indices(scenes[scene], "nodes", len(nodes), f"scenes[{scene}]")
+            roots = [r for r in roots if nodes[r].get("mesh") is None] or roots
             if not roots:
                 raise self.fail("no skin and no scene nodes: no skeleton to read")
             members = set()
             stack = roots[:1]
             while stack:
                 n = stack.pop()
-                if nodes[n].mesh is None and nodes[n].children:
+                if n not in members and nodes[n].get("mesh") is None and children[n]:
                     members.add(n)
-                    stack.extend(nodes[n].children)
+                    stack.extend(children[n])
+        limits.check("joints", len(members), self.path, "the skeleton's joints")
         roots = [j for j in members if parent_of.get(j) not in members]
         if len(roots) != 1:
             raise self.fail(
@@ -459,23 +641,24 @@ class _Reader:
                 order.append(n)
                 parents.append(parent)
                 here = len(order) - 1
-                for child in reversed(nodes[n].children or []):
+                for child in reversed(children[n]):
                     stack.append((child, here))
-            elif nodes[n].mesh is None and not nodes[n].children and nodes[n].camera is None:
+            elif not children[n] and all(nodes[n].get(k) is None for k in ("mesh", "camera")):
                 sites.append(n)
                 site_parents.append(parent)
         if len(order) != len(members):
             raise self.fail("skins[0].joints are not one tree under one root")
+        self.parent_of = parent_of
         return order, parents, sites, site_parents
 
     def ancestors(self, root: int) -> tuple[NDArray, NDArray, float]:
         """World rotation, translation and uniform scale of the root's parent."""
-        nodes = self.gltf.nodes
-        parent_of = {c: n for n, node in enumerate(nodes) for c in node.children or []}
         chain = []
         n = root
-        while n in parent_of:
-            n = parent_of[n]
+        while n in self.parent_of:
+            n = self.parent_of[n]
+            if n == root or len(chain) >= len(self.nodes):
+                raise self.fail(f"nodes[{root}]'s ancestors form a cycle")
             chain.append(n)
         rotation, translation, scale = quat.identity(()), np.zeros(3), 1.0
         for n in reversed(chain):
@@ -486,25 +669,37 @@ class _Reader:
         return rotation, translation, scale
 
     def rest(self, n: int) -> tuple[NDArray, NDArray, float]:
-        node = self.gltf.nodes[n]
-        if node.matrix is not None and list(node.matrix) != list(np.eye(4).ravel()):
-            m = np.asarray(node.matrix, dtype=np.float64).reshape(4, 4).T
+        node = self.nodes[n]
+        where = f"nodes[{n}]"
+        matrix = self.numbers(node, "matrix", 16, where)
+        if matrix is not None and not np.array_equal(matrix, np.eye(4).ravel()):
+            m = matrix.reshape(4, 4).T
             scales = np.linalg.norm(m[:3, :3], axis=0)
-            if not np.allclose(scales, scales[0], rtol=1e-6) or scales[0] <= 0:
-                raise self.fail(f"nodes[{n}].matrix is not a rotation with a uniform scale")
+            if not np.allclose(scales, scales[0], rtol=1e-6) or not scales[0] > 0:
+                raise self.fail(f"{where}.matrix is not a rotation with a uniform scale")
             r = quat.from_matrix(m[:3, :3] / scales[0])
             return r, m[:3, 3].copy(), float(scales[0])
-        t = np.asarray(node.translation or (0.0, 0.0, 0.0), dtype=np.float64)
-        r = _wxyz(np.asarray(node.rotation or (0.0, 0.0, 0.0, 1.0), dtype=np.float64))
-        s = np.asarray(node.scale or (1.0, 1.0, 1.0), dtype=np.float64)
-        if not np.allclose(s, s[0], rtol=1e-6) or s[0] <= 0:
-            raise self.fail(f"nodes[{n}].scale {s.tolist()} is not uniform and positive")
-        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(r))):
-            raise self.fail(f"nodes[{n}] has a transform that is not finite")
+        t = self.numbers(node, "translation", 3, where)
+        r = self.numbers(node, "rotation", 4, where)
+        s = self.numbers(node, "scale", 3, where)
+        t = np.zeros(3) if t is None else t
+        r = np.array([1.0, 0.0, 0.0, 0.0]) if r is None else _wxyz(r)
+        s = np.ones(3) if s is None else s
+        if not np.allclose(s, s[0], rtol=1e-6) or not s[0] > 0:
+            raise self.fail(f"{where}.scale {s.tolist()} is not uniform and positive")
+        if not np.linalg.norm(r) > 1e-12:
+            raise self.fail(f"{where}.rotation is zero, not a rotation")
         return quat.normalize(r), t, float(s[0])
 
-    def animation(self, wanted: str | int | None) -> tuple[int | None, Any]:
-        animations = self.gltf.animations or []
+    def translation(self, n: int) -> NDArray:
+        """A node's rest translation (an end site's offset): :meth:`rest`'s, quicker."""
+        if "matrix" in self.nodes[n]:
+            return self.rest(n)[1]
+        t = self.numbers(self.nodes[n], "translation", 3, f"nodes[{n}]")
+        return np.zeros(3) if t is None else t
+
+    def animation(self, wanted: str | int | None) -> tuple[int | None, dict[str, Any] | None]:
+        animations = self.objects(self.document, "animations", "")
         if wanted is None:
             return (0, animations[0]) if animations else (None, None)
         if isinstance(wanted, int) or (isinstance(wanted, str) and wanted.isdigit()):
@@ -512,38 +707,53 @@ class _Reader:
             if not 0 <= k < len(animations):
                 raise self.fail(f"no animation {k}: the file has {len(animations)}")
             return k, animations[k]
-        names = [a.name for a in animations]
+        names = [a.get("name") for a in animations]
         if wanted not in names:
             raise self.fail(f"no animation named {wanted!r}; the file has {names}")
         return names.index(wanted), animations[names.index(wanted)]
 
     def channels(
-        self, k: int | None, anim: Any, index: dict[int, int]
+        self, k: int | None, anim: dict[str, Any] | None, index: dict[int, int]
     ) -> tuple[dict[int, _Keys], dict[int, _Keys]]:
         """The animation's rotation and translation keyframes of each joint (by joint number),
-        checked: a sampler that exists, as many values as times, times that never go back."""
+        checked: a sampler that exists, as many values as times, times that never go back, no
+        more keyframes in all than :func:`quatmotion.limits.current` allows a clip."""
         rotated: dict[int, _Keys] = {}
         moved: dict[int, _Keys] = {}
-        for c, channel in enumerate((anim.channels or []) if anim is not None else []):
-            target = channel.target
-            j = index.get(target.node)
-            if j is None or target.path not in ("rotation", "translation"):
-                continue  # another node's, or weights and scale
+        if anim is None:
+            return rotated, moved
+        samplers = self.objects(anim, "samplers", f"animations[{k}].")
+        for c, channel in enumerate(self.objects(anim, "channels", f"animations[{k}].")):
             field = f"animations[{k}].channels[{c}]"
-            if not 0 <= channel.sampler < len(anim.samplers or []):
-                raise self.fail(f"{field}.sampler names a missing sampler")
-            sampler = anim.samplers[channel.sampler]
-            times = self.accessor(sampler.input, "SCALAR", f"{field} input")[:, 0]
-            kind = "VEC4" if target.path == "rotation" else "VEC3"
-            values = self.accessor(sampler.output, kind, f"{field} output")
-            how = sampler.interpolation or "LINEAR"
-            if how == "CUBICSPLINE":
-                values = values[1::3]
-            if len(values) != len(times) or not len(times):
-                raise self.fail(f"{field}: {len(times)} times but {len(values)} values")
+            target = channel.get("target")
+            if not _is_object(target):
+                raise self.fail(f"{field}.target is missing")
+            j = index.get(target.get("node"))  # type: ignore[arg-type]
+            path = target.get("path")
+            if j is None or path not in ("rotation", "translation"):
+                continue  # another node's, or weights and scale
+            s = self.index(channel, "sampler", len(samplers), field, f"animations[{k}].samplers")
+            sampler = samplers[s]
+            how = sampler.get("interpolation", "LINEAR")
+            if how not in ("LINEAR", "STEP", "CUBICSPLINE"):
+                raise self.fail(f"animations[{k}].samplers[{s}].interpolation is {how!r}")
+            n_times = self.accessor_count(sampler.get("input"), f"{field} input")
+            n_values = self.accessor_count(sampler.get("output"), f"{field} output")
+            per_key = 3 if how == "CUBICSPLINE" else 1
+            if n_values != per_key * n_times or not n_times:
+                raise self.fail(f"{field}: {n_times} times but {n_values} values ({how})")
+            self.keys_read += n_times
+            limits.check("joint_frames", self.keys_read, self.path, f"keyframes up to {field}")
+            times = self.accessor(sampler["input"], "SCALAR", f"{field} input")[:, 0]
+            kind = "VEC4" if path == "rotation" else "VEC3"
+            values = self.accessor(sampler["output"], kind, f"{field} output")[
+                per_key // 2 :: per_key
+            ]
             if np.any(np.diff(times) < 0):
                 raise self.fail(f"{field}: keyframe times go backwards")
-            (rotated if target.path == "rotation" else moved)[j] = (times, values, how)
+            if path == "rotation" and not np.all(np.linalg.norm(values, axis=1) > 1e-12):
+                raise self.fail(f"{field} output holds a zero quaternion, not a rotation")
+            (rotated if path == "rotation" else moved)[j] = (times, values, how)
         return rotated, moved
 
     # --- the motion ---------------------------------------------------------------------------
@@ -560,12 +770,12 @@ class _Reader:
         cm = self.metre * up_s * rests[0][2]
         offsets = np.array([t for _, t, _ in rests]) * cm
         offsets[0] = self.metre * (up_t + up_s * quat.rotate(up_r, rests[0][1]))
-        site_offsets = np.array([self.rest(n)[1] for n in sites]).reshape(-1, 3) * cm
+        site_offsets = np.array([self.translation(n) for n in sites]).reshape(-1, 3) * cm
         k, anim = self.animation(wanted)
         rotated, moved = self.channels(k, anim, {n: j for j, n in enumerate(order)})
         keys = [t for t, _, _ in (*rotated.values(), *moved.values())]
-        fps = 30.0 if anim is None else self._fps(anim, keys)
-        frames = _frame_times(keys, fps)
+        fps = 30.0 if anim is None else self._fps(k, anim, keys)
+        frames = self._frame_times(k, keys, fps, J)
         n_frames = len(frames)
         for table in (rotated, moved):
             for j, (times, values, how) in table.items():
@@ -583,31 +793,31 @@ class _Reader:
         rotations[:, 0] = quat.multiply(up_r, rotations[:, 0])
         translations *= cm
         joint_moves = any(j > 0 for j in moved)
-        names = [self.gltf.nodes[n].name or f"node{n}" for n in order]
-        site_names = [self.gltf.nodes[n].name or f"node{n}" for n in sites]
+        names = [self.name(n) for n in order]
+        site_names = [self.name(n) for n in sites]
         name = self.path.stem
-        skeleton = Skeleton(
-            joint_names=tuple(_unique(names)),
-            parents=np.asarray(parents, dtype=np.int64),
-            offsets=offsets,
-            channels=tuple(
-                (("tx", "ty", "tz") if j == 0 or j in moved else ())
-                + (("rz", "ry", "rx") if j == 0 or j in rotated else ())
-                for j in range(J)
-            ),
-            euler="intrinsic",
-            site_names=tuple(_unique(site_names, taken=set(names))),
-            site_parents=np.asarray(site_parents, dtype=np.int64),
-            site_offsets=site_offsets,
-            name=name,
-            extras={
-                "format": "gltf",
-                "length_scale": cm,
-                "gltf_animation": None if anim is None else (anim.name or str(k)),
-                **({"length_unit_given": True} if self.given else {}),
-            },
-        )
         try:
+            skeleton = Skeleton(
+                joint_names=tuple(_unique(names)),
+                parents=np.asarray(parents, dtype=np.int64),
+                offsets=offsets,
+                channels=tuple(
+                    (("tx", "ty", "tz") if j == 0 or j in moved else ())
+                    + (("rz", "ry", "rx") if j == 0 or j in rotated else ())
+                    for j in range(J)
+                ),
+                euler="intrinsic",
+                site_names=tuple(_unique(site_names, taken=set(names))),
+                site_parents=np.asarray(site_parents, dtype=np.int64),
+                site_offsets=site_offsets,
+                name=name,
+                extras={
+                    "format": "gltf",
+                    "length_scale": cm,
+                    "gltf_animation": None if anim is None else (anim.get("name") or str(k)),
+                    **({"length_unit_given": True} if self.given else {}),
+                },
+            )
             return Motion(
                 skeleton,
                 fps,
@@ -616,30 +826,56 @@ class _Reader:
                 translations if joint_moves else None,
                 name=name,
             )
-        except ValueError as error:
+        except ValueError as error:  # e.g. offsets that overflow once in centimetres
             raise self.fail(str(error)) from None
 
-    def _fps(self, anim: Any, times: list[NDArray]) -> float:
-        extras = anim.extras if isinstance(anim.extras, dict) else {}
-        fps = extras.get("fps")
-        if isinstance(fps, int | float) and np.isfinite(fps) and fps > 0:
+    def name(self, n: int) -> str:
+        name = self.nodes[n].get("name")
+        return name if isinstance(name, str) and name else f"node{n}"
+
+    def _fps(self, k: int | None, anim: dict[str, Any], times: list[NDArray]) -> float:
+        extras = anim.get("extras")
+        fps = extras.get("fps") if _is_object(extras) else None
+        if fps is not None:
+            limits.check("fps", fps, self.path, f"animations[{k}].extras.fps")
             return float(fps)
         steps = np.concatenate([np.diff(t) for t in times]) if times else np.zeros(0)
         steps = steps[steps > 0]
         if not len(steps):
             return 30.0
         fps = 1.0 / float(np.median(steps))
+        limits.check("fps", fps, self.path, f"animations[{k}]'s frame rate (1 / median key step)")
         return float(round(fps)) if abs(fps - round(fps)) <= 1e-3 * fps else fps
+
+    def _frame_times(self, k: int | None, keys: list[NDArray], fps: float, joints: int) -> NDArray:
+        """The clip's frame times: from the first keyframe to the last at ``fps`` (none without
+        keyframes), their number checked against the limits before they are made."""
+        if not keys:
+            return np.zeros(0)
+        start = min(float(t[0]) for t in keys)
+        end = max(float(t[-1]) for t in keys)
+        field = f"animations[{k}]"
+        limits.check("duration", end - start, self.path, f"{field}'s duration (keyframe times)")
+        n_frames = int(round((end - start) * fps)) + 1
+        limits.check("frames", n_frames, self.path, f"{field}'s frames ({fps:g} frames/s)")
+        limits.check("joint_frames", n_frames * joints, self.path, f"{field}'s frames x joints")
+        return start + np.arange(n_frames) / fps
+
+
+_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*:")
 
 
 def _unique(names: list[str], taken: set[str] | None = None) -> list[str]:
-    """Names made unique (glTF does not require it; a Skeleton does): ``name.1``, ``name.2``."""
+    """Names made unique (glTF does not require it; a Skeleton does): ``name.1``, ``name.2``.
+    Linear: each name's next suffix is remembered."""
     seen = set(taken or ())
+    suffix: dict[str, int] = {}
     out = []
     for name in names:
-        candidate, k = name, 1
+        candidate, k = name, suffix.get(name, 1)
         while candidate in seen:
             candidate, k = f"{name}.{k}", k + 1
+        suffix[name] = k
         seen.add(candidate)
         out.append(candidate)
     return out
@@ -654,16 +890,6 @@ def _sample(times: NDArray, values: NDArray, how: str, at: NDArray) -> NDArray:
 
 
 _Keys = tuple  # (times (K,), values (K, 3 or 4), interpolation): one channel's keyframes
-
-
-def _frame_times(keys: list[NDArray], fps: float) -> NDArray:
-    """The clip's frame times: from the first keyframe to the last at ``fps`` (none without
-    keyframes)."""
-    if not keys:
-        return np.zeros(0)
-    start = min(float(t[0]) for t in keys)
-    end = max(float(t[-1]) for t in keys)
-    return start + np.arange(int(round((end - start) * fps)) + 1) / fps
 
 
 def _snapped(times: NDArray, frames: NDArray, fps: float) -> NDArray:
