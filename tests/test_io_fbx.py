@@ -275,3 +275,44 @@ def test_the_readers_limits_hold_for_fbx():
         read_fbx(path, 0)
     with limits.raised(frames=40):
         assert read_fbx(path, 0).n_frames == 40
+
+
+@pytest.mark.filterwarnings("ignore:.*2 takes:quatmotion.errors.FormatWarning")
+def test_the_web_app_searches_by_an_uploaded_fbx(motion_library):
+    """An upload goes through io.parse_motion: an FBX is searched like a BVH; a damaged one
+    gets 400 with the parser's one line naming the upload."""
+    from fastapi.testclient import TestClient
+
+    from quatmotion.server import create_app
+
+    app = create_app(motion_library["library"], motion_library["index"], motion_library["poses"])
+    data = (FIXTURES / "cmu_bvh_names.fbx").read_bytes()  # names search maps today
+    with TestClient(app, base_url="http://127.0.0.1") as client:
+        good = client.post(
+            "/api/search/upload", files={"file": ("cmu_bvh_names.fbx", data)}, data={"top": "2"}
+        )
+        bad = client.post("/api/search/upload", files={"file": ("bad.fbx", BAD["damaged"])})
+    assert good.status_code == 200, good.text
+    assert good.json()["query"] == "cmu_bvh_names" and len(good.json()["results"]) == 2
+    assert bad.status_code == 400 and bad.json()["detail"].startswith("bad.fbx: ")
+
+
+def test_world_transforms_compose_alike_as_quaternions_and_as_matrices():
+    """A non-uniform scale on a leaf sends the composition through matrices; the rotations and
+    positions are those the quaternion path gives without it (a leaf's scale moves nothing)."""
+    from quatmotion import quat
+    from quatmotion.io.fbx import _world
+
+    rng = np.random.default_rng(3)
+    T, parents = 5, [-1, 0, 1, 1, 3]
+    N = len(parents)
+    translations = rng.normal(size=(T, N, 3)) * 10
+    rotations = quat.normalize(rng.normal(size=(T, N, 4)))
+    uniform = np.repeat(rng.uniform(0.5, 2.0, size=(T, N, 1)), 3, axis=-1)
+    uniform[:, 4] = 1.0
+    skewed = uniform.copy()
+    skewed[:, 4] = (2.0, 1.0, 0.5)
+    r_quat, p_quat = _world(translations, rotations, uniform, parents)
+    r_matrix, p_matrix = _world(translations, rotations, skewed, parents)
+    assert np.allclose(p_quat, p_matrix, atol=1e-9)
+    assert np.allclose(np.abs(np.sum(r_quat * r_matrix, axis=-1)), 1.0, atol=1e-9)

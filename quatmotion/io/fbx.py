@@ -430,30 +430,41 @@ def _axis_name(axis: Any) -> str | None:
 def _world(
     translations: NDArray, rotations: NDArray, scales: NDArray, parents: list[int]
 ) -> tuple[NDArray, NDArray]:
-    """World linear maps ``(T, N, 3, 3)`` and positions ``(T, N, 3)`` of nodes listed parents
-    first (``parents[k] < k``, -1 for none), from local translations, rotations (wxyz) and
-    scales ``(T, N, ...)``: ``M = M_parent @ (T R S)``."""
+    """World rotations (wxyz, ``(T, N, 4)``) and positions (``(T, N, 3)``) of nodes listed
+    parents first (``parents[k] < k``, -1 for none), from local translations, rotations (wxyz)
+    and scales ``(T, N, ...)``: ``M = M_parent @ (T R S)``. Uniform scales (every rig we know)
+    compose as quaternions and a factor; others as matrices, the rotation taken from each."""
     T, N = translations.shape[:2]
+    position = np.empty((T, N, 3))
+    if np.allclose(scales, scales[..., :1], rtol=1e-5, atol=0.0) and np.all(scales > 0):
+        factor = scales[..., 0]
+        rotation = np.empty((T, N, 4))
+        world_factor = np.empty((T, N))
+        for k in range(N):
+            p = parents[k]
+            if p < 0:
+                rotation[:, k], position[:, k] = rotations[:, k], translations[:, k]
+                world_factor[:, k] = factor[:, k]
+                continue
+            moved = quat.rotate(rotation[:, p], translations[:, k])
+            position[:, k] = position[:, p] + world_factor[:, p, None] * moved
+            rotation[:, k] = quat.multiply(rotation[:, p], rotations[:, k])
+            world_factor[:, k] = world_factor[:, p] * factor[:, k]
+        return quat.normalize(rotation), position
     local = quat.to_matrix(rotations) * scales[..., None, :]
     linear = np.empty((T, N, 3, 3))
-    position = np.empty((T, N, 3))
     for k in range(N):
         p = parents[k]
         if p < 0:
-            linear[:, k] = local[:, k]
-            position[:, k] = translations[:, k]
+            linear[:, k], position[:, k] = local[:, k], translations[:, k]
         else:
             linear[:, k] = linear[:, p] @ local[:, k]
             position[:, k] = position[:, p] + np.einsum(
                 "tij,tj->ti", linear[:, p], translations[:, k]
             )
-    return linear, position
-
-
-def _rotation(linear: NDArray) -> NDArray:
-    """The rotation (wxyz) of linear maps that are a rotation times a positive scale."""
     columns = np.linalg.norm(linear, axis=-2, keepdims=True)
-    return quat.normalize(quat.from_matrix(linear / np.where(columns > 0, columns, 1.0)))
+    unscaled = linear / np.where(columns > 0, columns, 1.0)
+    return quat.normalize(quat.from_matrix(unscaled)), position
 
 
 def _build(
@@ -484,15 +495,15 @@ def _build(
     for array in (t_rest, r_rest, s_rest, t_anim, r_anim, s_anim):
         if not np.all(np.isfinite(array)):
             raise FormatError("a node's transform is not finite", path)
-    rest_linear, rest_position = _world(t_rest, r_rest, s_rest, parents)
-    linear, position = _world(t_anim, r_anim, s_anim, parents)
+    rest_world, rest_position = _world(t_rest, r_rest, s_rest, parents)
+    animated_world, position = _world(t_anim, r_anim, s_anim, parents)
     joints = slice(n_chain, N)
-    rest_rotation = _rotation(rest_linear[0, joints])  # W_j, (J, 4)
+    rest_rotation = rest_world[0, joints]  # W_j, (J, 4)
     rest_position = rest_position[0, joints] * scale
     position = position[:, joints] * scale
     J = N - n_chain
     # G'_j = G_j W_j^-1: the world rotation relative to the rest pose's
-    world = quat.multiply(_rotation(linear[:, joints]), quat.conjugate(rest_rotation)[None])
+    world = quat.multiply(animated_world[:, joints], quat.conjugate(rest_rotation)[None])
     jp = np.asarray(joint_parents, dtype=np.int64)
     offsets = np.empty((J, 3))
     offsets[0] = rest_position[0]
