@@ -477,6 +477,7 @@ def build_library(
     poses: bool = True,
     progress: BuildProgress | None = None,
     workers: int | None = None,
+    joint_map: Sequence[str] = (),
 ) -> BuiltLibrary:
     """Compress, index (and pose-index) clips into ``folder``, ready to serve or search.
 
@@ -496,6 +497,9 @@ def build_library(
         See :data:`BuildProgress`.
     workers : int, optional
         Processes of the batch steps (default: every core).
+    joint_map : sequence of str
+        A user's humanoid map for the index and the pose index, ``"Canonical=joint"``
+        entries (:attr:`quatmotion.collection.ReadSettings.joint_map`).
 
     Returns
     -------
@@ -507,6 +511,7 @@ def build_library(
         No clip could be read (naming the sources).
     """
     from quatmotion import codec
+    from quatmotion.collection import ReadSettings
     from quatmotion.io import find_motion_files
     from quatmotion.retrieval.index import ClipIndex, IndexSettings
 
@@ -548,7 +553,7 @@ def build_library(
     built = ClipIndex.build(
         good,
         index,
-        IndexSettings(kinds=("motion",)),
+        IndexSettings(kinds=("motion",), read=ReadSettings(joint_map=tuple(joint_map))),
         labels=labels,
         workers=workers,
         progress=lambda done, total: report("index", done, total),
@@ -562,7 +567,7 @@ def build_library(
 
         pose_library, pose_failures = PoseLibrary.build_streamed(
             good,
-            functools.partial(load_pose_clip, fps=30.0, height=170.0),
+            functools.partial(load_pose_clip, fps=30.0, height=170.0, joint_map=tuple(joint_map)),
             seed=seed,
             workers=workers,
             progress=step("poses"),

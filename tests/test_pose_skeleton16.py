@@ -80,11 +80,13 @@ def test_world_positions_pick_the_mapped_joints() -> None:
     np.testing.assert_allclose(s16.world_positions16(motion), fk)  # synthetic order is JOINTS_16
 
 
-def test_unknown_skeleton_names_missing_joints() -> None:
+def test_a_joint_without_a_known_name_is_found_by_structure() -> None:
     names = [b[0] for b in _BONES]
     names[names.index("Foot_L")] = "LeftToe"
-    with pytest.raises(ValueError, match="Foot_L"):
-        s16.joint_indices16(_skeleton(names))
+    mapping = s16.humanoid_map(_skeleton(names))
+    k = s16.JOINTS_16.index("LFoot")
+    assert mapping.points[k] == "LeftToe" and mapping.how[k] == "structure"
+    np.testing.assert_array_equal(s16.joint_indices16(_skeleton(names)), np.arange(16))
 
 
 def test_rest_pose_faces_plus_z_and_yaw_is_recovered() -> None:

@@ -45,6 +45,7 @@ __all__ = [
     "FRAMES_HELP",
     "CliInputError",
     "ForceOption",
+    "JointMapOption",
     "JsonOption",
     "Outputs",
     "SchedulerOption",
@@ -65,6 +66,7 @@ __all__ = [
     "doubt_reporter",
     "error_console",
     "fail",
+    "joint_map_entries",
     "files_read",
     "number_in",
     "print_json",
@@ -222,6 +224,18 @@ SkeletonOption = Annotated[
     ),
 ]
 """``--skeleton`` of every command that reads motion: the ASF used for every AMC input."""
+JointMapOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--joint-map",
+        help="Which file joint is which of the 16 body joints, where names and structure do "
+        "not tell: a CSV (canonical,joint per line) or JSON object, e.g. LHip -> thigh_l. "
+        "Stored in the index or pose library.",
+        show_default=False,
+    ),
+]
+"""``--joint-map`` of every command that maps a skeleton onto the 16-joint body
+(:func:`joint_map_entries`)."""
 ForceOption = Annotated[bool, typer.Option("--force", help="Replace existing output files.")]
 JsonOption = Annotated[
     bool, typer.Option("--json", help="Print one JSON document on stdout, nothing else there.")
@@ -240,6 +254,20 @@ def check_units(units: str | float | None) -> str | float | None:
         except ValueError as error:
             raise CliInputError(f"--units: {error}") from None
     return units
+
+
+def joint_map_entries(path: Path | None) -> tuple[str, ...]:
+    """``--joint-map``'s file as settings store it (``"LHip=thigh_l"``...; empty without
+    one): :class:`CliInputError` naming the file and line of a malformed one."""
+    from quatmotion.io import joint_map_pairs, read_joint_map
+
+    if path is None:
+        return ()
+    require_file(path)
+    try:
+        return joint_map_pairs(read_joint_map(path))
+    except FormatError as error:
+        raise CliInputError(f"--joint-map: {error}") from None
 
 
 def check_translations(translations: str) -> str:
@@ -304,6 +332,7 @@ def read_clip(
     strict: bool = False,
     translations: str = "auto",
     take: str | None = None,
+    joint_map: tuple[str, ...] = (),
 ) -> Motion:
     """Read a motion file given on the command line, warning about doubtful content (and
     what the reader tolerated or assumed: :func:`quatmotion.io.read_motion_checked`).
@@ -324,7 +353,10 @@ def read_clip(
         ``--bvh-translations`` (:data:`quatmotion.io.TRANSLATION_MODES` or ``"auto"``).
     take : str, optional
         ``--take``: an FBX file's take (a glTF file's animation), by name or number.
+    joint_map : tuple of str
+        ``--joint-map``'s entries (:func:`joint_map_entries`): the skeleton carries them.
     """
+    from quatmotion.collection import with_joint_map
     from quatmotion.io import MOTION_SUFFIXES, read_motion_checked
     from quatmotion.io.fbx import FBX_SUFFIXES
     from quatmotion.io.gltf import GLTF_SUFFIXES
@@ -351,6 +383,11 @@ def read_clip(
         if strict and doubt.kind == "far":
             raise CliInputError(f"{path}: {doubt.message}: not human motion capture")
         warn_doubt(path, doubt)
+    if joint_map:
+        try:
+            motion = with_joint_map(motion, joint_map)
+        except ValueError as error:
+            raise CliInputError(f"{path}: {error}") from None
     return motion
 
 

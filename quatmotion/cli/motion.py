@@ -13,6 +13,7 @@ from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
+    JointMapOption,
     JsonOption,
     Outputs,
     SkeletonOption,
@@ -26,6 +27,7 @@ from quatmotion.cli._common import (
     check_writable,
     clip_files,
     console,
+    joint_map_entries,
     number_in,
     print_json,
     progress_bar,
@@ -131,6 +133,29 @@ def _stature(skeleton: Skeleton) -> float | None:
         return None
 
 
+def _mapping(skeleton: Skeleton) -> tuple[object | None, str | None]:
+    """The humanoid mapping (:func:`quatmotion.pose.skeleton16.humanoid_map`) or why there is
+    none."""
+    from quatmotion.pose.skeleton16 import humanoid_map
+
+    try:
+        return humanoid_map(skeleton), None
+    except ValueError as error:
+        return None, str(error)
+
+
+def _mapping_rows(skeleton: Skeleton) -> list[tuple[str, str]]:
+    from quatmotion.motion.humanoid import JOINTS_16
+
+    mapping, why = _mapping(skeleton)
+    if mapping is None:
+        return [("16-joint body", f"not mapped: {why}")]
+    rows = [("16-joint body", mapping.summary())]
+    for name, point, how in zip(JOINTS_16, mapping.points, mapping.how, strict=True):
+        rows.append((f"  {name}", f"{point} ({how})"))
+    return rows
+
+
 def _skeleton_rows(skeleton: Skeleton, asf: str | None = None) -> list[tuple[str, str]]:
     height, lying = _rest_pose(skeleton)
     rows = [
@@ -150,7 +175,7 @@ def _skeleton_rows(skeleton: Skeleton, asf: str | None = None) -> list[tuple[str
     stature = _stature(skeleton)
     if stature is not None:
         rows.append(("ankle-to-head bone chain (cm)", _cm(stature)))
-    return rows
+    return rows + _mapping_rows(skeleton)
 
 
 def _skeleton_doc(skeleton: Skeleton, asf: str | None = None) -> dict[str, object]:
@@ -170,6 +195,12 @@ def _skeleton_doc(skeleton: Skeleton, asf: str | None = None) -> dict[str, objec
     if "fbx_takes" in skeleton.extras:
         doc["take"] = skeleton.extras["fbx_take"]
         doc["takes"] = list(skeleton.extras["fbx_takes"])
+    mapping, why = _mapping(skeleton)
+    doc["body16"] = (
+        {"family": mapping.family, "joints": mapping.as_dict(), "estimated": mapping.estimated}
+        if mapping is not None
+        else {"error": why}
+    )
     if "bvh_translations" in skeleton.extras:
         doc["position_channels"] = skeleton.extras["bvh_translations"]
         doc["position_channels_detected"] = bool(skeleton.extras["bvh_translations_guessed"])
@@ -268,15 +299,23 @@ def info(
     units: UnitsOption = None,
     translations: TranslationsOption = "auto",
     take: TakeOption = None,
+    joint_map: JointMapOption = None,
     as_json: JsonOption = False,
 ) -> None:
-    """Print a clip's skeleton, unit, frames, fps, duration and body measures (cm)."""
+    """Print a clip's skeleton, unit, frames, fps, duration, body measures (cm) and which of
+    its joints are the 16 of the body search compares (and how each was found)."""
     with user_errors():
         check_units(units)
         if file.suffix.lower() == ".asf":
             from quatmotion.io import read_asf
+            from quatmotion.motion import with_joint_map
 
             sk = read_asf(require_file(file), units)
+            entries = joint_map_entries(joint_map)
+            if entries:
+                from quatmotion.io import joint_map_dict
+
+                sk = with_joint_map(sk, joint_map_dict(entries))
             if as_json:
                 print_json({"file": str(file), **_skeleton_doc(sk)})
                 return
@@ -287,7 +326,14 @@ def info(
             console.print(table)
             return
         asf, asf_text = _asf_used(require_file(file), skeleton)
-        motion = read_clip(file, asf, units, translations=translations, take=take)
+        motion = read_clip(
+            file,
+            asf,
+            units,
+            translations=translations,
+            take=take,
+            joint_map=joint_map_entries(joint_map),
+        )
         if as_json:
             print_json({"file": str(file), **_motion_doc(motion, asf_text)})
             return

@@ -26,6 +26,7 @@ from quatmotion.cli._common import (
     FRAMES_HELP,
     CliInputError,
     ForceOption,
+    JointMapOption,
     JsonOption,
     SchedulerOption,
     SkeletonOption,
@@ -38,6 +39,7 @@ from quatmotion.cli._common import (
     console,
     doubt_reporter,
     error_console,
+    joint_map_entries,
     print_json,
     progress_bar,
     read_clip,
@@ -102,6 +104,7 @@ def index_command(
     scheduler: SchedulerOption = None,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    joint_map: JointMapOption = None,
     force: ForceOption = False,
 ) -> None:
     """Learn a pose distance on the library and index every pose of it.
@@ -117,7 +120,7 @@ def index_command(
         settings = _pose_settings(
             fps=fps, height=height, metric=metric, rank=rank, n_unlabeled=unlabeled,
             n_pairs=pairs, seed=seed, fit_poses=fit_poses, index_threads=index_threads,
-            skeleton=skeleton, units=units,
+            skeleton=skeleton, units=units, joint_map=joint_map,
         )  # fmt: skip
         where = resolve_scheduler(scheduler, workers=workers)
         files = find_motion_files(paths)
@@ -157,6 +160,7 @@ def add_command(
     scheduler: SchedulerOption = None,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    joint_map: JointMapOption = None,
 ) -> None:
     """Add clips to a pose library with its stored settings and distance (nothing learned
     again); clips it already holds are skipped. Exits with code 1 if a clip failed."""
@@ -175,7 +179,8 @@ def add_command(
         ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
         with progress_bar(error_console) as bar:
             report = PoseLibrary.add(
-                library_path, paths, skeleton=skeleton, units=units, runner=where,
+                library_path, paths, skeleton=skeleton, units=units,
+                joint_map=joint_map_entries(joint_map) or None, runner=where,
                 workers=workers,
                 progress=_StageBars(bar), on_doubt=doubt_reporter(bar),
             )  # fmt: skip
@@ -197,7 +202,9 @@ _OPTION_OF = {
 }  # fmt: skip
 
 
-def _pose_settings(*, skeleton: Path | None, units: str | None, **values):  # -> PoseSettings
+def _pose_settings(
+    *, skeleton: Path | None, units: str | None, joint_map: Path | None = None, **values
+):  # -> PoseSettings
     """One :class:`PoseSettings` of the options, validated once by its constraints; a value
     refused is named by its option."""
     import re
@@ -208,7 +215,11 @@ def _pose_settings(*, skeleton: Path | None, units: str | None, **values):  # ->
     check_units(units)
     if skeleton is not None and not skeleton.exists():
         raise CliInputError(f"{skeleton}: no such skeleton file or folder")
-    read = ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton))
+    read = ReadSettings(
+        units=units,
+        skeleton=None if skeleton is None else str(skeleton),
+        joint_map=joint_map_entries(joint_map),
+    )
     try:
         return PoseSettings(**values, read=read)
     except ValueError as error:
@@ -307,6 +318,7 @@ def search_command(
     as_json: JsonOption = False,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    joint_map: JointMapOption = None,
 ) -> None:
     """Find the poses most like frame F of a clip (frames count from 0), or with
     --transitions the best poses to jump to from it."""
@@ -326,7 +338,13 @@ def search_command(
         at_least("--ef", ef, 1)
         library = PoseLibrary.open(library_path, ef_search=ef)
         if file is not None:
-            motion = read_clip(file, skeleton, units, strict=True)
+            entries = joint_map_entries(joint_map)
+            motion = read_clip(file, skeleton, units, strict=True, joint_map=entries)
+            stored = library.settings.read.joint_map if library.settings else ()
+            if not entries and stored:
+                from quatmotion.collection import with_joint_map
+
+                motion = with_joint_map(motion, stored, if_fits=True)
             check_frame(frame, motion.n_frames, str(file))
             kinds = library.meta.get("skeletons")
             if kinds and skeleton_kind(motion.skeleton) not in kinds:

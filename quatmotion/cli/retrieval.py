@@ -21,6 +21,7 @@ from rich.table import Table
 from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
+    JointMapOption,
     JsonOption,
     SchedulerOption,
     SkeletonOption,
@@ -31,6 +32,8 @@ from quatmotion.cli._common import (
     console,
     doubt_reporter,
     error_console,
+    fail,
+    joint_map_entries,
     print_json,
     progress_bar,
     read_clip,
@@ -79,6 +82,7 @@ def _settings(
     label_folders: bool | None,
     methods: list[str] | None = None,
     base=None,  # IndexSettings | None
+    joint_map: Path | None = None,
 ):  # -> IndexSettings
     """The one settings object of a build, from the options given on top of ``base`` (an
     index's stored settings for ``index add``; else :class:`IndexSettings`' defaults), checked
@@ -102,6 +106,8 @@ def _settings(
         read = read.replace(units=units)
     if asf is not None:
         read = read.replace(skeleton=str(asf))
+    if joint_map is not None:
+        read = read.replace(joint_map=joint_map_entries(joint_map))
     given: dict[str, object] = {"read": read}
     if kinds is not None or methods:
         asked = ",".join(base.kinds) if kinds is None else kinds
@@ -160,6 +166,12 @@ def _build(
             else:
                 report = ClipIndex.build(paths, output, settings, **options)
     report_skipped(report.failures)
+    fresh = not add and not report.details.get("resumed")
+    if fresh and report.failures and not report.added and not report.skipped:
+        output.unlink(missing_ok=True)  # an index of no clip is no result: leave nothing
+        raise fail(
+            f"{output}: not written, none of the {len(report.failures)} clips could be indexed"
+        )
     resumed = " (resumed: the index was there)" if report.details.get("resumed") and not add else ""
     _say(
         f"{output}: {len(report.added)} clips added, {len(report.skipped)} already indexed, "
@@ -207,6 +219,7 @@ def build_command(
     ] = None,
     method: Annotated[list[str] | None, typer.Option(help=_BUILD_METHOD_HELP)] = None,
     label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
+    joint_map: JointMapOption = None,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
@@ -217,7 +230,9 @@ def build_command(
     others.
     """
     with user_errors():
-        settings = _settings(kinds, skeleton, skeletons, units, label_folders, method)
+        settings = _settings(
+            kinds, skeleton, skeletons, units, label_folders, method, joint_map=joint_map
+        )
     _build(paths, output, settings, labels, workers, scheduler, add=False)
 
 
@@ -237,6 +252,7 @@ def add_command(
         bool | None,
         typer.Option(help=f"{_LABEL_FOLDERS_HELP} Default: the index's.", show_default=False),
     ] = None,
+    joint_map: JointMapOption = None,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
@@ -247,10 +263,10 @@ def add_command(
 
     with user_errors():
         options = (kinds, skeleton, skeletons, units, label_folders, method)
-        _settings(*options)  # the options' own errors before the file's
+        _settings(*options, joint_map=joint_map)  # the options' own errors before the file's
         with ClipIndex.open(index) as idx:
             stored = idx.settings
-        settings = _settings(*options, base=stored)
+        settings = _settings(*options, base=stored, joint_map=joint_map)
     _build(paths, index, settings, labels, workers, scheduler, add=True)
 
 
@@ -351,6 +367,7 @@ def search_command(
     within: Annotated[
         bool, typer.Option(help="Find where the query occurs inside longer clips.")
     ] = False,
+    joint_map: JointMapOption = None,
 ) -> None:
     """Rank the indexed clips by similarity to the query (or to each of --queries).
 
@@ -360,7 +377,10 @@ def search_command(
     """
     with user_errors():
         _check_search_options(query, queries, method, within, skeleton, units)
-        quick = _quick_answer(index, query, top, method, within, skeleton, units)
+        entries = joint_map_entries(joint_map)
+        quick = None
+        if not entries:
+            quick = _quick_answer(index, query, top, method, within, skeleton, units)
         if quick is not None:  # a single query by clip name, without Numba
             method_name, own, results = quick
             if as_json:
@@ -372,7 +392,7 @@ def search_command(
                 _print_results([_Result(**r) for r in results], within)
             return
         texts = _query_texts(query, queries)
-        method_name, answers = _answer(index, texts, top, method, within, skeleton, units)
+        method_name, answers = _answer(index, texts, top, method, within, skeleton, units, entries)
     _show_answers(texts, answers, method_name, as_json, batch=queries is not None, within=within)
 
 
@@ -456,9 +476,11 @@ def _answer(
     within: bool,
     skeleton: Path | None,
     units: str | None,
+    joint_map: tuple[str, ...] = (),
 ) -> tuple[str, list[list]]:
-    """Step 3: every query answered on the index opened once (a motion file is read; any other
-    text names an indexed clip). Returns the method's name and each query's answer: the
+    """Step 3: every query answered on the index opened once (a motion file is read, mapped
+    by ``joint_map``, else by the index's stored map where its skeleton has those joints; any
+    other text names an indexed clip). Returns the method's name and each query's answer: the
     indexed clip it is, left out of its results (None: none), and its results."""
     from quatmotion.collection.reading import file_hash
     from quatmotion.errors import ClipNameError
@@ -476,7 +498,11 @@ def _answer(
             is_file = looks_like_file and path.exists()  # else a clip's name (walk.bvh too)
             if not is_file and (skeleton is not None or units is not None):
                 raise CliInputError("--skeleton and --units apply to a query file")
-            target = read_clip(path, skeleton, units) if is_file else text
+            target = read_clip(path, skeleton, units, joint_map=joint_map) if is_file else text
+            if is_file and not joint_map and idx.settings.read.joint_map:
+                from quatmotion.collection import with_joint_map
+
+                target = with_joint_map(target, idx.settings.read.joint_map, if_fits=True)
             sha256 = file_hash(path, skeleton) if is_file else None
             where = path if is_file else None
             try:

@@ -18,9 +18,11 @@ import typer
 from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
+    JointMapOption,
     at_least,
     console,
     error_console,
+    joint_map_entries,
     progress_bar,
     report_skipped,
     require_file,
@@ -57,6 +59,7 @@ def serve(
     max_upload: Annotated[
         str, typer.Option(help="Largest upload (request body): e.g. 50MB, 500kB, 2MiB.")
     ] = "50MB",
+    joint_map: JointMapOption = None,
 ) -> None:
     """Serve a local web app to browse, play, compare and search a motion library."""
     from quatmotion.server import allowed_hosts_for, create_app, is_loopback, listen, parse_size
@@ -65,6 +68,10 @@ def serve(
         given = [p for p in (library, index, poses) if p is not None]
         if folder is not None and given:
             raise CliInputError("give a folder of clips, or --library/--index/--poses, not both")
+        if joint_map is not None and folder is None:
+            raise CliInputError(
+                "--joint-map applies to a folder of clips (an index stores its own)"
+            )
         if poses is not None and library is None and index is None:
             raise CliInputError("--poses needs --library or --index beside it")
         at_least("--port", port, 0, 65535)
@@ -82,7 +89,7 @@ def serve(
             work = Path(
                 stack.enter_context(tempfile.TemporaryDirectory(prefix="quatmotion-serve-"))
             )
-            built = _build(work, folder)
+            built = _build(work, folder, joint_map_entries(joint_map))
             library, index, poses = built.library, built.index, built.poses
         application = create_app(
             library,
@@ -115,7 +122,7 @@ def serve(
         listen.serve_on(application, sock)
 
 
-def _build(work: Path, folder: Path | None) -> BuiltLibrary:
+def _build(work: Path, folder: Path | None, joint_map: tuple[str, ...] = ()) -> BuiltLibrary:
     """The demo's library, or ``folder``'s clips, compressed and indexed in ``work``."""
     from quatmotion.cli._kernels import ensure_kernels
     from quatmotion.demo import build_library
@@ -131,6 +138,11 @@ def _build(work: Path, folder: Path | None) -> BuiltLibrary:
     from quatmotion.cli.codec import _reporter  # the codec's steps, one bar each
 
     with progress_bar(error_console) as bar:
-        built = build_library(work, [folder] if folder is not None else [], progress=_reporter(bar))
+        built = build_library(
+            work,
+            [folder] if folder is not None else [],
+            progress=_reporter(bar),
+            joint_map=joint_map,
+        )
     report_skipped(built.failed)
     return built

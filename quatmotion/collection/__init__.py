@@ -30,6 +30,7 @@ from quatmotion.collection.reading import (
     find_clips,
     find_skeleton,
     read_clip,
+    with_joint_map,
 )
 from quatmotion.collection.refs import (
     ClipRef,
@@ -57,4 +58,5 @@ __all__ = [
     "read_clip",
     "name_apart",
     "unique_names",
+    "with_joint_map",
 ]

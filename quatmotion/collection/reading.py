@@ -41,6 +41,7 @@ __all__ = [
     "find_clips",
     "find_skeleton",
     "read_clip",
+    "with_joint_map",
 ]
 
 
@@ -65,19 +66,32 @@ class ReadSettings(Settings):
     translations : str
         What position channels on BVH joints other than the root mean: ``"auto"`` (detected),
         or one of :data:`quatmotion.io.TRANSLATION_MODES` (see :func:`quatmotion.io.read_bvh`).
+    joint_map : tuple of str
+        A user's humanoid map, ``"Canonical=file joint"`` entries
+        (:func:`quatmotion.io.joint_map_pairs`): every clip read carries it
+        (:func:`quatmotion.motion.with_joint_map`), and search maps its skeleton by it before
+        names and structure (:func:`quatmotion.motion.map_humanoid`). Empty: names and
+        structure alone.
     """
 
     units: str | float | None = None
     skeleton: str | None = None
     strict: bool = True
     translations: str = "auto"
+    joint_map: tuple[str, ...] = ()
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
         "units": [None, Interval(Real, 0, None, closed="neither"), StrOptions(set(LENGTH_UNITS))],
         "skeleton": [str, None],
         "strict": ["boolean"],
         "translations": [StrOptions({"auto", *TRANSLATION_MODES})],
+        "joint_map": [tuple],
     }
+
+    def _check(self) -> None:
+        from quatmotion.io import joint_map_dict
+
+        joint_map_dict(self.joint_map)  # a ValueError naming a malformed entry
 
     def __post_init__(self) -> None:
         if isinstance(self.skeleton, os.PathLike):
@@ -248,11 +262,38 @@ def read_clip(source: ClipSource | ClipRef, read: ReadSettings | None = None) ->
         )
     if motion.name != source.name:
         motion = motion.renamed(source.name)
+    if read.joint_map:
+        motion = with_joint_map(motion, read.joint_map)
     if read.strict:
         for doubt in doubts:
             if doubt.kind == "far":
                 raise ValueError(f"{source}: {doubt.message}: not human motion capture")
     return ReadClip(motion, source.ref().with_reading(motion), doubts)
+
+
+def with_joint_map(
+    motion: Motion, joint_map: Sequence[str] | dict[str, str], *, if_fits: bool = False
+) -> Motion:
+    """``motion`` whose skeleton carries a user's humanoid map (``"Canonical=joint"``
+    entries or a mapping), checked against its joints
+    (:class:`quatmotion.motion.HumanoidError` naming what does not fit); with ``if_fits``,
+    ``motion`` as it is when its skeleton lacks a joint the map names (a collection's stored
+    map and a query of another rig)."""
+    import copy
+
+    from quatmotion.io import joint_map_dict
+    from quatmotion.motion import with_joint_map as skeleton_with
+
+    mapping = dict(joint_map) if isinstance(joint_map, dict) else joint_map_dict(joint_map)
+    names = set(motion.skeleton.joint_names) | set(motion.skeleton.site_names)
+    if if_fits and not set(mapping.values()) <= names:
+        return motion
+    skeleton = skeleton_with(motion.skeleton, mapping)
+    if skeleton is motion.skeleton:
+        return motion
+    out = copy.copy(motion)
+    object.__setattr__(out, "skeleton", skeleton)
+    return out
 
 
 def _one_line(error: BaseException) -> str:

@@ -46,6 +46,7 @@ from quatmotion.io.files import (
     unit_reading,
     write_motion,
 )
+from quatmotion.io.joint_map import joint_map_dict, joint_map_pairs, read_joint_map
 from quatmotion.io.units import (
     LENGTH_UNITS,
     PLAUSIBLE_FIGURE_CM,
@@ -94,4 +95,7 @@ __all__ = [
     "write_asf",
     "write_bvh",
     "write_motion",
+    "joint_map_dict",
+    "joint_map_pairs",
+    "read_joint_map",
 ]

@@ -71,6 +71,7 @@ from quatmotion.collection import (
     find_clips,
     name_apart,
     read_clip,
+    with_joint_map,
 )
 from quatmotion.errors import FormatError
 from quatmotion.io import Doubt
@@ -411,6 +412,7 @@ class PoseLibrary:
         *,
         skeleton: str | os.PathLike[str] | None = None,
         units: str | float | None = None,
+        joint_map: Sequence[str] | None = None,
         runner: Runner | str | Scheduler | None = None,
         workers: int | None = None,
         progress: Callable[[str, int, int], None] | None = None,
@@ -422,8 +424,9 @@ class PoseLibrary:
         graph; a clip whose content the library already holds is skipped; a new clip whose
         name a stored clip of another file has is named by the collection's rule
         (:func:`~quatmotion.collection.unique_names` over the two paths). The file is
-        rewritten whole (temporary file, then rename). ``skeleton`` and ``units``
-        replace the stored :class:`~quatmotion.collection.ReadSettings`' for the new clips.
+        rewritten whole (temporary file, then rename). ``skeleton``, ``units`` and
+        ``joint_map`` (``"Canonical=joint"`` entries) replace the stored
+        :class:`~quatmotion.collection.ReadSettings`' for the new clips.
 
         Raises
         ------
@@ -440,7 +443,11 @@ class PoseLibrary:
         if settings is None:
             raise ValueError(f"{path}: a version-{library.version} library stores no settings; "
                              "build it again to add clips")  # fmt: skip
-        given = {"skeleton": None if skeleton is None else os.fspath(skeleton), "units": units}
+        given = {
+            "skeleton": None if skeleton is None else os.fspath(skeleton),
+            "units": units,
+            "joint_map": None if joint_map is None else tuple(joint_map),
+        }
         given = {k: v for k, v in given.items() if v is not None}
         if given:  # how the new clips are read, over the stored reading settings
             read = dataclasses.replace(settings.read, **given)
@@ -1432,6 +1439,7 @@ def load_pose_clip(
     height: float,
     skeleton: str | os.PathLike[str] | None = None,
     units: str | None = None,
+    joint_map: Sequence[str] = (),
 ) -> PoseClip:
     """Read a motion file and prepare it for a pose library (a batch job: module level).
 
@@ -1446,6 +1454,9 @@ def load_pose_clip(
         The ASF of AMC files (else each one's is found by name).
     units : str, optional
         Length unit of a BVH file (:data:`quatmotion.io.BVH_UNITS`); guessed when None.
+    joint_map : sequence of str
+        A user's humanoid map, ``"Canonical=joint"`` entries
+        (:attr:`quatmotion.collection.ReadSettings.joint_map`).
 
     Returns
     -------
@@ -1464,6 +1475,8 @@ def load_pose_clip(
     path = pathlib.Path(path)
     amc = path.suffix.lower() == ".amc"
     motion = read_motion(path, skeleton if amc else None, units=None if amc else units)
+    if joint_map:
+        motion = with_joint_map(motion, joint_map)
     doubts = implausible_values(motion)
     for doubt in doubts:
         if doubt.kind == "far":

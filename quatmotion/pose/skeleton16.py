@@ -16,7 +16,9 @@ Conventions
 * Positions are in centimetres, Y up (the file skeleton's units after I/O).
 * The shoulders hang from the Chest (as in the Bandai and most 16/17-joint skeletons), the hips
   from the Hip; the Head's grandparent is the Chest.
-* Joint placement per supported skeleton (an ASF bone's joint sits at the bone's *start*, see
+* Which joints of a file are the 16: :func:`quatmotion.motion.humanoid.map_humanoid` (names
+  of every usual family, structure, a user's map; :func:`humanoid_map` here). Placement in
+  the three families of the shared data (an ASF bone's joint sits at the bone's *start*, see
   :mod:`quatmotion.motion.skeleton`):
 
   - Hip: ``root`` (ASF), ``Hips`` (CMU BVH, Bandai)
@@ -52,33 +54,13 @@ Conventions
 
 from __future__ import annotations
 
-from typing import Literal
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quatmotion import quat
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
+from quatmotion.motion.humanoid import JOINTS_16, PARENTS_16, HumanoidMap, map_humanoid
 
-JOINTS_16: tuple[str, ...] = (
-    "Hip",
-    "Chest",
-    "Neck",
-    "Head",
-    "LShoulder",
-    "LElbow",
-    "LHand",
-    "RShoulder",
-    "RElbow",
-    "RHand",
-    "LHip",
-    "LKnee",
-    "LFoot",
-    "RHip",
-    "RKnee",
-    "RFoot",
-)
-PARENTS_16: tuple[int, ...] = (-1, 0, 1, 2, 1, 4, 5, 1, 7, 8, 0, 10, 11, 0, 13, 14)
 END_SITES_16: tuple[int, ...] = (3, 6, 9, 12, 15)
 """Indices of the five end sites of the paper: Head, LHand, RHand, LFoot, RFoot."""
 FEET_16: tuple[int, int] = (JOINTS_16.index("LFoot"), JOINTS_16.index("RFoot"))
@@ -90,8 +72,13 @@ MIRROR_16: tuple[int, ...] = tuple(
 """Each joint's mirror image (left and right swapped): ``positions[:, MIRROR_16]`` with X
 negated in the body frame is the mirrored pose."""
 
-SkeletonKind = Literal["asf", "cmu_bvh", "bandai"]
+SkeletonKind = str
+"""A naming family of :func:`quatmotion.motion.humanoid.map_humanoid` (``asf``, ``cmu_bvh``,
+``bandai``, ``mixamo``, ``unreal``, ``biped``, ``rigify``, ``smpl``, ``kinect``,
+``humanoid``...)."""
 
+# The three families the project's shared data comes in, joint for joint (what the tests
+# check the mapping against).
 _JOINT_MAPS: dict[str, tuple[str, ...]] = {
     "asf": (
         "root", "thorax", "lowerneck", "head",
@@ -109,6 +96,7 @@ _JOINT_MAPS: dict[str, tuple[str, ...]] = {
         "UpperLeg_L", "LowerLeg_L", "Foot_L", "UpperLeg_R", "LowerLeg_R", "Foot_R",
     ),
 }  # fmt: skip
+
 
 # Length of the bone from each joint's parent to the joint on the canonical body, as a fraction
 # of its stature (the ankle-to-head chain LFoot-LKnee-LHip-Hip-Chest-Neck-Head, which sums to
@@ -130,41 +118,44 @@ _HIP_L, _HIP_R = JOINTS_16.index("LHip"), JOINTS_16.index("RHip")
 _MIN_HIP_LINE = 1e-6  # cm: a shorter horizontal hip line gives no usable yaw
 
 
-def skeleton_kind(skeleton: Skeleton) -> SkeletonKind:
-    """Which supported skeleton family ``skeleton`` belongs to (matched by joint names).
-
-    Parameters
-    ----------
-    skeleton : Skeleton
-
-    Returns
-    -------
-    {"asf", "cmu_bvh", "bandai"}
-        ``"asf"`` for CMU and HDM05 ASF skeletons, ``"cmu_bvh"`` for the CMU BVH conversion
-        (B. Hahne's MotionBuilder-friendly skeleton), ``"bandai"`` for the Bandai-Namco BVH.
+def humanoid_map(skeleton: Skeleton) -> HumanoidMap:
+    """The mapping of ``skeleton`` onto the 16 joints (:func:`quatmotion.motion.humanoid.
+    map_humanoid`, with the user's map the skeleton carries), cached on the skeleton.
 
     Raises
     ------
     ValueError
-        If no supported family has all 16 joints, naming the joints that are missing from the
-        closest family.
+        (:class:`~quatmotion.motion.humanoid.HumanoidError`) one line: not a humanoid, or
+        the joints that could not be mapped.
     """
-    names = {n.lower() for n in skeleton.joint_names}
-    best, best_missing = None, None
-    for kind, mapping in _JOINT_MAPS.items():
-        missing = [m for m in mapping if m.lower() not in names]
-        if not missing:
-            return kind  # type: ignore[return-value]
-        if best_missing is None or len(missing) < len(best_missing):
-            best, best_missing = kind, missing
-    raise ValueError(
-        f"skeleton {skeleton.name!r} is not a supported 16-joint source (CMU/HDM05 ASF, CMU BVH, "
-        f"Bandai BVH); closest is {best!r}, which lacks joints {best_missing}"
-    )
+    cached = _CACHE.get(id(skeleton))
+    if cached is not None and cached[0] is skeleton:
+        return cached[1]
+    mapping = map_humanoid(skeleton)
+    if len(_CACHE) > 256:
+        _CACHE.clear()
+    _CACHE[id(skeleton)] = (skeleton, mapping)
+    return mapping
+
+
+_CACHE: dict[int, tuple[Skeleton, HumanoidMap]] = {}
+
+
+def skeleton_kind(skeleton: Skeleton) -> SkeletonKind:
+    """The naming family of ``skeleton`` (:attr:`HumanoidMap.family`).
+
+    Raises
+    ------
+    ValueError
+        For a skeleton that cannot be mapped onto the 16 joints (see :func:`humanoid_map`).
+    """
+    return humanoid_map(skeleton).family
 
 
 def joint_indices16(skeleton: Skeleton) -> NDArray[np.int64]:
-    """Indices into ``skeleton``'s joints of the 16 pose joints, in :data:`JOINTS_16` order.
+    """Indices into ``skeleton``'s joints of the joints carrying the 16 pose joints, in
+    :data:`JOINTS_16` order (an end site's parent; for an estimated joint, the nearer
+    mapped one: :attr:`HumanoidMap.joints`).
 
     Parameters
     ----------
@@ -177,11 +168,9 @@ def joint_indices16(skeleton: Skeleton) -> NDArray[np.int64]:
     Raises
     ------
     ValueError
-        For a skeleton of no supported family (see :func:`skeleton_kind`).
+        For a skeleton that cannot be mapped (see :func:`humanoid_map`).
     """
-    kind = skeleton_kind(skeleton)
-    lower = {n.lower(): i for i, n in enumerate(skeleton.joint_names)}
-    return np.array([lower[m.lower()] for m in _JOINT_MAPS[kind]], dtype=np.int64)
+    return humanoid_map(skeleton).joints.copy()
 
 
 def world_positions16(motion: Motion) -> NDArray[np.float64]:
@@ -190,15 +179,19 @@ def world_positions16(motion: Motion) -> NDArray[np.float64]:
     Parameters
     ----------
     motion : Motion
-        A clip of a supported skeleton (see :func:`skeleton_kind`), ``T`` frames.
+        A clip of a humanoid skeleton (see :func:`humanoid_map`), ``T`` frames.
 
     Returns
     -------
     ndarray, shape (T, 16, 3)
-        Centimetres, Y up, in :data:`JOINTS_16` order.
+        Centimetres, Y up, in :data:`JOINTS_16` order (an estimated joint placed as the
+        mapping says).
     """
-    idx = joint_indices16(motion.skeleton)
-    return forward_kinematics(motion, include_sites=False).positions[:, idx]
+    mapping = humanoid_map(motion.skeleton)
+    if not mapping.uses_sites and not mapping.estimated:
+        return forward_kinematics(motion, include_sites=False).positions[:, mapping.joints]
+    fk = forward_kinematics(motion, include_sites=mapping.uses_sites)
+    return mapping.positions(fk.all_positions())
 
 
 def facing_yaw(positions16: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -329,7 +322,7 @@ def stature16(skeleton: Skeleton) -> float:
     float
         Centimetres.
     """
-    rest = skeleton.rest_positions(include_sites=False)[joint_indices16(skeleton)]
+    rest = humanoid_map(skeleton).positions(skeleton.rest_positions(include_sites=True))
     chain = [JOINTS_16.index(n) for n in _STATURE_CHAIN]
     return float(np.sum(np.linalg.norm(np.diff(rest[chain], axis=0), axis=1)))
 

@@ -569,6 +569,10 @@ class ClipCatalogue:
             target = entry.row.path  # unique in the index, unlike a name
         with ClipIndex.open(self.index_path) as index:
             by_path = {r.path: r.id for r in index.rows()}
+            if isinstance(target, Motion) and index.settings.read.joint_map:
+                from quatmotion.collection import with_joint_map  # the index's user map
+
+                target = with_joint_map(target, index.settings.read.joint_map, if_fits=True)
             own = query_row(index, target, sha256=sha256)
             results = search(index, target, method=name, k=top, sha256=sha256)
         hits = [
