@@ -316,3 +316,27 @@ def test_world_transforms_compose_alike_as_quaternions_and_as_matrices():
     r_matrix, p_matrix = _world(translations, rotations, skewed, parents)
     assert np.allclose(p_quat, p_matrix, atol=1e-9)
     assert np.allclose(np.abs(np.sum(r_quat * r_matrix, axis=-1)), 1.0, atol=1e-9)
+
+
+@pytest.mark.filterwarnings("ignore:.*2 takes:quatmotion.errors.FormatWarning")
+def test_serve_a_folder_of_fbx(tmp_path):
+    """``serve DIR``'s library (demo.build_library: compressed, indexed, pose-indexed) from a
+    folder of FBX files, browsed through the web app."""
+    import shutil
+
+    from fastapi.testclient import TestClient
+
+    from quatmotion.demo import build_library
+    from quatmotion.server import create_app
+
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    for name in ("cmu_bvh_names.fbx", "bandai_bvh_names.fbx"):
+        shutil.copy(FIXTURES / name, folder / name)
+    built = build_library(tmp_path / "served", [folder], workers=1)
+    assert not built.failed
+    app = create_app(built.library, built.index, built.poses)
+    with TestClient(app, base_url="http://127.0.0.1") as client:
+        clips = client.get("/api/clips")
+    assert clips.status_code == 200
+    assert sorted(c["name"] for c in clips.json()["clips"]) == ["bandai_bvh_names", "cmu_bvh_names"]
