@@ -8,6 +8,7 @@ left as it was.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import tempfile
@@ -15,7 +16,18 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-__all__ = ["atomic_output", "atomic_write_bytes", "atomic_write_json", "atomic_write_text"]
+__all__ = [
+    "WRITE_ERRNOS",
+    "atomic_output",
+    "atomic_write_bytes",
+    "atomic_write_json",
+    "atomic_write_text",
+]
+
+
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})
+"""Errors only writing raises (a full disk, a quota, a file too large): an ``OSError`` of these
+that names no file is about the file being written."""
 
 
 @contextlib.contextmanager
@@ -37,9 +49,11 @@ def atomic_output(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
         os.chmod(temp, _permissions(path))
         os.replace(temp, path)
     except OSError as error:
-        # The temporary file is no name the user knows: errors name the target instead.
+        # The temporary file is no name the user knows: errors name the target instead; so
+        # do the errors of writing that name no file (a full disk: ``write`` says ENOSPC).
         named = getattr(error, "filename", None)
-        if error.errno is None or not named or not Path(named).name.startswith(f".{path.name}."):
+        ours = bool(named) and Path(named).name.startswith(f".{path.name}.")
+        if error.errno is None or not (ours or (not named and error.errno in WRITE_ERRNOS)):
             raise
         raise type(error)(error.errno, error.strerror, str(path)) from error
     finally:

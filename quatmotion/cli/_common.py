@@ -26,6 +26,7 @@ import contextlib
 import json
 import math
 import os
+import re
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -33,6 +34,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.console import Console, ConsoleDimensions
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.segment import Segment
 
 from quatmotion.errors import FormatError
 
@@ -62,6 +64,7 @@ __all__ = [
     "check_outputs",
     "check_writable",
     "clip_files",
+    "clip_output",
     "console",
     "doubt_reporter",
     "error_console",
@@ -70,6 +73,7 @@ __all__ = [
     "files_read",
     "number_in",
     "print_json",
+    "printable",
     "progress_bar",
     "read_clip",
     "report_skipped",
@@ -101,6 +105,24 @@ class _Console(Console):
         size = super().size
         return size if self.is_terminal else ConsoleDimensions(_PIPE_WIDTH, size.height)
 
+    def _render_buffer(self, buffer: Iterable[Segment]) -> str:
+        # Every text printed passes here: names and labels read from files are shown with
+        # their control characters escaped (an escape sequence in a clip name must not clear
+        # the screen); Rich's own cursor and colour codes are control segments and styles.
+        return super()._render_buffer(
+            seg if seg.control else Segment(printable(seg.text), seg.style) for seg in buffer
+        )
+
+
+_UNPRINTABLE = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u200e\u200f\u2028-\u202e\u2066-\u2069]")
+
+
+def printable(text: str) -> str:
+    """``text`` with its control characters (terminal escapes, bidirectional overrides; not
+    tabs and line ends) written as Python escapes (``\\x1b``): how every command shows text
+    taken from a file (a clip's name, a label) on a terminal."""
+    return _UNPRINTABLE.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), text)
+
 
 _PIPE_WIDTH = 10_000
 console = _Console()
@@ -126,8 +148,13 @@ def warn(message: str) -> None:
 
 
 @contextlib.contextmanager
-def user_errors() -> Iterator[None]:
-    """Turn bad-input exceptions into exit code 2 with a one-line message."""
+def user_errors(output: Path | None = None) -> Iterator[None]:
+    """Turn bad-input exceptions into exit code 2 with a one-line message.
+
+    ``output``: what the command writes, named by an error of writing that names no file (a
+    full disk under a temporary spool).
+    """
+    from quatmotion._atomic import WRITE_ERRNOS
     from quatmotion.datasets import DataNotFoundError, FetchError
 
     try:
@@ -137,6 +164,9 @@ def user_errors() -> Iterator[None]:
     except DataNotFoundError as error:
         raise fail(_os_message(error)) from None
     except OSError as error:  # a file that cannot be read or written: no disk, no permission
+        if getattr(error, "filename", None) is None and error.errno in WRITE_ERRNOS:
+            where = f"{output}: " if output is not None else ""
+            raise fail(f"{where}cannot be written: {str(error.strerror).lower()}") from None
         if getattr(error, "filename", None) is None and not isinstance(error, FileNotFoundError):
             raise  # not about a file the user named: a bug, shown in full
         raise fail(_os_message(error)) from None
@@ -642,6 +672,28 @@ def clip_files(out: Path, skeleton: Skeleton) -> list[Path]:
             f"({skeleton.name!r}) comes from a BVH, write .bvh instead"
         )
     return [out, out.with_suffix(".asf")] if suffix == ".amc" else [out]
+
+
+def clip_output(folder: Path, name: str, suffix: str, source: Path | None = None) -> Path:
+    """Where the clip ``name`` (a name read from a file) is written in ``folder``: its
+    :func:`quatmotion.io.names.relative_path`, which never leaves the folder.
+
+    Raises
+    ------
+    CliInputError
+        A name that cannot be made a file name inside ``folder`` (``../x``, ``/etc/x``),
+        naming ``source``, the file the name was read from.
+    """
+    from quatmotion.io.names import relative_path
+
+    try:
+        path = folder / relative_path(name, suffix)
+    except ValueError as error:
+        raise CliInputError(f"{source}: {error}" if source else str(error)) from None
+    base = folder.resolve()
+    if not path.resolve().is_relative_to(base):  # a sub-folder that is a link out of it
+        raise CliInputError(f"{path}: lies outside {folder}; not written")
+    return path
 
 
 def write_clip(motion: Motion, files: list[Path], outputs: Outputs) -> None:

@@ -24,6 +24,7 @@ from quatmotion.cli._common import (
     check_units,
     check_writable,
     clip_files,
+    clip_output,
     console,
     doubt_reporter,
     error_console,
@@ -36,6 +37,7 @@ from quatmotion.cli._common import (
     user_errors,
     write_clip,
 )
+from quatmotion.collection.refs import duplicates
 from quatmotion.errors import FormatError
 
 _METHODS = "best, spline, naive, qssd or ksvd"
@@ -280,8 +282,17 @@ def decompress(
                 fmt = (format or entry.source_format or "").lower().lstrip(".")
                 if fmt not in ("amc", "bvh"):
                     fmt = "amc" if skeleton.extras.get("format") == "asf" else "bvh"
-                planned.append((i, clip_files(out / f"{entry.name}.{fmt}", skeleton)))
-            check_outputs([f for _, files in planned for f in files], [library], force=force)
+                planned.append(
+                    (i, clip_files(clip_output(out, entry.name, f".{fmt}", library), skeleton))
+                )
+            targets = [f for _, files in planned for f in files]
+            twice = duplicates(str(f) for f in targets)
+            if twice:
+                raise CliInputError(
+                    f"{library}: several clips would be written to {twice[0]} (their names "
+                    "differ only in characters no file name holds)"
+                )
+            check_outputs(targets, [library], force=force)
             written = 0
             with Outputs() as outputs, progress_bar() as progress:
                 outputs.folder(out)

@@ -59,7 +59,7 @@ from quatmotion.pose.ranges import DEFAULT_METRIC, FPS_RANGE  # noqa: E402  (the
 
 
 def _echo(message: str) -> None:
-    typer.echo(message, err=True)
+    error_console.print(message, markup=False, highlight=False, soft_wrap=True)
 
 
 @pose_app.command("index")

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import io
-import json
 import os
-import zlib
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -24,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quatmotion._format import FileFormat
-from quatmotion.codec.binary import Reader
+from quatmotion.codec.binary import Reader, inflate
 from quatmotion.codec.channels import channel_rotations, from_channels
 from quatmotion.codec.container import (
     QMZ_FORMAT,
@@ -50,6 +48,7 @@ from quatmotion.codec.skeletons import (
 from quatmotion.collection import ClipRef
 from quatmotion.errors import FormatError
 from quatmotion.io.names import match_clip
+from quatmotion.limits import check, load_json
 from quatmotion.motion import Motion, Skeleton
 
 if TYPE_CHECKING:
@@ -213,6 +212,11 @@ class Archive:
         if self.method is None:
             self._file.close()
             raise FormatError(f"unknown codec method {self.header.method!r}", self._name)
+        try:  # every command reads the same file: the settings are checked here, once
+            self._settings = self._read_settings()
+        except BaseException:
+            self._file.close()
+            raise
         self._records: dict[int, str] = {}
         self._skeletons: dict[int, Skeleton] = {}
         self._layouts: dict[int, tuple[LayoutInfo, Any]] = {}
@@ -358,17 +362,22 @@ class Archive:
     @property
     def settings(self) -> CompressSettings | None:
         """How the file was made (version 2 on); None for a version 1 file."""
+        return self._settings
+
+    def _read_settings(self) -> CompressSettings | None:
         from quatmotion.codec.settings import CompressSettings
 
         if not self.header.settings:
             return None
+        values = load_json(self.header.settings, self._name, "header: settings")
+        if not isinstance(values, dict):
+            raise FormatError("header: settings are not a JSON object", self._name)
         try:
-            values = json.loads(self.header.settings.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as error:
-            raise FormatError(
-                f"header: settings are not valid JSON ({error})", self._name
-            ) from None
-        return CompressSettings.from_dict(values, self._name)
+            return CompressSettings.from_dict(values, self._name)
+        except FormatError:
+            raise
+        except (TypeError, ValueError, KeyError) as error:
+            raise FormatError(f"header: settings are invalid ({error})", self._name) from None
 
     def __len__(self) -> int:
         return len(self.header.clips)
@@ -466,15 +475,7 @@ class Archive:
         """The ``k``-th layout and its method model."""
         if k not in self._layouts:
             packed = read_chunk(self._file, self._layout_chunks[k], self._name)
-            try:
-                inflater = zlib.decompressobj(-15)
-                data = inflater.decompress(packed) + inflater.flush()
-                if not inflater.eof or inflater.unused_data:
-                    raise zlib.error("incomplete stream")
-            except zlib.error as error:
-                raise FormatError(
-                    f"library chunk: corrupt deflate stream ({error})", self._name
-                ) from None
+            data = inflate(packed, "library chunk", self._name)
             r = Reader(data, self._name, "library chunk")
             info = LayoutInfo.read(r, self.skeleton(self.header.layouts[k].skeleton))
             try:
@@ -495,9 +496,14 @@ class Archive:
         info, model = self.layout(entry.layout)
         if skeleton.n_joints != info.skeleton.n_joints:
             raise FormatError(f"clip {entry.name!r}: skeleton and layout disagree", self._name)
+        layout = info.layout
+        # What decoding allocates, from the header's frame count: checked before it is.
+        what = f"clip {entry.name!r}: frames x joints"
+        check("joint_frames", entry.n_frames * skeleton.n_joints, self._name, what)
+        n_bytes = 8 * entry.n_frames * max(layout.n_channels, 1)
+        check("decompressed_bytes", n_bytes, self._name, f"clip {entry.name!r}: decoded size")
         data = read_chunk(self._file, self._clip_chunks[i], self._name)
         r = Reader(data, self._name, f"clip {entry.name!r}")
-        layout = info.layout
         at_rest, corrections = read_clip_prefix(
             r, len(layout.translation_joints), entry.n_frames, layout.n_channels
         )

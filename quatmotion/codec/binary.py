@@ -8,20 +8,26 @@ Conventions
 * Floats are IEEE 754, little-endian (``f32``, ``f64``). Strings are a varint byte count then
   UTF-8.
 * :class:`Reader` raises :class:`~quatmotion.errors.FormatError` (naming the file and what it was
-  reading) when the data end early or a value is out of range, never ``IndexError``.
+  reading) when the data end early or a value is out of range, never ``IndexError``; a count
+  is checked against the bytes left before anything is allocated for it.
+* :func:`inflate` is the one inflater of the file's raw deflate streams (header, skeleton
+  records, library models): it never makes more bytes than the limit in force
+  (:mod:`quatmotion.limits`, ``decompressed_bytes``) or than the caller expects.
 """
 
 from __future__ import annotations
 
 import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion.errors import FormatError
+from quatmotion.limits import check, current
 
-__all__ = ["Reader", "Writer"]
+__all__ = ["Reader", "Writer", "inflate"]
 
 _F32 = struct.Struct("<f")
 _F64 = struct.Struct("<d")
@@ -131,6 +137,8 @@ class Reader:
         """``count`` uvarints in a row, ``(count,)`` (one compiled pass: clips hold thousands)."""
         from quatmotion.codec._decode_kernels import read_uvarints
 
+        if count > self.remaining:  # a varint takes a byte at least
+            raise self._fail(f"ends early ({count} varints wanted, {self.remaining} bytes left)")
         out = np.empty(count, dtype=np.uint64)
         buf = np.frombuffer(self._data, dtype=np.uint8)
         pos = read_uvarints(buf, self._pos, out)
@@ -169,3 +177,37 @@ class Reader:
         """Raise unless everything was read."""
         if self.remaining:
             raise self._fail(f"{self.remaining} unexpected bytes at the end")
+
+
+def inflate(
+    data: bytes,
+    what: str,
+    source: str | Path | None = None,
+    *,
+    limit: int | None = None,
+    zdict: bytes = b"",
+) -> bytes:
+    """A raw deflate stream (window bits -15, as :class:`Writer`'s callers deflate) inflated.
+
+    At most ``limit`` bytes (default: the ``decompressed_bytes`` limit in force) are ever made:
+    a stream that would expand further is refused before it does (a decompression bomb), as
+    is a stream cut short or followed by other bytes.
+
+    Raises
+    ------
+    FormatError
+        Naming ``what`` and ``source``.
+    """
+    cap = current().decompressed_bytes
+    cap = cap if limit is None else min(limit, cap)
+    try:
+        inflater = zlib.decompressobj(-15, zdict) if zdict else zlib.decompressobj(-15)
+        out = inflater.decompress(data, cap + 1)
+    except zlib.error as error:
+        raise FormatError(f"{what}: not a valid deflate stream ({error})", source) from None
+    if len(out) > cap:
+        check("decompressed_bytes", len(out), source, f"{what}: the inflated size (at least)")
+        raise FormatError(f"{what}: inflates to more than the {cap:,} bytes expected", source)
+    if not inflater.eof or inflater.unused_data:
+        raise FormatError(f"{what}: not a valid deflate stream (incomplete stream)", source)
+    return out

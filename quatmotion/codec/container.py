@@ -26,6 +26,7 @@ Conventions
 
 from __future__ import annotations
 
+import math
 import zlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -33,9 +34,11 @@ from pathlib import Path
 from typing import BinaryIO
 
 from quatmotion._format import FileFormat
-from quatmotion.codec.binary import Reader, Writer
+from quatmotion.codec.binary import Reader, Writer, inflate
 from quatmotion.collection import ClipRef
+from quatmotion.collection.refs import duplicates
 from quatmotion.errors import FormatError
+from quatmotion.limits import check
 
 __all__ = [
     "FORMAT_VERSION",
@@ -167,37 +170,41 @@ class Header:
         """Parse a header payload of format ``version``, checking every index against the
         tables (the clip entries' decoder is the version's: :data:`_REF_READERS`)."""
         read_ref = _REF_READERS[version]
-        try:
-            d = zlib.decompressobj(-15)
-            raw = d.decompress(payload, 1 << 26) + d.flush()
-            if not d.eof or d.unused_data:
-                raise zlib.error("incomplete stream")
-        except zlib.error as error:
-            raise FormatError(f"header: not a valid deflate stream ({error})", source) from None
+        raw = inflate(payload, "header", source)
         r = Reader(raw, source, "header")
         method = r.string()
         settings = r.blob()
-        records = tuple(RecordEntry(r.u8(), r.f64()) for _ in range(r.uvarint(1 << 20)))
+        records = tuple(RecordEntry(r.u8(), r.f64()) for _ in range(r.uvarint(r.remaining // 9)))
         skeletons = tuple(
-            SkeletonEntry(r.uvarint(len(records) - 1), r.string())
-            for _ in range(r.uvarint(1 << 20))
+            SkeletonEntry(_index(r, len(records), "skeleton record", source), r.string())
+            for _ in range(r.uvarint(r.remaining // 2))
         )
         layouts = tuple(
-            LayoutEntry(r.uvarint(max(0, len(skeletons) - 1))) for _ in range(r.uvarint(1 << 20))
+            LayoutEntry(_index(r, len(skeletons), "skeleton", source))
+            for _ in range(r.uvarint(r.remaining))
         )
-        rates = [r.f64() for _ in range(r.uvarint(1 << 20))]
+        rates = [r.f64() for _ in range(r.uvarint(r.remaining // 8))]
+        for k, rate in enumerate(rates):
+            check("fps", rate, source, f"header: frame rate {k}")
         clips = []
-        for _ in range(r.uvarint(1 << 32)):
+        for _ in range(r.uvarint(r.remaining // _MIN_CLIP_BYTES)):
             name = r.string()
-            sk = r.uvarint(max(0, len(skeletons) - 1))
-            lay = r.uvarint(max(0, len(layouts) - 1))
-            fps = rates[r.uvarint(max(0, len(rates) - 1))]
-            frames = r.uvarint(1 << 40)
+            sk = _index(r, len(skeletons), "skeleton", source)
+            lay = _index(r, len(layouts), "layout", source)
+            fps = rates[_index(r, len(rates), "frame rate", source)]
+            frames = r.uvarint()
+            check("frames", frames, source, f"header: clip {name!r}: frames")
+            if frames < 1:
+                raise FormatError(f"header: clip {name!r} has no frames", source)
             source_bytes = r.uvarint()
             fmt = r.u8()
             if fmt >= len(SOURCE_FORMATS):
                 raise FormatError(f"header: unknown source format code {fmt}", source)
             max_error, arms = r.f32(), r.f32()
+            if not (math.isfinite(max_error) and math.isfinite(arms)) or min(max_error, arms) < 0:
+                raise FormatError(
+                    f"header: clip {name!r}: errors {max_error}, {arms} are not distances", source
+                )
             clips.append(
                 ClipEntry(
                     name,
@@ -215,7 +222,26 @@ class Header:
         r.end()
         if (skeletons or layouts or clips) and not records:
             raise FormatError("header: clips without skeleton records", source)
+        twice = duplicates(c.name for c in clips)
+        if twice:
+            raise FormatError(
+                f"header: {len(twice)} clip name(s) given to several clips ({twice[0]!r}...): "
+                "a clip's name is its identity",
+                source,
+            )
         return cls(method, records, skeletons, layouts, tuple(clips), settings)
+
+
+_MIN_CLIP_BYTES = 15
+"""The fewest bytes a clip entry takes (its fields at one byte per varint): what a count of
+entries is checked against before any is read."""
+
+
+def _index(r: Reader, n: int, what: str, source: str | Path | None) -> int:
+    """An index into a table of ``n`` entries (refused when the table is empty)."""
+    if n == 0:
+        raise FormatError(f"header: a {what} is named, but the header lists none", source)
+    return r.uvarint(n - 1)
 
 
 def _write_ref(w: Writer, entry: ClipEntry) -> None:

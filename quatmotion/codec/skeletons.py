@@ -35,8 +35,10 @@ from typing import Any
 import numpy as np
 
 from quatmotion import quat
+from quatmotion.codec.binary import inflate
 from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.io import asf_text, bvh_text, parse_asf, parse_bvh
+from quatmotion.limits import check, load_json
 from quatmotion.motion import Motion, Skeleton
 
 __all__ = [
@@ -102,7 +104,10 @@ def _to_json(value: Any) -> Any:
 def _from_json(value: Any) -> Any:
     if isinstance(value, dict):
         if "__array__" in value:
-            return np.asarray(_from_json(value["__array__"]), dtype=np.dtype(value["dtype"]))
+            dtype = np.dtype(value["dtype"])
+            if dtype.kind not in "biuf":  # numbers only: never objects from a file
+                raise ValueError(f"an array of {dtype} in a skeleton")
+            return np.asarray(_from_json(value["__array__"]), dtype=dtype)
         if "__tuple__" in value:
             return tuple(_from_json(v) for v in value["__tuple__"])
         return {k: _from_json(v) for k, v in value["__dict__"].items()}
@@ -149,7 +154,8 @@ def skeleton_from_record(
                 skeleton = replace(skeleton, extras=extras)
             return skeleton
         if kind == RECORD_EXACT:
-            fields = _from_json(json.loads(text))
+            fields = _from_json(load_json(text, source, "stored skeleton"))
+            check("joints", len(fields["joint_names"]), source, "stored skeleton: joints")
             return Skeleton(**fields)
     except FormatError as error:
         raise FormatError(f"stored skeleton does not parse: {error.reason}", source) from None
@@ -205,11 +211,8 @@ def deflate_text(text: str, extra_dictionary: str = "") -> bytes:
 def inflate_text(data: bytes, extra_dictionary: str = "", source: str | Path | None = None) -> str:
     """Inverse of :func:`deflate_text`."""
     zdict = _DICTIONARY + extra_dictionary.encode("utf-8")
+    raw = inflate(data, "stored skeleton text", source, zdict=zdict[-32768:])
     try:
-        decompressor = zlib.decompressobj(-15, zdict[-32768:])
-        text = decompressor.decompress(data) + decompressor.flush()
-        if not decompressor.eof or decompressor.unused_data:
-            raise zlib.error("stream incomplete or trailing data")
-        return text.decode("utf-8")
-    except (zlib.error, UnicodeDecodeError) as error:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as error:
         raise FormatError(f"stored skeleton text is corrupt ({error})", source) from None

@@ -5,17 +5,49 @@ A collection names its clips by file stem (``walk``: a ``.qmz``), by path (``cli
 a pose library) or both (a clip index keeps the path). A user types any of those: the name, the
 file name, the stem, trailing folders, or a clip's number. :func:`match_clip` decides which clip
 that is, the same way everywhere, and says so when the answer is none or several.
+
+A name also becomes a file when clips are written out (``decompress``): :func:`relative_path`
+is the one rule for that, and a name read from a file is never trusted to stay in its folder.
 """
 
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Sequence
-from pathlib import PurePath
+from pathlib import PurePath, PurePosixPath
 
 from quatmotion.errors import ClipNameError
 
-__all__ = ["match_clip"]
+__all__ = ["match_clip", "relative_path"]
+
+_NOT_IN_FILE_NAMES = re.compile(r"[\x00-\x1f\x7f-\x9f\\:*?\"<>|]")
+"""Replaced by ``_`` in a file name made from a clip name: control characters, and what
+Windows refuses (a backslash, a drive's colon, wildcards)."""
+
+
+def relative_path(name: str, suffix: str = "") -> PurePosixPath:
+    """The path, relative to an output folder, that the clip ``name`` is written to.
+
+    A clip's name is its file stem or, where stems collide, ``/``-separated trailing folders
+    (:func:`quatmotion.collection.unique_names`): those become sub-folders. Characters no file
+    name should hold are replaced by ``_``; what no replacement makes safe is refused.
+
+    Raises
+    ------
+    ValueError
+        An empty name, an absolute path, or a component that is empty, ``.`` or ``..`` (a name
+        that would leave the folder: never one quatmotion writes).
+    """
+    parts = name.split("/")
+    if not name or not all(parts) or any(p in (".", "..") for p in parts):
+        why = "is absolute" if name.startswith("/") else "has an empty, '.' or '..' part"
+        if not name:
+            why = "is empty"
+        raise ValueError(f"clip name {name!r} {why}: it cannot name a file")
+    parts = [_NOT_IN_FILE_NAMES.sub("_", p) for p in parts]
+    return PurePosixPath(*parts[:-1], parts[-1] + suffix)
+
 
 # io.files.MOTION_SUFFIXES (importing it here would be circular)
 _SUFFIXES = (".amc", ".bvh", ".glb", ".gltf", ".fbx")

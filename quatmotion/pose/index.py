@@ -9,19 +9,25 @@ Conventions
 * Distances returned are Euclidean (hnswlib's ``"l2"`` space returns squared distances; they
   are square-rooted here).
 * Vectors are stored as float32 (hnswlib's precision).
+* hnswlib's own reader trusts the bytes it loads (sizes, neighbour ids, levels): a damaged or
+  crafted graph reads and writes outside its arrays. :meth:`HNSWIndex.from_bytes` checks every
+  size, count and id of the serialised graph against the others (:func:`check_graph`) before
+  the bytes reach it.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import pathlib
+import struct
 import tempfile
 
 import hnswlib
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["HNSWIndex", "exact_knn", "recall_at_k"]
+__all__ = ["HNSWIndex", "check_graph", "exact_knn", "recall_at_k"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -202,9 +208,16 @@ class HNSWIndex:
 
     @classmethod
     def from_bytes(
-        cls, data: bytes, dim: int, ef_search: int = 64, n_threads: int = -1
+        cls,
+        data: bytes,
+        dim: int,
+        ef_search: int = 64,
+        n_threads: int = -1,
+        *,
+        n_items: int | None = None,
     ) -> HNSWIndex:
-        """Rebuild an index from :meth:`to_bytes` output.
+        """Rebuild an index from :meth:`to_bytes` output, the bytes checked first
+        (:func:`check_graph`).
 
         Parameters
         ----------
@@ -213,13 +226,22 @@ class HNSWIndex:
             Vector dimension the graph was built with.
         ef_search, n_threads : int
             Query-time settings.
+        n_items : int, optional
+            Items the graph must hold (the catalogue's poses).
+
+        Raises
+        ------
+        ValueError
+            Bytes that are not a whole graph of ``n_items`` vectors of ``dim`` dimensions.
         """
+        graph = check_graph(data, dim, n_items)
         self = cls(ef_search=ef_search, n_threads=n_threads)
         index = hnswlib.Index(space="l2", dim=int(dim))
         with tempfile.TemporaryDirectory() as tmp:
             path = os.path.join(tmp, "index.bin")
             pathlib.Path(path).write_bytes(data)
-            index.load_index(path)
+            # Room for the items it holds, not for what the file declares.
+            index.load_index(path, max_elements=graph.n_items)
         index.set_ef(int(ef_search))
         self._index = index
         self.n_items_ = index.get_current_count()
@@ -227,6 +249,124 @@ class HNSWIndex:
         self.M = index.M
         self.ef_construction = index.ef_construction
         return self
+
+
+_HEADER = struct.Struct("<QQQQQQiIQQQdQ")
+"""hnswlib's saveIndex header (0.8): offsetLevel0, max_elements, cur_element_count,
+size_data_per_element, label_offset, offsetData, maxlevel, enterpoint_node, maxM, maxM0, M,
+mult, ef_construction."""
+_MAX_DEGREE = 1 << 12
+_MAX_LEVEL = 64
+
+
+class GraphSummary:
+    """What :func:`check_graph` found: the items and the graph degree."""
+
+    def __init__(self, n_items: int, M: int) -> None:
+        self.n_items = n_items
+        self.M = M
+
+
+def check_graph(data: bytes, dim: int, n_items: int | None = None) -> GraphSummary:
+    """Check hnswlib's serialised graph against itself before hnswlib reads it.
+
+    Every size field must be the one ``dim`` and ``M`` imply; the file's length what its
+    counts imply; every neighbour id an item, listed at a level the neighbour has; the labels
+    ``0..N-1`` once each; the vectors finite; no item marked deleted.
+
+    Raises
+    ------
+    ValueError
+        Naming the first field that disagrees.
+    """
+    dim = int(dim)
+    if dim < 1:
+        raise ValueError(f"the graph's vectors have {dim} dimensions")
+    if len(data) < _HEADER.size:
+        raise ValueError(f"the graph is {len(data)} bytes, shorter than its header")
+    (off0, _max_elements, n, per_item, label_at, data_at, max_level, entry, max_m, max_m0, M,
+     mult, ef_construction) = _HEADER.unpack_from(data)  # fmt: skip
+    if n_items is not None and n != n_items:
+        raise ValueError(f"the graph holds {n} items, the catalogue {n_items}")
+    links0 = max_m0 * 4 + 4
+    if not (1 <= M <= _MAX_DEGREE and max_m == M and max_m0 == 2 * M):
+        raise ValueError(f"the graph's degree fields disagree (M {M}, {max_m}, {max_m0})")
+    if (off0, data_at, label_at, per_item) != (0, links0, links0 + 4 * dim, links0 + 4 * dim + 8):
+        raise ValueError(
+            f"the graph's item layout does not hold {dim}-dimensional vectors (item size "
+            f"{per_item}, vector at {data_at}, label at {label_at})"
+        )
+    if n < 1 or not 0 <= max_level <= _MAX_LEVEL or entry >= n:
+        raise ValueError(f"the graph's {n} items, top level {max_level}, entry {entry} disagree")
+    if not (math.isfinite(mult) and mult > 0 and 1 <= ef_construction <= 1 << 20):
+        raise ValueError("the graph's construction parameters are invalid")
+    level0_end = _HEADER.size + n * per_item
+    if len(data) < level0_end + 4 * n:
+        raise ValueError(f"the graph is {len(data)} bytes, too short for {n} items")
+    items = np.frombuffer(data, dtype=np.uint8, count=n * per_item, offset=_HEADER.size)
+    items = items.reshape(n, per_item)
+    counts = items[:, :2].copy().view("<u2")[:, 0]
+    if items[:, 2:4].any() or counts.max() > max_m0:
+        raise ValueError("the graph's bottom level has a deleted item or an overfull list")
+    links = items[:, 4:links0].copy().view("<u4")
+    listed = np.arange(max_m0)[None, :] < counts[:, None]
+    if np.any(links[listed] >= n):
+        raise ValueError("the graph's bottom level names an item it does not hold")
+    labels = items[:, label_at:per_item].copy().view("<u8")[:, 0]
+    if not np.array_equal(np.sort(labels), np.arange(n, dtype=np.uint64)):
+        raise ValueError("the graph's item labels are not 0 to N-1 once each")
+    vectors = items[:, data_at:label_at].copy().view("<f4")
+    if not np.all(np.isfinite(vectors)):
+        raise ValueError("the graph holds vectors that are not finite")
+    levels, upper = _upper_levels(data, level0_end, n, max_m)
+    if levels[entry] != max_level or levels.max() != max_level:
+        raise ValueError("the graph's entry item is not on its top level")
+    for level, lists in enumerate(upper, start=1):
+        count = lists[:, 0] & 0xFFFF
+        if np.any(lists[:, 0] >> 16) or count.max(initial=0) > max_m:
+            raise ValueError(f"the graph's level {level} has a deleted mark or an overfull list")
+        ids = lists[:, 1:][np.arange(max_m)[None, :] < count[:, None]]
+        if np.any(ids >= n) or np.any(levels[ids.astype(np.int64)] < level):
+            raise ValueError(f"the graph's level {level} names an item not on that level")
+    return GraphSummary(int(n), int(M))
+
+
+def _upper_levels(
+    data: bytes, start: int, n: int, max_m: int
+) -> tuple[NDArray[np.int64], list[NDArray[np.uint32]]]:
+    """Every item's level, and per level above the bottom the ``(k, 1 + max_m)`` link lists
+    (count word, then ids) of the items on it, from hnswlib's per-item upper link blocks."""
+    per_level = max_m * 4 + 4
+    levels = np.zeros(n, dtype=np.int64)
+    blocks: list[tuple[int, int]] = []
+    pos = start
+    view = memoryview(data)
+    size_of = struct.Struct("<I").unpack_from
+    for i in range(n):
+        if pos + 4 > len(data):
+            raise ValueError("the graph ends inside its upper levels")
+        (size,) = size_of(view, pos)
+        pos += 4
+        if size:
+            if size % per_level or size // per_level > _MAX_LEVEL or pos + size > len(data):
+                raise ValueError(f"the graph's item {i} has an upper link block of {size} bytes")
+            levels[i] = size // per_level
+            blocks.append((i, pos))
+            pos += size
+    if pos != len(data):
+        raise ValueError(f"the graph has {len(data) - pos} bytes after its last item")
+    upper = []
+    for level in range(1, int(levels.max(initial=0)) + 1):
+        lists = np.array(
+            [
+                np.frombuffer(data, "<u4", 1 + max_m, at + (level - 1) * per_level)
+                for i, at in blocks
+                if levels[i] >= level
+            ],
+            dtype=np.uint32,
+        ).reshape(-1, 1 + max_m)
+        upper.append(lists)
+    return levels, upper
 
 
 def exact_knn(

@@ -46,6 +46,7 @@ import dataclasses
 import errno
 import functools
 import json
+import math
 import os
 import pathlib
 import time
@@ -76,6 +77,7 @@ from quatmotion.collection import (
 from quatmotion.errors import FormatError
 from quatmotion.io import Doubt
 from quatmotion.io.names import match_clip
+from quatmotion.limits import check, load_json
 from quatmotion.motion import Motion
 from quatmotion.parallel import Failure, Runner, Scheduler, imap_batch
 from quatmotion.pose import labels
@@ -303,37 +305,39 @@ class PoseLibrary:
             Not a quatmotion pose library, or a version this code does not read.
         """
         try:
-            with np.load(path, allow_pickle=False) as data:
-                meta = json.loads(str(data["meta"]))
-                if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
-                    raise FormatError(_NOT_A_LIBRARY, path)
-                version = FORMAT.check(meta.get("format"), meta.get("version"), path)
-                refs = [ClipRef.from_dict(r, path) for r in meta.pop("clips", [])]
-                stored = meta.pop("settings", None)
-                settings = None if stored is None else PoseSettings.from_dict(stored, path)
-                index = HNSWIndex.from_bytes(
-                    data["index"].tobytes(), dim=int(meta["dim"]), ef_search=ef_search
-                )
-                model = {k[6:]: data[k] for k in data.files if k.startswith("model_")}
-                rows = data["pose_rows"] if "pose_rows" in data.files else None
-                return cls(
-                    pose_rows=rows,
-                    index=index,
-                    clip_names=[str(n) for n in data["clip_names"]],
-                    clip_of=data["clip_of"].astype(np.int64),
-                    frame_of=data["frame_of"].astype(np.int64),
-                    model=model,
-                    meta=meta,
-                    refs=refs,
-                    settings=settings,
-                    version=version,
-                    path=pathlib.Path(path),
-                )
+            arrays = _load_arrays(path)
+            meta = load_json(str(arrays.get("meta", "null")), path, "meta")
+            if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
+                raise FormatError(_NOT_A_LIBRARY, path)
+            version = FORMAT.check(meta.get("format"), meta.get("version"), path)
+            refs = [ClipRef.from_dict(r, path) for r in meta.pop("clips", [])]
+            stored = meta.pop("settings", None)
+            settings = None if stored is None else PoseSettings.from_dict(stored, path)
+            model = {k[6:]: arrays[k] for k in arrays if k.startswith("model_")}
+            n_items, dim = _check_catalogue(arrays, meta, model, refs)
+            index = HNSWIndex.from_bytes(
+                arrays["index"].tobytes(), dim=dim, ef_search=ef_search, n_items=n_items
+            )
+            return cls(
+                pose_rows=arrays.get("pose_rows"),
+                index=index,
+                clip_names=[str(n) for n in arrays["clip_names"]],
+                clip_of=arrays["clip_of"].astype(np.int64),
+                frame_of=arrays["frame_of"].astype(np.int64),
+                model=model,
+                meta=meta,
+                refs=refs,
+                settings=settings,
+                version=version,
+                path=pathlib.Path(path),
+            )
         except FormatError:
             raise
         except (IsADirectoryError, FileNotFoundError, PermissionError):
             raise
-        except (KeyError, ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        except _MalformedError as exc:
+            raise FormatError(f"malformed pose library: {exc}", path) from None
+        except (KeyError, ValueError, TypeError, OSError, EOFError, zipfile.BadZipFile) as exc:
             # np.load's own message (pickled data, a bad zip...) says nothing about what the
             # file should have been.
             raise FormatError(_NOT_A_LIBRARY, path) from exc
@@ -996,6 +1000,98 @@ class PoseLibrary:
         """:meth:`open` (the name before 0.4.0; warns)."""
         warn_renamed("PoseLibrary.load", "PoseLibrary.open")
         return cls.open(path, ef_search)
+
+
+class _MalformedError(ValueError):
+    """A pose library whose arrays disagree (the message says which)."""
+
+
+def _load_arrays(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
+    """A library's arrays, each member's declared size checked (against the limits and its
+    header's shape) before NumPy allocates it; no objects."""
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            check("file_bytes", info.file_size, path, f"member {info.filename}")
+            with archive.open(info) as fh:
+                version = np.lib.format.read_magic(fh)
+                read_header = (
+                    np.lib.format.read_array_header_1_0
+                    if version == (1, 0)
+                    else np.lib.format.read_array_header_2_0
+                )
+                shape, _, dtype = read_header(fh)
+            if (
+                dtype.hasobject
+                or int(np.prod(shape, dtype=object)) * dtype.itemsize > info.file_size
+            ):
+                raise _MalformedError(f"member {info.filename} declares more data than it holds")
+    with np.load(path, allow_pickle=False) as data:
+        return {k: data[k] for k in data.files}
+
+
+def _check_catalogue(
+    arrays: dict[str, np.ndarray], meta: dict[str, Any], model: dict[str, Any], refs: list
+) -> tuple[int, int]:
+    """Every stored count and shape against the others (what indexes what), before anything
+    is searched; returns the poses and the index's dimension.
+
+    Raises
+    ------
+    _MalformedError
+        Naming the first that disagrees.
+    """
+    names, clip_of, frame_of = arrays["clip_names"], arrays["clip_of"], arrays["frame_of"]
+    n_clips = len(names) if names.ndim == 1 else -1
+    if n_clips < 1 or names.dtype.kind != "U":
+        raise _MalformedError("it names no clips")
+    for key, a in (("clip_of", clip_of), ("frame_of", frame_of)):
+        if a.ndim != 1 or a.dtype.kind not in "iu" or len(a) != len(clip_of) or not len(a):
+            raise _MalformedError(f"{key} is not one whole number per pose")
+    if clip_of.min() < 0 or clip_of.max() >= n_clips:
+        raise _MalformedError(f"clip_of names clips outside 0 to {n_clips - 1}")
+    if frame_of.min() < 0:
+        raise _MalformedError("frame_of holds negative frames")
+    dim = meta.get("dim")
+    if isinstance(dim, bool) or not isinstance(dim, int) or not 1 <= dim <= 1 << 16:
+        raise _MalformedError(f"meta.dim is {dim!r}")
+    W, scale, offset = model.get("W"), model.get("scale"), model.get("offset")
+    if W is None or scale is None or offset is None:
+        raise _MalformedError("the projection model is missing")
+    if W.ndim != 2 or W.shape[1] != dim or scale.shape != (W.shape[0],) != offset.shape:
+        raise _MalformedError(f"the projection model's shapes disagree with meta.dim {dim}")
+    if not all(np.all(np.isfinite(a)) for a in (W, scale, offset)):
+        raise _MalformedError("the projection model holds values that are not finite")
+    rows = arrays.get("pose_rows")
+    if rows is not None and (rows.ndim != 2 or len(rows) != len(clip_of)):
+        raise _MalformedError("pose_rows is not one row per pose")
+    check("fps", _number(meta.get("fps"), "fps"), None, "meta.fps")
+    height = meta.get("height_cm")
+    if height is not None and not (math.isfinite(_number(height, "height_cm")) and height > 0):
+        raise _MalformedError(f"meta.height_cm is {height!r}")
+    for key, least in (("file_frames", 1), ("file_fps", 0)):
+        values = meta.get(key)
+        if values is None:
+            continue
+        if not isinstance(values, list) or len(values) != n_clips:
+            raise _MalformedError(f"meta.{key} is not one value per clip")
+        for v in values:
+            if v is not None and not (_number(v, key) > least and math.isfinite(v)):
+                raise _MalformedError(f"meta.{key} holds {v!r}")
+    if refs and len(refs) != n_clips:
+        raise _MalformedError(f"{len(refs)} clip references for {n_clips} clips")
+    judge = {k: v for k, v in model.items() if k.startswith(_TRANSITION)}
+    if judge:
+        TransitionClassifier.from_arrays(
+            {k[len(_TRANSITION) :]: v for k, v in judge.items()},
+            n_features=None if rows is None else 2 * rows.shape[1],
+        )
+    return len(clip_of), dim
+
+
+def _number(value: object, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise _MalformedError(f"meta.{key} is {value!r}, not a number")
+    return float(value)
 
 
 def _labelled_pairs(

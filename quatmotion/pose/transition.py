@@ -179,13 +179,18 @@ class TransitionClassifier:
         }
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, ArrayLike]) -> TransitionClassifier:
-        """A fitted classifier from :meth:`to_arrays` (scores by :func:`_predict_trees`).
+    def from_arrays(
+        cls, arrays: dict[str, ArrayLike], n_features: int | None = None
+    ) -> TransitionClassifier:
+        """A fitted classifier from :meth:`to_arrays` (scores by :func:`_predict_trees`), its
+        trees checked (:func:`check_trees`; ``n_features``: the pair rows it will score).
 
-        Raises ``KeyError`` naming the arrays missing."""
+        Raises ``KeyError`` naming the arrays missing, ``ValueError`` for trees that do not
+        hold together."""
         missing = [k for k in SCHEMA if k not in arrays]
         if missing:
             raise KeyError(f"a stored transition classifier lacks {missing}")
+        check_trees({k: np.asarray(v) for k, v in arrays.items()}, n_features)
         out = cls.__new__(cls)
         components = np.asarray(arrays["components"], dtype=np.float64)
         out.n_components = len(components)
@@ -208,6 +213,35 @@ def _pair_features(rows_a: ArrayLike, rows_b: ArrayLike) -> FloatArray:
     a = np.asarray(rows_a, dtype=np.float64)
     b = np.asarray(rows_b, dtype=np.float64)
     return np.concatenate((np.abs(a - b), (a + b) / 2.0), axis=1)
+
+
+def check_trees(trees: dict[str, NDArray[Any]], n_features: int | None = None) -> None:
+    """Refuse (``ValueError``) stored trees that :func:`_predict_trees` cannot walk safely: node
+    arrays of unequal lengths, tree starts that do not split them, a child that is not a later
+    node of its own tree (no cycle, no jump out), a split on a feature the rows lack."""
+    n = len(trees["node_feature"])
+    keys = ("node_value", "node_threshold", "node_missing_left", "node_left", "node_right",
+            "node_leaf")  # fmt: skip
+    if any(np.ndim(trees[k]) != 1 or len(trees[k]) != n for k in (*keys, "node_feature")):
+        raise ValueError("a stored transition classifier's node arrays disagree in length")
+    starts = np.asarray(trees["tree_starts"])
+    if starts.ndim != 1 or not len(starts) or starts[0] != 0 or starts[-1] != n:
+        raise ValueError("a stored transition classifier's trees do not cover its nodes")
+    if np.any(np.diff(starts) < 1) or np.asarray(trees["baseline"]).size < 1:
+        raise ValueError("a stored transition classifier has an empty tree or no baseline")
+    tree = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
+    local = np.arange(n) - starts[tree]
+    inner = ~trees["node_leaf"].astype(bool)
+    for side in ("node_left", "node_right"):
+        child = trees[side][inner].astype(np.int64)
+        end = (starts[tree + 1] - starts[tree])[inner]
+        if np.any(child <= local[inner]) or np.any(child >= end):
+            raise ValueError("a stored transition classifier's tree links outside its nodes")
+    feature = trees["node_feature"][inner].astype(np.int64)
+    if feature.size and (feature.min() < 0 or (n_features and feature.max() >= n_features)):
+        raise ValueError("a stored transition classifier splits on a feature rows lack")
+    if not np.all(np.isfinite(trees["node_value"].astype(np.float64))):
+        raise ValueError("a stored transition classifier holds values that are not finite")
 
 
 def _predict_trees(trees: dict[str, NDArray[Any]], X: FloatArray) -> FloatArray:

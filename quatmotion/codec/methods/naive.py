@@ -112,12 +112,14 @@ class NaiveMethod(Method):
             raise FormatError("naive clip: invalid stride or step")
         T = context.n_frames
         kept = _kept(T, stride)
+        C = layout.n_channels
+        expected = 4 * C * len(kept)  # never more is inflated: a bomb stops here
         try:
-            raw = lzma.decompress(r.take(r.remaining), format=lzma.FORMAT_RAW, filters=_FILTERS)
+            inflater = lzma.LZMADecompressor(format=lzma.FORMAT_RAW, filters=_FILTERS)
+            raw = inflater.decompress(r.take(r.remaining), max_length=expected + 1)
         except lzma.LZMAError as error:
             raise FormatError(f"naive clip: corrupt lzma stream ({error})") from None
-        C = layout.n_channels
-        if len(raw) != 4 * C * len(kept):
+        if len(raw) != expected or not inflater.eof:
             raise FormatError("naive clip: stream size does not match the clip")
         deltas = np.frombuffer(raw, dtype="<i4").reshape(C, len(kept)).T.astype(np.int64)
         values = np.cumsum(deltas, axis=0) * step / unit
