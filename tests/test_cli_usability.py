@@ -434,7 +434,7 @@ def test_pose_commands_take_skeleton_and_units(pose_library, tmp_path):
         "--rank", "4", "--unlabeled", "50", "--pairs", "10",
     )  # fmt: skip
     assert index.exit_code == 0, index.output
-    assert "of 2 clips; 0 of 2 clips failed" in index.stderr
+    assert "of 2 clips; 0 of 2 clips failed" in index.stdout
 
 
 @pytest.mark.parametrize(
@@ -462,7 +462,7 @@ def test_pose_index_skips_absurd_clips_quietly_and_keeps_its_inputs(tmp_path, po
     assert result.exit_code == 1, result.output  # the library is written; a clip failed
     assert "Warning" not in result.stderr and "RuntimeWarning" not in result.output
     assert re.search(r"skipped .*far\.bvh: .*1 km", result.stderr), result.stderr
-    assert "1 of 3 clips failed" in result.stderr
+    assert "1 of 3 clips failed" in result.stdout
     _assert_bad_input(_invoke(*args), "lib.idx", "--force")
     assert _invoke(*args, "--force").exit_code == 1
     walk = folder / "walk.bvh"

@@ -125,3 +125,31 @@ def test_append_codes_new_clips_at_the_bound_the_library_was_made_with(tmp_path:
             axis=-1,
         )
         assert err.max() <= bound + 1e-4
+
+
+def test_every_writing_command_ends_with_one_wrote_line_on_stdout(tmp_path: Path):
+    """The success line is the same everywhere: ``wrote PATH...`` as stdout's last line; and
+    ``compress --ratio`` (no bound asked) does not say an error bound holds."""
+    clip = generate_clip("walk", 1, n_frames=60)
+    bvh = tmp_path / "walk.bvh"
+    write_bvh(clip, bvh)
+    other = tmp_path / "run.bvh"
+    write_bvh(generate_clip("run", 2, n_frames=60), other)
+    steps = [
+        (("convert", bvh, tmp_path / "c.bvh"), tmp_path / "c.bvh"),
+        (("generate", "walk", tmp_path / "g.bvh", "--frames", "30"), tmp_path / "g.bvh"),
+        (("view", bvh, "-o", tmp_path / "v.html"), tmp_path / "v.html"),
+        (("compress", bvh, "-o", tmp_path / "r.qmz", "--ratio", "5"), tmp_path / "r.qmz"),
+        (("append", tmp_path / "r.qmz", other), tmp_path / "r.qmz"),
+        (("decompress", tmp_path / "r.qmz", "-o", tmp_path / "d"), tmp_path / "d"),
+        (("index", "build", bvh, "-o", tmp_path / "i.qidx", "--workers", "1"), tmp_path / "i.qidx"),
+        (("index", "add", tmp_path / "i.qidx", other, "--workers", "1"), tmp_path / "i.qidx"),
+    ]
+    for args, out in steps:
+        result = _invoke(*args)
+        assert result.exit_code == 0, (args, result.output)
+        last = result.stdout.strip().splitlines()[-1]
+        assert last.startswith("wrote ") and str(out) in last, (args, result.stdout)
+        assert out.exists()
+        if args[0] == "compress":
+            assert "error bound" not in result.stdout and "errors are measured" in result.stdout

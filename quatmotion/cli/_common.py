@@ -81,6 +81,7 @@ __all__ = [
     "unit_label",
     "unit_text",
     "user_errors",
+    "say_wrote",
     "warn",
     "warn_doubt",
     "write_clip",
@@ -145,6 +146,14 @@ def fail(message: str) -> typer.Exit:
 def warn(message: str) -> None:
     """Print ``warning: <message>`` on stderr (one line; the command goes on)."""
     error_console.print(f"warning: {message}", markup=False, highlight=False, soft_wrap=True)
+
+
+def say_wrote(path: object, what: str = "") -> None:
+    """The success line of a command that wrote a file: ``wrote PATH: WHAT`` on stdout, one
+    line (progress and warnings go to stderr or above the bar), the same for every command."""
+    console.print(
+        f"wrote {path}{f': {what}' if what else ''}", markup=False, highlight=False, soft_wrap=True
+    )
 
 
 @contextlib.contextmanager

@@ -17,6 +17,7 @@ from quatmotion.cli._common import (
     at_least,
     check_outputs,
     console,
+    say_wrote,
     user_errors,
 )
 
@@ -44,7 +45,7 @@ def bench(
         out.parent.mkdir(parents=True, exist_ok=True)
     # Outside the bad-input guard: an exception inside a benchmark is a bug, shown in full.
     result = module.run(out, quick=quick, seed=seed)
-    console.print(f"benchmark {name}: wrote {out}")
+    say_wrote(out, f"benchmark {name}")
     if isinstance(result, dict):
         table = Table(show_header=False)
         for key, value in result.items():

@@ -32,6 +32,7 @@ from quatmotion.cli._common import (
     progress_bar,
     report_skipped,
     require_file,
+    say_wrote,
     unit_label,
     unit_text,
     user_errors,
@@ -152,12 +153,15 @@ def _settings_line(archive) -> str:
     )
 
 
-def _units_line(rows: list[dict[str, object]]) -> str:
-    """``length unit: in (guessed) for 3 clips; cm (given) for 1 clip``."""
+def _units_line(rows: list[dict[str, object]], settings) -> str:
+    """``length unit: in (guessed) for 3 clips; cm (given) for 1 clip``; where a unit was
+    guessed, what hangs on it: the error bound asked for (``settings.max_error``), else the
+    errors measured."""
     counts = Counter(str(r["unit_text"]) for r in rows)
     parts = [f"{unit} for {n} clip{'s' if n != 1 else ''}" for unit, n in counts.most_common()]
     guessed = any(r["unit_guessed"] for r in rows)
-    note = " (the error bound holds in this unit; give --units if a guess is wrong)"
+    held = "the error bound holds" if settings.max_error is not None else "errors are measured"
+    note = f" ({held} in this unit; give --units if a guess is wrong)"
     return f"length unit: {'; '.join(parts)}{note if guessed else ''}"
 
 
@@ -231,8 +235,8 @@ def compress(
         )
     else:
         summary = _summary(report.details, Path(out).stat().st_size)
-        console.print(f"wrote {out}: {len(report.added)} clip(s), {summary}")
-        console.print(_units_line(rows), markup=False, highlight=False)
+        console.print(_units_line(rows, settings), markup=False, highlight=False)
+        say_wrote(out, f"{len(report.added)} clip(s), {summary}")
         if failed:
             console.print(f"{len(failed)} input(s) failed")
     if failed:
@@ -416,11 +420,11 @@ def append(
             rows = _clip_rows(archive, len(archive) - len(report.added))
             size = archive.size
     skipped = f" ({len(report.skipped)} already in it)" if report.skipped else ""
-    console.print(
-        f"added {len(report.added)} clip(s) to {library}{skipped}, {_bound_text(settings)}: "
-        f"now {size:,} bytes"
+    console.print(_units_line(rows, settings), markup=False, highlight=False)
+    say_wrote(
+        library,
+        f"added {len(report.added)} clip(s){skipped}, {_bound_text(settings)}; now {size:,} bytes",
     )
-    console.print(_units_line(rows), markup=False, highlight=False)
 
 
 def _units(units):

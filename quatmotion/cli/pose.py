@@ -45,6 +45,7 @@ from quatmotion.cli._common import (
     read_clip,
     report_skipped,
     require_file,
+    say_wrote,
     user_errors,
     warn,
 )
@@ -142,9 +143,10 @@ def index_command(
             )
     library = report.details["library"]
     report_skipped(report.failures)
-    _echo(
-        f"wrote {output}: {len(library.clip_of)} poses of {len(library.clip_names)} clips; "
-        f"{len(report.failures)} of {len(files)} clips failed"
+    say_wrote(
+        output,
+        f"{len(library.clip_of)} poses of {len(library.clip_names)} clips; "
+        f"{len(report.failures)} of {len(files)} clips failed",
     )
     if report.failures:
         raise typer.Exit(code=1)
@@ -186,10 +188,11 @@ def add_command(
             )  # fmt: skip
     library = report.details["library"]
     report_skipped(report.failures)
-    _echo(
-        f"{library_path}: {len(report.added)} clips added, {len(report.skipped)} already there, "
+    say_wrote(
+        library_path,
+        f"{len(report.added)} clips added, {len(report.skipped)} already there, "
         f"{len(report.failures)} failed; {len(library.clip_names)} clips, "
-        f"{len(library.clip_of)} poses"
+        f"{len(library.clip_of)} poses",
     )
     if report.failures:
         raise typer.Exit(code=1)

@@ -39,6 +39,7 @@ from quatmotion.cli._common import (
     read_clip,
     report_skipped,
     require_file,
+    say_wrote,
     user_errors,
 )
 
@@ -173,9 +174,10 @@ def _build(
             f"{output}: not written, none of the {len(report.failures)} clips could be indexed"
         )
     resumed = " (resumed: the index was there)" if report.details.get("resumed") and not add else ""
-    _say(
-        f"{output}: {len(report.added)} clips added, {len(report.skipped)} already indexed, "
-        f"{len(report.failures)} failed{resumed}"
+    say_wrote(
+        output,
+        f"{len(report.added)} clips added, {len(report.skipped)} already indexed, "
+        f"{len(report.failures)} failed{resumed}",
     )
     if label_map is not None:
         _say_labels(labels, report.labels_changed, report.unmatched_labels)
