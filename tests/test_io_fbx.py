@@ -223,10 +223,10 @@ def _quatmotion(*args: object, cwd: Path) -> subprocess.CompletedProcess:
 
 def test_every_command_on_fbx_ends_by_itself(tmp_path):
     """info, convert (to BVH and glTF), compress, view, index build and pose index on FBX
-    input (the BVH-named files: the names search maps), and a bad FBX: each in
+    input (every fixture: BVH, Mixamo and Unreal names), and a bad FBX: each in
     its own process, each ending with its own exit code; the outputs read back."""
     fbx = FIXTURES / "cmu_unreal.fbx"
-    named = [FIXTURES / "cmu_bvh_names.fbx", FIXTURES / "bandai_bvh_names.fbx"]
+    named = sorted(FIXTURES.glob("*.fbx"))  # the BVH's, Mixamo's and Unreal's names
     runs = {
         "info": _quatmotion("info", FIXTURES / "cmu_bvh_names.fbx", "--take", "1", cwd=tmp_path),
         "bvh": _quatmotion("convert", fbx, tmp_path / "out.bvh", cwd=tmp_path),
@@ -248,6 +248,9 @@ def test_every_command_on_fbx_ends_by_itself(tmp_path):
         expected = 2 if name == "bad" else 0
         assert result.returncode == expected, (name, result.stdout, result.stderr)
     assert "'Armature|walk_b' of 2" in runs["info"].stdout
+    said = {name: result.stdout + result.stderr for name, result in runs.items()}
+    assert "6 clips added, 0 already indexed, 0 failed" in said["index"]
+    assert "120 poses of 6 clips; 0 of 6 clips failed" in said["pose"]
     assert runs["bad"].stderr.startswith("error: ") and "bad.fbx" in runs["bad"].stderr
     original = _read("cmu_unreal.fbx")
     for out in ("out.bvh", "out.glb"):
@@ -340,3 +343,18 @@ def test_serve_a_folder_of_fbx(tmp_path):
         clips = client.get("/api/clips")
     assert clips.status_code == 200
     assert sorted(c["name"] for c in clips.json()["clips"]) == ["bandai_bvh_names", "cmu_bvh_names"]
+
+
+@pytest.mark.parametrize("source", ["cmu", "bandai"])
+def test_mixamo_and_unreal_names_map_joint_for_joint_as_the_bvh_names(source):
+    """The humanoid mapping (index, pose, search) finds the same 16 joints in the renamed FBX
+    files as in the BVH-named one, so they go through index build and pose index alike."""
+    from quatmotion.pose.skeleton16 import joint_indices16
+
+    base = _read(f"{source}_bvh_names.fbx", 0).skeleton
+    expected = [base.joint_names[j] for j in joint_indices16(base)]
+    for family in ("mixamo", "unreal"):
+        name = f"{source}_{family}.fbx"
+        renamed = _read(name).skeleton
+        found = [renamed.joint_names[j] for j in joint_indices16(renamed)]
+        assert found == [SPEC[name]["names"][j] for j in expected], name
