@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from quatmotion.cli import app
@@ -153,3 +154,56 @@ def test_every_writing_command_ends_with_one_wrote_line_on_stdout(tmp_path: Path
         assert out.exists()
         if args[0] == "compress":
             assert "error bound" not in result.stdout and "errors are measured" in result.stdout
+
+
+@pytest.mark.needs_data
+def test_a_renamed_cmu_skeleton_decompresses_to_asf_amc_under_its_own_names(tmp_path: Path):
+    """Issue 29 item 11: a studio's names on CMU's skeleton (the last joint, then every one)
+    once failed with "no joint 'rthumb'" (the ASF/AMC writers took the names the ASF was read
+    with). The writers follow the skeleton's names; the clip comes back within the bound."""
+    import dataclasses
+
+    from quatmotion.codec import Archive, CompressSettings
+    from quatmotion.datasets import data_root
+
+    original = read_motion(data_root() / "cmu" / "02" / "02_01.amc").slice(0, 60)
+    sk = original.skeleton
+    for renamed in (
+        (*sk.joint_names[:-1], "thumb_R"),
+        ("root", *(f"Bone{k:02d}_{n.upper()}" for k, n in enumerate(sk.joint_names[1:]))),
+    ):
+        motion = dataclasses.replace(
+            original, skeleton=dataclasses.replace(sk, joint_names=renamed)
+        ).renamed("studio")
+        lib = tmp_path / f"{renamed[-1]}.qmz"
+        Archive.build([motion], lib, CompressSettings(max_error=0.5))
+        out = tmp_path / f"out_{renamed[-1]}"
+        result = _invoke("decompress", lib, "-o", out)
+        assert result.exit_code == 0, result.output
+        back = read_motion(out / "studio.amc")  # its ASF beside it, written by quatmotion
+        assert back.skeleton.joint_names == renamed
+        err = np.linalg.norm(
+            forward_kinematics(back).all_positions() - forward_kinematics(original).all_positions(),
+            axis=-1,
+        )
+        assert err.max() <= 0.5 + 1e-4
+
+
+def test_the_asf_writers_refuse_a_skeleton_that_is_no_longer_its_asf():
+    """Joints renamed are written under their new names; other parents, or a name an ASF
+    cannot hold, are a ValueError naming the problem, never a KeyError from inside."""
+    import dataclasses
+
+    from quatmotion.io import asf_text, parse_asf
+
+    sk = generate_clip("walk", 0, n_frames=2).skeleton
+    renamed = dataclasses.replace(sk, joint_names=(*sk.joint_names[:-1], "tip"))
+    assert parse_asf(asf_text(renamed), "x.asf").joint_names == renamed.joint_names
+    spaced = dataclasses.replace(sk, joint_names=(*sk.joint_names[:-1], "left tip"))
+    with pytest.raises(ValueError, match="cannot be written"):
+        asf_text(spaced)
+    parents = sk.parents.copy()
+    parents[-1] = 0
+    moved = dataclasses.replace(sk, parents=parents)
+    with pytest.raises(ValueError, match="not the .* bones of the ASF"):
+        asf_text(moved)

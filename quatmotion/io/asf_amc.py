@@ -566,6 +566,42 @@ def _require_asf(skeleton: Skeleton, what: str) -> None:
         )
 
 
+def _asf_names(skeleton: Skeleton, what: str) -> dict[str, str]:
+    """Each bone name of the ASF bookkeeping (``extras``) -> the skeleton's joint name.
+
+    The bookkeeping names the bones as the file did; the skeleton's joints may since have been
+    renamed (a studio's names on CMU's skeleton). Joints are matched by position: the joint
+    order the reader makes of the bookkeeping (:func:`_joint_order`) is the skeleton's, parent
+    for parent, so the writers put the skeleton's names on the file's bones whatever they are.
+    The root stays ``root`` (an ASF keyword).
+
+    Raises
+    ------
+    ValueError
+        If the skeleton's joints are not the bookkeeping's (other joints, other parents), or a
+        name cannot stand in an ASF (empty, white space, ``#``, a second ``root``).
+    """
+    _require_asf(skeleton, what)
+    bones = [b["name"] for b in skeleton.extras["asf_bones"]]
+    parent_of = {child: h[0] for h in skeleton.extras["asf_hierarchy"] for child in h[1:]}
+    try:
+        order = _joint_order(bones, parent_of, 0, Path(skeleton.name or "skeleton"))
+    except (FormatError, KeyError):
+        order = []
+    parents = [-1] + [order.index(parent_of[n]) for n in order[1:]] if order else []
+    if len(order) != skeleton.n_joints or not np.array_equal(parents, skeleton.parents):
+        raise ValueError(
+            f"{what}: skeleton {skeleton.name!r} has {skeleton.n_joints} joints that are not "
+            f"the {len(order)} bones of the ASF it was read from (other joints or parents)"
+        )
+    names = {"root": "root"}
+    for old, new in zip(order[1:], skeleton.joint_names[1:], strict=True):
+        if not new or new == "root" or any(c.isspace() or c in "#()" for c in new):
+            raise ValueError(f"{what}: joint name {new!r} cannot be written to an ASF")
+        names[old] = new
+    return names
+
+
 # --------------------------------------------------------------------------------------------
 # AMC reading
 # --------------------------------------------------------------------------------------------
@@ -964,7 +1000,7 @@ def write_asf(skeleton: Skeleton, path: str | Path) -> None:
 
 def asf_text(skeleton: Skeleton) -> str:
     """The ASF text :func:`write_asf` writes for ``skeleton`` (read from an ASF)."""
-    _require_asf(skeleton, "write_asf")
+    names = _asf_names(skeleton, "write_asf")
     ex = skeleton.extras
     out = [f":version {ex['asf_version']}", f":name {ex['asf_name'] or skeleton.name}", ":units"]
     out += [f"  {k} {v}" for k, v in ex["asf_units"]]
@@ -984,7 +1020,7 @@ def asf_text(skeleton: Skeleton) -> str:
         out.append("  begin")
         if bone["id"] is not None:
             out.append(f"     id {bone['id']}")
-        out.append(f"     name {bone['name']}")
+        out.append(f"     name {names[bone['name']]}")
         out.append(f"     direction {' '.join(_g(v) for v in bone['direction'])}")
         out.append(f"     length {_g(bone['length'])}")
         out.append(
@@ -997,7 +1033,7 @@ def asf_text(skeleton: Skeleton) -> str:
         out += [f"     {o}" for o in bone["other"]]
         out.append("  end")
     out += [":hierarchy", "  begin"]
-    out += [f"    {' '.join(h)}" for h in ex["asf_hierarchy"]]
+    out += [f"    {' '.join(names[n] for n in h)}" for h in ex["asf_hierarchy"]]
     out += ["  end", ""]
     return "\n".join(out)
 
@@ -1025,12 +1061,12 @@ def amc_channel_values(
         (relative to the root ``position``); ``l`` dofs are 0.
     """
     sk = motion.skeleton
-    _require_asf(sk, "write_amc")
+    renamed = _asf_names(sk, "write_amc")
     to_deg = 180.0 / np.pi if degrees else 1.0
     to_cm = sk.extras["length_scale"]
     T = motion.n_frames
-    names = ["root"] + [b["name"] for b in sk.extras["asf_bones"] if b["dof"]]
-    dofs = {b["name"]: b["dof"] for b in sk.extras["asf_bones"]}
+    names = ["root"] + [renamed[b["name"]] for b in sk.extras["asf_bones"] if b["dof"]]
+    dofs = {renamed[b["name"]]: b["dof"] for b in sk.extras["asf_bones"]}
     dofs["root"] = sk.channels[0]
     counts = [len(dofs[n]) for n in names]
     values = np.zeros((T, sum(counts)))
@@ -1053,7 +1089,7 @@ def amc_channel_values(
         column += len(dofs[bone])
         if letters:
             joints, cols = groups.setdefault(letters, ([], []))
-            joints.append(sk.index(bone))
+            joints.append(0 if bone == "root" else sk.index(bone))
             cols.append(columns)
     for letters, (joints, cols) in groups.items():
         values[:, cols] = decompose_channels(local_m[:, joints], letters, intrinsic=False) * to_deg
@@ -1112,10 +1148,10 @@ def asf_bone_end_positions(
         Centimetres.
     """
     sk = motion.skeleton
-    _require_asf(sk, "asf_bone_end_positions")
+    renamed = _asf_names(sk, "asf_bone_end_positions")
     if world is None:
         world = forward_kinematics(motion, include_sites=False)
-    joints = [sk.index(b["name"]) for b in sk.extras["asf_bones"]]
+    joints = [sk.index(renamed[b["name"]]) for b in sk.extras["asf_bones"]]
     vectors = np.asarray(sk.extras["bone_vectors_cm"])[joints]
     ends = world.positions[:, joints] + quat.rotate(world.rotations[:, joints], vectors)
     return np.concatenate((world.positions[:, :1], ends), axis=1)
