@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import make_lsq_spline
 
 __all__ = [
     "MIN_SPLINE_FRAMES",
@@ -72,6 +71,8 @@ def fit_segments(
     -------
     list of ndarray, each (n_s, C)
     """
+    from scipy.interpolate import make_lsq_spline  # the encoder's: a reader never fits
+
     inserted = inserted or {}
     out = []
     for s, (a, b) in enumerate(segment_bounds(len(Y), breaks)):

@@ -1,0 +1,54 @@
+"""The decoder apart: reading and sampling a ``best`` file loads no compressor, no other
+codec's kernels, no scikit-learn, SQLite or PyWavelets (issue 32; the static half of this is
+an import-linter contract in pyproject.toml, this is the dynamic half)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from quatmotion import codec
+from quatmotion.synthetic import generate_clip
+
+HEAVY = (
+    "quatmotion.codec.methods.naive",
+    "quatmotion.codec.methods.sparse",
+    "quatmotion.sparse",
+    "quatmotion.retrieval",
+    "quatmotion.pose",
+    "sklearn",
+    "sqlite3",
+    "pywt",
+    "scipy.interpolate",
+    "scipy.stats",
+)
+
+
+def test_reading_a_best_file_loads_no_compressor_parts(tmp_path):
+    clip = generate_clip("walk", 5, n_frames=60)
+    path = tmp_path / "one.qmz"
+    path.write_bytes(codec.compress([clip], max_error=1.0, method="best").data)
+    script = f"""
+import json, sys
+from quatmotion.codec import Archive
+with Archive.open({str(path)!r}) as a:
+    a.read_rotations(0)
+    a.read(0)
+    a.sample(a.names()[0], 0.1)
+    a.sampler(0).pose(0.2)
+print(json.dumps(sorted(sys.modules)))
+"""
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    loaded = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert "quatmotion.codec.methods.spline" in loaded  # the file's codec, and only it
+    assert sorted(m for m in HEAVY if m in loaded) == []
+
+
+def test_every_codec_is_still_registered():
+    assert list(codec.METHODS) == ["best", "spline", "naive", "qssd", "ksvd"]
+    assert "ksvd" in codec.METHODS and "nope" not in codec.METHODS
+    assert codec.METHODS["ksvd"] is codec.METHODS["ksvd"]
+    from quatmotion.codec.methods import SparseMethod
+
+    assert isinstance(codec.METHODS["qssd"], SparseMethod)
