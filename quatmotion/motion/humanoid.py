@@ -621,7 +621,8 @@ def _arm(tree: _Tree, start: int) -> tuple[int, int, int]:
     joints = [p for p in chain if p < tree.n_joints]
     wrist = joints[-1]  # no fingers branch: the last joint (an end site is the hand's end)
     for k in range(2, len(chain)):
-        kids = [c for c in tree.children[chain[k]] if tree.lengths[c] > 0]
+        # fingers are chains (a leaf off the forearm is a twist helper, not a finger)
+        kids = [c for c in tree.children[chain[k]] if tree.lengths[c] > 0 and tree.reach[c] > 0]
         if len(kids) >= 2 and tree.reach[chain[k]] <= 0.6 * tree.path_length(start, chain[k]):
             wrist = chain[k]  # where the fingers branch, the hand shorter than the arm
             break

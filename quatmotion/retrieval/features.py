@@ -76,6 +76,14 @@ HORIZON_S = 0.5
 """Seconds that turn velocities into displacements in the motion frames."""
 YAW_RADIUS_CM = 100.0
 """Centimetres per radian of the yaw rate term."""
+BODY = "scaled"
+"""Which body the features are computed on (:data:`BODIES`)."""
+BODIES = ("scaled", "canonical")
+"""``scaled``: the clip's own 16 joints scaled uniformly to :data:`HEIGHT_CM` (limb
+proportions stay the rig's); ``canonical``: every bone put on the canonical body of that
+stature, keeping its direction (:func:`quatmotion.pose.skeleton16.canonical_positions16`):
+two rigs doing one motion give one stream, whatever their proportions and where their root
+sits."""
 FRAME_DIM = 52
 """Numbers per motion frame: 48 body-frame coordinates, 3 Hip velocity, 1 yaw rate."""
 POSITION_DIM = 48
@@ -127,7 +135,25 @@ def _frames_and_velocities(world16: FloatArray, fps: float) -> tuple[FloatArray,
     return frames, np.concatenate((joint_velocity, travel), axis=1)
 
 
-def motion_frames(motion: Motion) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+def world16(motion: Motion, body: str = BODY) -> FloatArray:
+    """World positions ``(T', 16, 3)`` of every ``feature_step``-th frame on the features'
+    body (:data:`BODIES`), centimetres, stature :data:`HEIGHT_CM`."""
+    from quatmotion.pose import skeleton16
+
+    step = feature_step(motion.fps)
+    if body == "canonical":
+        return skeleton16.canonical_positions16(motion, height=HEIGHT_CM)[::step]
+    if body != "scaled":
+        raise ValueError(f"unknown body {body!r}; expected one of {', '.join(BODIES)}")
+    scale = skeleton16.height_scale(motion.skeleton, HEIGHT_CM)
+    # Kinematics of every frame, then every step-th: cheaper than Motion.slice, whose
+    # validation of the new clip costs more than the kinematics of the frames it drops.
+    return skeleton16.world_positions16(motion)[::step] * scale
+
+
+def motion_frames(
+    motion: Motion, body: str = BODY
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Motion frames and embedding of a clip (module docstring).
 
     Parameters
@@ -146,13 +172,8 @@ def motion_frames(motion: Motion) -> tuple[NDArray[np.float32], NDArray[np.float
     ValueError
         For a skeleton without the 16 pose joints.
     """
-    from quatmotion.pose import skeleton16
-
     step = feature_step(motion.fps)
-    scale = skeleton16.height_scale(motion.skeleton, HEIGHT_CM)
-    # Kinematics of every frame, then every step-th: cheaper than Motion.slice, whose
-    # validation of the new clip costs more than the kinematics of the frames it drops.
-    world = skeleton16.world_positions16(motion)[::step] * scale
+    world = world16(motion, body)
     frames, velocities = _frames_and_velocities(world, motion.fps / step)
     return frames.astype(np.float32), motion_embedding(frames, velocities).astype(np.float32)
 
@@ -186,14 +207,10 @@ def path_from_world(world16: FloatArray) -> FloatArray:
     return out / _leg_length(world16)
 
 
-def path_frames(motion: Motion) -> NDArray[np.float32]:
+def path_frames(motion: Motion, body: str = BODY) -> NDArray[np.float32]:
     """Path frames ``(T', 51)`` of a clip (module docstring), every
     ``feature_step(motion.fps)``-th frame."""
-    from quatmotion.pose import skeleton16
-
-    step = feature_step(motion.fps)
-    world = skeleton16.world_positions16(motion)[::step]
-    return path_from_world(world).astype(np.float32)
+    return path_from_world(world16(motion, body)).astype(np.float32)
 
 
 def motion_embedding(frames: FloatArray, velocities: FloatArray) -> FloatArray:
@@ -254,7 +271,9 @@ def skeleton_fingerprint(skeleton: Skeleton) -> str:
     return hashlib.sha1("|".join(parts).encode()).hexdigest()[:16]
 
 
-def clip_features(motion: Motion, kinds: Iterable[str], seed: int = 0) -> dict[str, np.ndarray]:
+def clip_features(
+    motion: Motion, kinds: Iterable[str], seed: int = 0, body: str = BODY
+) -> dict[str, np.ndarray]:
     """The arrays of the feature ``kinds`` of one clip: a pure function of its arguments.
 
     Parameters
@@ -265,6 +284,8 @@ def clip_features(motion: Motion, kinds: Iterable[str], seed: int = 0) -> dict[s
         ``ksvd`` give the dictionaries of :func:`clip_dictionary` under those keys.
     seed : int
         Seed of the dictionaries' initial atoms.
+    body : str
+        The body the motion features are computed on (:data:`BODIES`).
 
     Returns
     -------
@@ -273,8 +294,8 @@ def clip_features(motion: Motion, kinds: Iterable[str], seed: int = 0) -> dict[s
     out: dict[str, np.ndarray] = {}
     for kind in kinds:
         if kind == "motion":
-            out["frames"], out["embedding"] = motion_frames(motion)
-            out["path"] = path_frames(motion)
+            out["frames"], out["embedding"] = motion_frames(motion, body)
+            out["path"] = path_frames(motion, body)
         elif kind in ("qssd", "ksvd"):
             out[kind] = clip_dictionary(motion, kind, seed)
         else:
