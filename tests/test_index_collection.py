@@ -215,3 +215,28 @@ def test_index_add_reads_and_indexes_with_the_settings_the_index_was_built_with(
     with ClipIndex.open(index) as idx:
         after = idx.settings
     assert after == before.replace(read=before.read.replace(units="mm"), label_folders=False)
+
+
+def test_an_empty_index_is_searched_with_an_error_and_a_failed_add_exits_2(two_sessions, tmp_path):
+    """Issue 29 item 6: a search of an index of no clips printed an empty table, exit 0 (read
+    as "nothing alike"); it is one error line saying so, exit 2, however the query comes. An
+    ``index add`` of clips that all fail adds nothing and exits 2, not 1."""
+    index = tmp_path / "x.qidx"
+    clip = two_sessions / "s1" / "punch.bvh"
+    assert _build(str(clip), "-o", str(index)).exit_code == 0
+    assert runner.invoke(app, ["index", "remove", str(index), "punch"]).exit_code == 0
+    queries = tmp_path / "queries.txt"
+    queries.write_text(f"{clip}\n")
+    for args in ([str(clip)], [str(clip), "--json"], ["--queries", str(queries)]):
+        result = runner.invoke(app, ["search", *args, "--index", str(index)])
+        assert result.exit_code == 2, (args, result.output)
+        assert "holds no clips" in result.stderr and "Traceback" not in result.output
+        assert result.stdout == ""
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "a.bvh").write_text("HIERARCHY\nROOT x\n")
+    before = index.read_bytes()
+    result = runner.invoke(app, ["index", "add", str(index), str(broken), "--workers", "1"])
+    assert result.exit_code == 2, result.output
+    assert "no clip added, none of the 1 clips could be indexed" in result.stderr
+    assert index.read_bytes() == before

@@ -168,10 +168,12 @@ def _build(
                 report = ClipIndex.build(paths, output, settings, **options)
     report_skipped(report.failures)
     fresh = not add and not report.details.get("resumed")
-    if fresh and report.failures and not report.added and not report.skipped:
-        output.unlink(missing_ok=True)  # an index of no clip is no result: leave nothing
+    if report.failures and not report.added and not report.skipped:
+        if fresh:
+            output.unlink(missing_ok=True)  # an index of no clip is no result: leave nothing
         raise fail(
-            f"{output}: not written, none of the {len(report.failures)} clips could be indexed"
+            f"{output}: {'not written' if fresh else 'no clip added'}, none of the "
+            f"{len(report.failures)} clips could be indexed"
         )
     resumed = " (resumed: the index was there)" if report.details.get("resumed") and not add else ""
     say_wrote(

@@ -144,6 +144,11 @@ def _query(
     path: str | Path | None = None,
 ) -> tuple[list[ClipRow], object, QueryFeatures, int]:
     keys = method_keys(method)
+    if not len(index):  # an empty ranking would read as "nothing alike": say what it is
+        raise ValueError(
+            f"{index.path}: the index holds no clips, so there is nothing to search (quatmotion "
+            "index add INDEX CLIPS adds some)"
+        )
     rows, library = index.load(keys)
     if not rows and len(index):
         raise ValueError(
@@ -191,8 +196,8 @@ def search(
     Raises
     ------
     ValueError
-        Unknown method or clip name; a query skeleton without the 16 pose joints; for the
-        dictionary methods, no indexed clip of the query's skeleton.
+        An index of no clips; unknown method or clip name; a query skeleton without the 16
+        pose joints; for the dictionary methods, no indexed clip of the query's skeleton.
     """
     if k < 1:
         raise ValueError(f"k must be at least 1, got {k}")
