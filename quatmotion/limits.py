@@ -191,7 +191,7 @@ def check(
         raise FormatError(f"{field} is {value!r}, not a number", source, line) from None
     if not math.isfinite(number) or number < 0 or (limit == "fps" and number == 0):
         least = "positive" if limit == "fps" else "0 or more"
-        raise FormatError(f"{field} is {value!r}: must be {least} and finite", source, line)
+        raise FormatError(f"{field} is {_show(number)}: must be {least} and finite", source, line)
     if number > ceiling:
         raise FormatError(
             f"{field} is {_show(value)} {unit}, over the limit of {_show(ceiling)} "
@@ -203,7 +203,8 @@ def check(
 
 def _show(value: float) -> str:
     number = float(value)
-    return f"{int(number):,}" if number.is_integer() and abs(number) < 1e18 else f"{number:g}"
+    whole = math.isfinite(number) and number.is_integer() and abs(number) < 1e18
+    return f"{int(number):,}" if whole else f"{number:g}"
 
 
 _STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)

@@ -462,5 +462,5 @@ def test_find_motion_files_walks_folders_and_names_what_is_missing(tmp_path: Pat
     with pytest.raises(FileNotFoundError, match="nope"):
         find_motion_files([tmp_path / "nope"])
     (tmp_path / "empty").mkdir()
-    with pytest.raises(ValueError, match="no .amc or .bvh or .glb or .gltf files"):
+    with pytest.raises(ValueError, match="no .amc or .bvh or .glb or .gltf or .fbx files"):
         find_motion_files([tmp_path / "empty"])

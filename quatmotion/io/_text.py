@@ -27,6 +27,7 @@ Conventions
 from __future__ import annotations
 
 import codecs
+import itertools
 import os
 import re
 from collections.abc import Sequence
@@ -110,6 +111,18 @@ def read_bytes(path: str | Path) -> bytes:
         data = file.read(ceiling + 1)
     limits.check("file_bytes", len(data), path, "the file's size")
     return data
+
+
+def check_count(
+    text: str, pattern: re.Pattern[str], limit: str, allowed: int, path: str | Path, what: str
+) -> None:
+    """Refuse a text in which ``pattern`` occurs more than ``allowed`` times, naming the line
+    of the first occurrence too many: a count in C over the raw text, before a parser builds
+    anything per occurrence. ``limit`` names the :class:`quatmotion.limits.Limits` field."""
+    beyond = next(itertools.islice(pattern.finditer(text), allowed, None), None)
+    if beyond is not None:
+        line = text.count("\n", 0, beyond.start()) + 1
+        limits.check(limit, allowed + 1, path, f"{what} (at least)", line)
 
 
 def decode_text(data: bytes, path: str | Path) -> str:

@@ -4,7 +4,11 @@ Conventions
 -----------
 * Lengths: ``:units length L`` means one file unit is ``1/L`` inch, so centimetres are
   ``value * 2.54 / L`` (CMU and HDM05 use ``L = 0.45``: one unit is about 5.644 cm). Missing
-  ``length`` means ``L = 1`` (inches). ``mass`` is kept for the writer, not used.
+  ``length`` means ``L = 1`` (inches). ``mass`` is kept for the writer, not used. A unit
+  outside :data:`quatmotion.io.units.LENGTH_UNIT_RANGE_CM` (``length 1e-300``) is refused.
+* Bounds: the bones are counted before any line is split and parsed in linear time; bones,
+  frames, frames x joints and the frame rate given are checked against
+  :func:`quatmotion.limits.current` (a ``FormatError`` naming the file and line).
 * Angles: ``:units angle deg|rad`` for the ASF; an AMC's ``:DEGREES`` / ``:RADIANS`` header
   decides for the AMC (the ASF's unit when neither is present). Radians inside.
 * Euler angles (``axis``, ``orientation``, dof values) are extrinsic in the order listed: for
@@ -40,10 +44,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion import quat
+from quatmotion import limits, quat
 from quatmotion.errors import FormatError
 from quatmotion.io._text import (
     atomic_write,
+    check_count,
     compose_joint_channels,
     decompose_channels,
     fields,
@@ -54,7 +59,7 @@ from quatmotion.io._text import (
     scan_tokens,
     token_hash,
 )
-from quatmotion.io.units import length_unit
+from quatmotion.io.units import check_length_unit, length_unit
 from quatmotion.motion import Motion, Skeleton, WorldTransforms, forward_kinematics
 
 __all__ = [
@@ -77,6 +82,7 @@ DEFAULT_AMC_FPS = 120.0
 _ROTATION_DOFS = {"rx": "x", "ry": "y", "rz": "z"}
 _KNOWN_BONE_DOFS = {"rx", "ry", "rz", "l", "tx", "ty", "tz"}
 _ROOT_CHANNELS = {"TX": "tx", "TY": "ty", "TZ": "tz", "RX": "rx", "RY": "ry", "RZ": "rz"}
+_BEGIN_LINE = re.compile(r"^[ \t]*begin[ \t]*$", re.IGNORECASE | re.MULTILINE)
 _INTEGER = re.compile(r"[+-]?\d+")
 
 
@@ -226,6 +232,10 @@ def parse_asf(text: str, path: str | Path, units: str | float | None = None) -> 
     """
     path = Path(path)
     given = None if units is None else length_unit(units)
+    # Each bone's 'begin', and the hierarchy's, in place of the root's: the joints, counted
+    # before any line is split.
+    begins = limits.current().joints
+    check_count(text, _BEGIN_LINE, "joints", begins, path, "the bones and the root")
     sections = _AsfSections.split(_asf_lines(text), path)
     stated, to_cm, to_rad, angle_unit = _parse_units(sections.body.get("units", []), path)
     to_cm = to_cm if given is None else given
@@ -367,6 +377,10 @@ def _parse_units(
             length_unit = parse_float(tokens[1], path, line, "length unit")
             if length_unit <= 0:
                 raise FormatError("length unit must be positive", path, line)
+            try:  # one file unit is 1/length inch
+                check_length_unit(INCH_CM / length_unit)
+            except ValueError as error:
+                raise FormatError(f":units length {tokens[1]}: {error}", path, line) from None
         elif key == "angle":
             angle_unit = tokens[1].lower()
             if angle_unit not in ("deg", "rad"):
@@ -422,6 +436,7 @@ def _parse_bones(
         elif key == "end":
             if lines is None:
                 raise FormatError("'end' without 'begin'", path, line)
+            limits.check("joints", len(bones) + 2, path, ":bonedata's bones and the root", line)
             bones.append(_parse_bone(lines, path, begin_line))
             lines = None
         elif lines is None:
@@ -527,6 +542,7 @@ def _asf_skeleton(
     bone_vectors = np.zeros((J, 3))
     offsets[0] = np.asarray(root["position"]) * to_cm
     axes[0] = quat.from_euler(np.asarray(root["orientation"]) * to_rad, root["axis"])
+    by_order: dict[str, list[int]] = {}  # one vectorised Euler conversion per axis order
     channels.append(tuple(_ROOT_CHANNELS[c] for c in root["order"]))
     has_children = set(parent_of.values())
     for j, n in enumerate(order[1:], start=1):
@@ -536,12 +552,15 @@ def _asf_skeleton(
         parents[j] = index[parent]
         if parent != "root":
             offsets[j] = bone_vectors[index[parent]]
-        axes[j] = quat.from_euler(np.asarray(bone["axis"]) * to_rad, bone["axis_order"])
+        by_order.setdefault(bone["axis_order"], []).append(j)
         channels.append(tuple(d for d in bone["dof"] if d in _ROTATION_DOFS))
         if n not in has_children:
             site_names.append(f"{n}_end")
             site_parents.append(j)
             site_offsets.append(bone_vectors[j])
+    for axis_order, joints in by_order.items():
+        angles = np.array([by_name[order[j]]["axis"] for j in joints], dtype=np.float64)
+        axes[joints] = quat.from_euler(angles * to_rad, axis_order)
     bone_vectors.setflags(write=False)
     return Skeleton(
         joint_names=tuple(order),
@@ -743,7 +762,8 @@ def _amc_layout(
                 path,
                 k,
             )
-    missing = [n for n, c in dof_count.items() if c and n not in names]
+    listed = set(names)
+    missing = [n for n, c in dof_count.items() if c and n not in listed]
     if missing:
         raise FormatError(f"frame 1 lacks bones {missing}", path, first_line)
     if len(set(names)) != len(names):
@@ -913,6 +933,7 @@ def parse_amc(
     """
     path = Path(path)
     _require_asf(skeleton, "parse_amc")
+    limits.check("fps", fps, path, "the frame rate given")
     offset, first_line, degrees = _amc_header(text, path)
     if degrees is None:
         degrees = skeleton.extras["angle_unit"] == "deg"
@@ -928,6 +949,9 @@ def parse_amc(
     values = _amc_values_fast(body, names, counts)
     if values is None:
         values = _amc_values_careful(body, names, counts, path, first_line, skeleton)
+    limits.check("frames", len(values), path, "the frames")
+    limits.check("joint_frames", len(values) * skeleton.n_joints, path, "frames x joints")
+    limits.check("duration", len(values) / fps, path, f"the frames at {fps:g} frames/s")
     try:
         # As in read_bvh: the Motion checks name values that overflow once scaled.
         with np.errstate(over="ignore", invalid="ignore"):
@@ -955,8 +979,9 @@ def _motion_from_values(
     columns = np.full((J, 3), -1, dtype=np.int64)
     letters = [""] * J
     column = 0
+    index = {name: j for j, name in enumerate(skeleton.joint_names)}
     for bone, count in zip(names, counts, strict=True):
-        j = skeleton.index(bone)
+        j = index[bone]
         for k, d in enumerate(dofs[bone]):
             if d in _ROTATION_DOFS:
                 columns[j, len(letters[j])] = column + k

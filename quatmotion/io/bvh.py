@@ -41,6 +41,10 @@ Conventions
   exporter's off-by-one); fewer is an error naming both numbers.
 * Frame rate: ``1 / Frame Time``, rounded to the nearest integer when within 0.01 % of it
   (files store ``0.0333333`` for 30 frames/s).
+* Bounds: ``ROOT``/``JOINT`` lines are counted before the hierarchy is tokenised, and it is
+  parsed in linear time without recursion; joints, nesting depth, ``Frames:``, the frame rate,
+  the duration and frames x joints are checked against :func:`quatmotion.limits.current`
+  before the frames are read (a ``FormatError`` naming the line).
 """
 
 from __future__ import annotations
@@ -53,10 +57,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion import quat
+from quatmotion import limits, quat
 from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.io._text import (
     atomic_write,
+    check_count,
     compose_joint_channels,
     decompose_channels,
     fields,
@@ -104,7 +109,6 @@ BVH_UNITS = LENGTH_UNITS
 TRANSLATION_MODES = ("absolute", "relative", "root-only")
 """What position channels mean (see the module docstring); ``"auto"`` detects it."""
 _NEAR_ZERO = 0.1  # position values this small against the offsets (medians) are relative
-_MAX_DEPTH = 200  # far deeper than any body; keeps recursion bounded on hostile input
 
 
 class _Tokens:
@@ -158,6 +162,8 @@ class _Tokens:
 
 
 def _parse_hierarchy(tokens: _Tokens):
+    """The joints, their channels and end sites, parents first: in time linear in the file,
+    without recursion, and no more joints or levels than :func:`quatmotion.limits.current`."""
     names: list[str] = []
     parents: list[int] = []
     offsets: list[list[float]] = []
@@ -165,63 +171,66 @@ def _parse_hierarchy(tokens: _Tokens):
     site_names: list[str] = []
     site_parents: list[int] = []
     site_offsets: list[list[float]] = []
+    taken: set[str] = set()
+    site_taken: set[str] = set()
     path = tokens.path
+    open_joints: list[int] = []  # the joints whose '}' is still to come, innermost last
 
-    def joint(parent: int, name: str, name_line: int, depth: int = 0) -> None:
-        if depth > _MAX_DEPTH:
-            raise FormatError(f"joints nested more than {_MAX_DEPTH} deep", path, name_line)
-        if name in names:
-            raise FormatError(f"joint name {name!r} appears twice", path, name_line)
-        j = len(names)
+    def begin_joint(name: str, line: int) -> None:
+        limits.check("joints", len(names) + 1, path, "the joints of the hierarchy", line)
+        limits.check("depth", len(open_joints) + 1, path, "the hierarchy's nesting", line)
+        if name in taken:
+            raise FormatError(f"joint name {name!r} appears twice", path, line)
+        taken.add(name)
         names.append(name)
-        parents.append(parent)
+        parents.append(open_joints[-1] if open_joints else -1)
+        open_joints.append(len(names) - 1)
         tokens.expect("{")
         tokens.expect("OFFSET")
         offsets.append(tokens.floats(3, "OFFSET value"))
         chans: tuple[str, ...] = ()
         if (tokens.peek() or "").upper() == "CHANNELS":
             tokens.next("CHANNELS")
-            count_token, line = tokens.next("channel count")
-            count = parse_int(count_token, path, line, "channel count")
+            count_token, count_line = tokens.next("channel count")
+            count = parse_int(count_token, path, count_line, "channel count")
             if not 0 <= count <= 6:
-                raise FormatError(f"a joint has 0 to 6 channels, got {count}", path, line)
+                raise FormatError(f"a joint has 0 to 6 channels, got {count}", path, count_line)
             listed = []
             for _ in range(count):
-                token, line = tokens.next("channel name")
+                token, count_line = tokens.next("channel name")
                 if token.lower() not in _CHANNEL_TOKENS:
-                    raise FormatError(f"unknown channel {token!r}", path, line)
+                    raise FormatError(f"unknown channel {token!r}", path, count_line)
                 listed.append(_CHANNEL_TOKENS[token.lower()])
             if len(set(listed)) != len(listed):
-                raise FormatError("a channel is listed twice", path, line)
+                raise FormatError("a channel is listed twice", path, count_line)
             chans = tuple(listed)
         channels.append(chans)
-        while True:
-            token, line = tokens.next("JOINT, End Site or '}'")
-            upper = token.upper()
-            if upper == "}":
-                return
-            if upper == "JOINT":
-                child, child_line = tokens.name("joint name")
-                joint(j, child, child_line, depth + 1)
-            elif upper == "END":
-                tokens.expect("Site")
-                tokens.expect("{")
-                tokens.expect("OFFSET")
-                site_offsets.append(tokens.floats(3, "End Site OFFSET value"))
-                tokens.expect("}")
-                site_names.append(
-                    f"{name}_end"
-                    if f"{name}_end" not in site_names
-                    else f"{name}_end{len(site_names)}"
-                )
-                site_parents.append(j)
-            else:
-                raise FormatError(f"expected JOINT, End Site or '}}', got {token!r}", path, line)
 
     tokens.expect("HIERARCHY")
     tokens.expect("ROOT")
-    root_name, root_line = tokens.name("root name")
-    joint(-1, root_name, root_line)
+    begin_joint(*tokens.name("root name"))
+    while open_joints:
+        token, line = tokens.next("JOINT, End Site or '}'")
+        upper = token.upper()
+        if upper == "}":
+            open_joints.pop()
+        elif upper == "JOINT":
+            begin_joint(*tokens.name("joint name"))
+        elif upper == "END":
+            tokens.expect("Site")
+            tokens.expect("{")
+            tokens.expect("OFFSET")
+            site_offsets.append(tokens.floats(3, "End Site OFFSET value"))
+            tokens.expect("}")
+            j = open_joints[-1]
+            site = f"{names[j]}_end"
+            if site in site_taken:
+                site = f"{names[j]}_end{len(site_names)}"
+            site_taken.add(site)
+            site_names.append(site)
+            site_parents.append(j)
+        else:
+            raise FormatError(f"expected JOINT, End Site or '}}', got {token!r}", path, line)
     return names, parents, offsets, channels, site_names, site_parents, site_offsets
 
 
@@ -359,6 +368,8 @@ def parse_bvh(
             f"{', '.join(TRANSLATION_MODES)}"
         )
     head_end, motion_line, found = _find_motion_keyword(text)
+    joints_allowed = limits.current().joints
+    check_count(text[:head_end], _JOINT_LINE, "joints", joints_allowed, path, "joints")
     hierarchy_tokens = [
         (token, number)
         for number, raw in enumerate(text[:head_end].split("\n"), start=1)
@@ -376,7 +387,12 @@ def parse_bvh(
     n_channels = sum(len(c) for c in channels)
     if n_channels == 0:
         raise FormatError("no joint has channels", path, motion_line)
+    joints = f"'Frames:' x {len(names):,} joints"
+    limits.check("joint_frames", n_frames * len(names), path, joints, block_line - 2)
     values = _frame_values(block, block_line, n_frames, n_channels, path)
+    if len(values) > n_frames:  # frame lines beyond those announced: read, so bounded too
+        limits.check("frames", len(values), path, "frame lines", block_line)
+        limits.check("joint_frames", len(values) * len(names), path, "frame lines x joints")
     offsets_units = np.asarray(offsets, dtype=np.float64)
     mode, mode_guessed, root_relative = _translation_mode(
         translations, channels, offsets_units, values, path
@@ -496,18 +512,15 @@ def _translation_mode(
 def _find_motion_keyword(text: str) -> tuple[int, int, bool]:
     """Offset and line number of the ``MOTION`` line (joint names never are 'MOTION'), and
     whether there is one (if not: the end of the text and its last line)."""
-    head_end = 0
-    line_number = 1
-    while head_end < len(text):
-        end = text.find("\n", head_end)
-        end = len(text) if end < 0 else end
-        if text[head_end:end].strip().upper() == "MOTION":
-            return head_end, line_number, True
-        head_end = end + 1
-        line_number += 1
-    return head_end, line_number, False
+    found = _MOTION_LINE.search(text)
+    if found is not None:
+        return found.start(), text.count("\n", 0, found.start()) + 1, True
+    lines = text.count("\n") + (0 if not text or text.endswith("\n") else 1)
+    return len(text), lines + 1, False
 
 
+_MOTION_LINE = re.compile(r"^[^\S\n]*MOTION[^\S\n]*$", re.IGNORECASE | re.MULTILINE)
+_JOINT_LINE = re.compile(r"^[ \t]*(?:ROOT|JOINT)\b", re.IGNORECASE | re.MULTILINE)
 _FRAMES = re.compile(r"frames\s*:\s*(\S*)", re.IGNORECASE)
 _FRAME_TIME = re.compile(r"frame\s*time\s*:\s*(\S*)", re.IGNORECASE)
 
@@ -532,9 +545,14 @@ def _motion_header(section: str, motion_line: int, path: Path) -> tuple[int, flo
     n_frames = parse_int(count_token, path, count_line, "frame count")
     if n_frames < 0:
         raise FormatError(f"frame count must be 0 or more, got {n_frames}", path, count_line)
+    limits.check("frames", n_frames, path, "'Frames:'", count_line)
     frame_time = parse_float(time_token, path, time_line, "frame time")
     if frame_time <= 0:
         raise FormatError(f"frame time must be positive, got {frame_time}", path, time_line)
+    with np.errstate(over="ignore"):
+        fps = np.float64(1.0) / frame_time
+    limits.check("fps", fps, path, f"'Frame Time: {time_token}' (a frame rate)", time_line)
+    limits.check("duration", n_frames * frame_time, path, "'Frames:' x 'Frame Time:'", time_line)
     offset = sum(len(line) + 1 for line in lines[:k])
     return n_frames, frame_time, section[offset:], motion_line + k
 

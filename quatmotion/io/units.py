@@ -34,10 +34,12 @@ from quatmotion.motion import Motion, Skeleton, forward_kinematics
 
 __all__ = [
     "LENGTH_UNITS",
+    "LENGTH_UNIT_RANGE_CM",
     "PLAUSIBLE_FIGURE_CM",
     "TYPICAL_HEIGHT_CM",
     "Body",
     "body_size",
+    "check_length_unit",
     "find_body",
     "guess_length_unit",
     "length_unit",
@@ -85,7 +87,25 @@ def length_unit(unit: str | float) -> float:
         value = float(unit)
     if not (np.isfinite(value) and value > 0):
         raise ValueError(f"a length unit is a positive number of cm per file unit, got {unit!r}")
-    return value
+    return check_length_unit(value)
+
+
+LENGTH_UNIT_RANGE_CM = (1e-3, 1e5)
+"""The centimetres per file unit a length unit may be, given or stated by a file: from ten
+micrometres to a kilometre (:data:`LENGTH_UNITS` span a millimetre to a metre). Anything
+beyond is a typing error or a hostile file, and would make every coordinate absurd."""
+
+
+def check_length_unit(cm_per_unit: float) -> float:
+    """``cm_per_unit`` if it lies in :data:`LENGTH_UNIT_RANGE_CM`; ``ValueError`` saying so
+    otherwise."""
+    low, high = LENGTH_UNIT_RANGE_CM
+    if not low <= cm_per_unit <= high:
+        raise ValueError(
+            f"a unit of {cm_per_unit:g} cm is no length unit of motion capture "
+            f"(from {low:g} to {high:g} cm)"
+        )
+    return cm_per_unit
 
 
 def unit_name(cm_per_unit: float) -> str | None:
