@@ -102,7 +102,7 @@ def test_a_device_or_a_pipe_is_no_buffer(tmp_path, document):
         read_gltf(_write(tmp_path, _with_uri(document, "pipe.bin")))
     with pytest.raises(FormatError, match="must be a relative path inside"):
         read_gltf(_write(tmp_path, _with_uri(document, "zero.bin")))
-    assert time.monotonic() - started < 5
+    assert time.monotonic() - started < 60  # a blocking open() would hang here
 
 
 def test_a_buffer_file_is_read_no_further_than_its_byte_length(tmp_path, document, monkeypatch):
@@ -172,10 +172,10 @@ def _animation_times(document: dict, times: np.ndarray) -> dict:
 
 def _refused(data: dict | bytes, match: str) -> FormatError:
     raw = data if isinstance(data, bytes) else json.dumps(data).encode()
-    started = time.monotonic()
+    started = time.process_time()
     with pytest.raises(FormatError, match=match) as caught:
         io.parse_motion(raw, "hostile.gltf")
-    assert time.monotonic() - started < 5
+    assert time.process_time() - started < 5
     assert str(caught.value).startswith("hostile.gltf: ")
     return caught.value
 
@@ -228,9 +228,9 @@ def test_a_hundred_thousand_nodes_read_in_linear_time(document):
     many = 100_000
     changed["nodes"] += [{"name": "same"} for _ in range(many)]  # end sites of one joint
     changed["nodes"][1].setdefault("children", []).extend(range(base, base + many))
-    started = time.monotonic()
+    started = time.process_time()
     motion = io.parse_motion(json.dumps(changed).encode(), "many.gltf")
-    assert motion.skeleton.n_sites >= many and time.monotonic() - started < 20
+    assert motion.skeleton.n_sites >= many and time.process_time() - started < 20
     changed["skins"][0]["joints"] = list(range(base + many))
     _refused(changed, r"the skeleton's joints is 100,0\d\d joints, over the limit")
 

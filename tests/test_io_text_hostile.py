@@ -52,10 +52,10 @@ def flat_asf(bones: int, length: str = "0.45") -> str:
 
 
 def _quickly_refused(parse, text: str, name: str, match: str) -> FormatError:
-    started = time.monotonic()
+    started = time.process_time()
     with pytest.raises(FormatError, match=match) as caught:
         parse(text, name)
-    assert time.monotonic() - started < 5, "refused, but only after parsing it all"
+    assert time.process_time() - started < 5, "refused, but only after parsing it all"
     assert str(caught.value).startswith(f"{name}:")
     return caught.value
 
@@ -68,9 +68,9 @@ def test_forty_thousand_bvh_joints_are_refused_at_once():
 def test_bvh_hierarchies_parse_in_linear_time():
     """20,000 joints, limits raised: seconds (a list lookup per joint made it minutes)."""
     with limits.raised(joints=30_000):
-        started = time.monotonic()
+        started = time.process_time()
         motion = parse_bvh(flat_bvh(20_000), "wide.bvh", scale="cm")
-        elapsed = time.monotonic() - started
+        elapsed = time.process_time() - started
     assert motion.skeleton.n_joints == 20_001 and motion.skeleton.n_sites == 20_000
     assert elapsed < 15
 
@@ -103,9 +103,9 @@ def test_a_hundred_thousand_asf_bones_are_refused_at_once():
 
 def test_asf_bones_parse_in_linear_time():
     with limits.raised(joints=30_000):
-        started = time.monotonic()
+        started = time.process_time()
         skeleton = parse_asf(flat_asf(20_000), "wide.asf")
-        elapsed = time.monotonic() - started
+        elapsed = time.process_time() - started
     assert skeleton.n_joints == 20_001 and elapsed < 15
     # The vectorised pre-rotations are each bone's own: bone k turns k % 90 degrees about z.
     assert skeleton.axes[1 + 45][0] == pytest.approx(np.cos(np.deg2rad(45) / 2))
