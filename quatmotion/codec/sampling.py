@@ -150,6 +150,8 @@ class ClipSampler:
         cached = self._selections.get(key)
         if cached is not None:
             return cached
+        if sel is self._all:  # every joint: every decoded column, as decoded (no copy)
+            return self._P, self._cols, self._scale, sel
         at = np.flatnonzero(np.isin(self._cols, self._needed_columns(sel)))
         cached = (
             np.ascontiguousarray(self._P[:, at]),
