@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -441,6 +441,8 @@ class BuiltLibrary:
         The pose index (pose search), when asked for.
     failed : list of str
         ``"file: reason"`` of each clip left out.
+    unmatched_labels : list of str
+        Keys of the ``labels`` given that named no clip.
     """
 
     files: list[Path]
@@ -448,11 +450,16 @@ class BuiltLibrary:
     index: Path
     poses: Path | None
     failed: list[str] = field(default_factory=list)
+    unmatched_labels: list[str] = field(default_factory=list)
 
 
 BuildProgress = Callable[[str, int, int], None]
-"""``progress(step, done, total)`` of :func:`build_library`: steps ``compress: ...`` (the
-codec's steps), ``index`` and ``poses: ...``."""
+"""``progress(step, done, total)`` of :func:`build_library`: steps ``index``, ``compress: ...``
+(the codec's steps) and ``poses: ...``; it may raise to stop the build."""
+
+StageReady = Callable[["Path | None", "Path | None", "Path | None"], None]
+"""``on_stage(library, index, poses)`` of :func:`build_library`: called when a stage's file is
+complete, with every file complete so far (None for those still to come)."""
 
 
 def write_clips(clips: Sequence[tuple[Motion, str]], folder: str | Path) -> dict[Path, str]:
@@ -477,14 +484,22 @@ def build_library(
     poses: bool = True,
     progress: BuildProgress | None = None,
     workers: int | None = None,
+    labels: Mapping[str, str] | None = None,
+    label_folders: bool = False,
+    on_stage: StageReady | None = None,
     joint_map: Sequence[str] = (),
 ) -> BuiltLibrary:
-    """Compress, index (and pose-index) clips into ``folder``, ready to serve or search.
+    """Index, compress (and pose-index) clips into ``folder``, ready to serve or search.
+
+    The index comes first (it is the quickest step, and with it the clips can be listed,
+    played from their files and searched), then the library (every clip that reads, those the
+    index refused too), then the pose index of the clips compressed; ``on_stage`` hears of each
+    file as it is complete.
 
     Parameters
     ----------
     folder : str or Path
-        Where the files go (created): ``library.qmz``, ``library.qidx``, ``poses.idx``, and
+        Where the files go (created): ``library.qidx``, ``library.qmz``, ``poses.idx``, and
         ``clips/`` when the clips are generated.
     sources : sequence of paths
         Clips or folders of clips (``.amc`` with their ASF found by name, ``.bvh``); empty: the
@@ -497,6 +512,15 @@ def build_library(
         See :data:`BuildProgress`.
     workers : int, optional
         Processes of the batch steps (default: every core).
+    labels : mapping, optional
+        Clip (name, file name, stem or path) -> label, before every other source of labels;
+        the clips' sidecars, their folders (with ``label_folders``) and the data folder's
+        catalogue label the others (:func:`quatmotion.collection.label_sources`, as
+        ``index build`` does).
+    label_folders : bool
+        Label a clip without another label by its folder's name.
+    on_stage : callable, optional
+        See :data:`StageReady`.
     joint_map : sequence of str
         A user's humanoid map for the index and the pose index, ``"Canonical=joint"``
         entries (:attr:`quatmotion.collection.ReadSettings.joint_map`).
@@ -518,8 +542,9 @@ def build_library(
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     report = progress or (lambda _step, _done, _total: None)
+    stage = on_stage or (lambda _library, _index, _poses: None)
     if sources:
-        files, labels = find_motion_files(sources), None
+        files = find_motion_files(sources)
     else:
         from quatmotion.synthetic import generate_library
 
@@ -527,38 +552,50 @@ def build_library(
         report("clips", 0, len(generated))
         written = write_clips(generated, folder / "clips")
         report("clips", len(generated), len(generated))
-        files, labels = list(written), {p.stem: label for p, label in written.items()}
+        files = list(written)
+        labels = {str(p): label for p, label in written.items()} | dict(labels or {})
     failed: dict[str, str] = {}
-    library = folder / "library.qmz"
 
     def step(prefix: str) -> BuildProgress:
         return lambda name, done, total: report(f"{prefix}: {name}", done, total)
 
-    result = codec.compress(
-        files,
-        library,
-        max_error=codec.DEFAULT_MAX_ERROR_CM,
-        seed=seed,
-        workers=workers,
-        on_error="skip",
-        progress=step("compress"),
-    )
-    failed.update(dict(result.failed))
-    bad = {str(Path(name)) for name in failed}
-    good = [f for f in files if str(f) not in bad and f.stem not in failed]
-    if not good:
-        where = ", ".join(str(s) for s in sources) or "the generated library"
-        raise ValueError(f"{where}: no clip could be read ({next(iter(failed.values()), '')})")
     index = folder / "library.qidx"
-    built = ClipIndex.build(
-        good,
+    indexed = ClipIndex.build(
+        files,
         index,
-        IndexSettings(kinds=("motion",), read=ReadSettings(joint_map=tuple(joint_map))),
+        IndexSettings(
+            kinds=("motion",),
+            label_folders=label_folders,
+            read=ReadSettings(joint_map=tuple(joint_map)),
+        ),
         labels=labels,
         workers=workers,
         progress=lambda done, total: report("index", done, total),
     )
-    failed.update({str(f.item): f.message for f in built.failures})
+    failed.update({str(f.item): f.message for f in indexed.failures})
+    if indexed.added:
+        stage(None, index, None)
+    library = folder / "library.qmz"
+    try:  # every clip, those the index refused too (still played and compared)
+        result = codec.compress(
+            files,
+            library,
+            max_error=codec.DEFAULT_MAX_ERROR_CM,
+            seed=seed,
+            workers=workers,
+            on_error="skip",
+            progress=step("compress"),
+        )
+    except ValueError:  # nothing to compress: every clip failed
+        result = None
+    refused = dict(result.failed) if result is not None else {}
+    failed.update(refused)
+    bad = {str(Path(name)) for name in refused}  # named by path, or by stem
+    good = [f for f in files if result is not None and str(f) not in bad and f.stem not in bad]
+    if not good:
+        where = ", ".join(str(s) for s in sources) or "the generated library"
+        raise ValueError(f"{where}: no clip could be read ({next(iter(failed.values()), '')})")
+    stage(library, index if indexed.added else None, None)
     pose_path = None
     if poses:
         import functools
@@ -576,4 +613,12 @@ def build_library(
             failed.setdefault(str(failure.item), failure.message)
         pose_path = folder / "poses.idx"
         pose_library.save(pose_path)
-    return BuiltLibrary(files, library, index, pose_path, [f"{k}: {v}" for k, v in failed.items()])
+        stage(library, index if indexed.added else None, pose_path)
+    return BuiltLibrary(
+        files,
+        library,
+        index,
+        pose_path,
+        [f"{k}: {v}" for k, v in failed.items()],
+        list(indexed.unmatched_labels),
+    )

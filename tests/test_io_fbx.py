@@ -286,11 +286,11 @@ def test_the_web_app_searches_by_an_uploaded_fbx(motion_library):
     gets 400 with the parser's one line naming the upload."""
     from fastapi.testclient import TestClient
 
-    from quatmotion.server import create_app
+    from quatmotion.server import CSRF_HEADER, create_app
 
     app = create_app(motion_library["library"], motion_library["index"], motion_library["poses"])
     data = (FIXTURES / "cmu_bvh_names.fbx").read_bytes()  # names search maps today
-    with TestClient(app, base_url="http://127.0.0.1") as client:
+    with TestClient(app, base_url="http://127.0.0.1", headers={CSRF_HEADER: "1"}) as client:
         good = client.post(
             "/api/search/upload", files={"file": ("cmu_bvh_names.fbx", data)}, data={"top": "2"}
         )

@@ -172,9 +172,10 @@ def test_every_command_takes_glb_clips(tmp_path):
 
     from fastapi.testclient import TestClient
 
-    from quatmotion.server import create_app
+    from quatmotion.server import CSRF_HEADER, create_app
 
-    with TestClient(create_app(lib, index, poses), base_url="http://127.0.0.1") as client:
+    app = create_app(lib, index, poses)
+    with TestClient(app, base_url="http://127.0.0.1", headers={CSRF_HEADER: "1"}) as client:
         listed = {c["name"]: c for c in client.get("/api/clips").json()["clips"]}
         assert {"walk", "run", "jump", "squat"} <= {n.rsplit("/", 1)[-1] for n in listed}
         some = next(c for n, c in listed.items() if n.endswith("run"))

@@ -130,7 +130,15 @@ def test_port_0_serves_on_a_free_port_and_prints_it(motion_library, tmp_path) ->
         assert server.stop(signal.SIGINT) == 130  # Ctrl+C: stopped as an interrupted program
 
 
-def test_serve_dir_compresses_indexes_and_serves_a_folder_then_removes_its_work(
+def _built(server: _Server, timeout: float = 900) -> dict:
+    deadline = time.monotonic() + timeout
+    while (status := server.get("api/build"))["state"] == "building":
+        assert time.monotonic() < deadline, f"not built within {timeout} s: {status}"
+        time.sleep(0.25)
+    return status
+
+
+def test_serve_dir_listens_at_once_builds_in_the_background_then_removes_its_work(
     tmp_path,
 ) -> None:
     clips = tmp_path / "studio"
@@ -143,22 +151,57 @@ def test_serve_dir_compresses_indexes_and_serves_a_folder_then_removes_its_work(
     write_motion(squat, clips / "s3.amc")
     write_asf(squat.skeleton, clips / "s3.asf")
     (clips / "broken.bvh").write_text("HIERARCHY\nROOT hips\n{\n")
-    server = _Server(tmp_path, str(clips))
+    (tmp_path / "labels.csv").write_text("clip,label\ns3,deep squat\nnone_such,x\n")
+    server = _Server(
+        tmp_path, str(clips), "--labels", str(tmp_path / "labels.csv"), "--label-folders"
+    )
     try:
+        first = server.get("api/build")  # answered at once, before the build is done
+        assert first["state"] == "building" and first["source"] == str(clips)
+        status = _built(server)
+        assert status["state"] == "ready" and status["served"] == ["index", "library", "poses"]
+        assert len(status["failed"]) == 1 and "broken.bvh" in status["failed"][0]
         listed = {c["name"]: c for c in server.get("api/clips")["clips"]}
         assert sorted(listed) == ["s3", "w0", "w1"]
         assert all(c["in_library"] and c["in_index"] and c["in_poses"] for c in listed.values())
+        assert {n: c["label"] for n, c in listed.items()} == {
+            "s3": "deep squat",  # --labels
+            "w0": "walks",  # --label-folders
+            "w1": "walks",
+        }
+        for clip in listed.values():  # the originals were given: every clip compares
+            assert clip["has_original"]
+            assert server.get(f"api/clips/{clip['id']}/compare")["pairs"][0]["max_cm"] <= 1.0001
         info = server.get("api/info")
         assert info["poses"] and info["default_method"] in info["methods"]
         hits = server.get("api/search?clip=w0")
         assert hits["results"][0]["clip"] == "w1"  # the other walk first
         err = server.stderr()
         assert "skipped" in err and "broken.bvh" in err
+        assert "clips listed, playable from their files and searchable after" in err
+        assert "keys name no clip (none_such)" in err
         work = Path(re.search(r"in (\S+quatmotion-serve-\S+) \(removed at exit\)", err).group(1))
         assert (work / "library.qmz").is_file()
     finally:
         assert server.stop(signal.SIGTERM) == 128 + signal.SIGTERM
     assert not work.exists()  # cleaned up, though SIGTERM's default action kills at once
+
+
+def test_serve_dir_stopped_while_building_stops_the_build_and_removes_its_work(
+    tmp_path,
+) -> None:
+    clips = tmp_path / "studio"
+    clips.mkdir()
+    for k in range(6):
+        write_motion(generate_clip("walk", seed=k, n_frames=400, fps=60.0), clips / f"w{k}.bvh")
+    server = _Server(tmp_path, str(clips))
+    try:
+        assert server.get("api/build")["state"] == "building"
+        err = server.stderr()
+        work = Path(re.search(r"in (\S+quatmotion-serve-\S+) \(removed at exit\)", err).group(1))
+    finally:
+        assert server.stop(signal.SIGINT) == 130
+    assert not work.exists()
 
 
 def test_serve_without_files_serves_the_demos_library(monkeypatch, tmp_path) -> None:
@@ -177,6 +220,10 @@ def test_serve_without_files_serves_the_demos_library(monkeypatch, tmp_path) -> 
     def serve_on(application, sock):  # instead of uvicorn: look at the app, then stop
         seen["url"] = listen.url_of(sock)
         with TestClient(application, base_url="http://127.0.0.1") as client:
+            deadline = time.monotonic() + 300
+            while client.get("/api/build").json()["state"] == "building":
+                assert time.monotonic() < deadline
+                time.sleep(0.2)
             seen["clips"] = client.get("/api/clips").json()["clips"]
         sock.close()
 
@@ -184,7 +231,8 @@ def test_serve_without_files_serves_the_demos_library(monkeypatch, tmp_path) -> 
     result = CliRunner().invoke(cli, ["serve", "--port", "0"])
     assert result.exit_code == 0, result.output
     assert [c["label"] for c in seen["clips"]] == ["squat", "walk", "walk"]
-    assert "3 clips of the demo's generated library at " + seen["url"] in result.stdout
+    assert "the demo's generated library, being built" in result.stdout
+    assert seen["url"] in result.stdout
     assert "building the demo's generated library" in result.stderr
     work = re.search(r"in (\S+quatmotion-serve-\S+) \(removed at exit\)", result.stderr)
     assert work and not Path(work.group(1)).exists()
@@ -198,3 +246,9 @@ def test_serve_refuses_a_folder_beside_files_and_a_file_as_folder(motion_library
     assert "not both" in _one_error(both)
     not_folder = runner.invoke(cli, ["serve", str(motion_library["library"])])
     assert "not a folder" in _one_error(not_folder)
+    empty = runner.invoke(cli, ["serve", str(motion_library["clips"].parent / "none")])
+    assert "not a folder" in _one_error(empty)
+    labels_beside_files = runner.invoke(
+        cli, ["serve", "--library", str(motion_library["library"]), "--label-folders"]
+    )
+    assert "label the clips of a folder" in _one_error(labels_beside_files)

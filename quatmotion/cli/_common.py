@@ -45,6 +45,8 @@ if TYPE_CHECKING:
 __all__ = [
     "EXIT_BAD_INPUT",
     "FRAMES_HELP",
+    "LABELS_HELP",
+    "LABEL_FOLDERS_HELP",
     "CliInputError",
     "ForceOption",
     "JointMapOption",
@@ -71,6 +73,7 @@ __all__ = [
     "fail",
     "joint_map_entries",
     "files_read",
+    "labels_option",
     "number_in",
     "print_json",
     "printable",
@@ -204,6 +207,15 @@ def require_file(path: Path) -> Path:
 
 
 # --- options shared by several commands ------------------------------------------------------
+LABELS_HELP = "CSV with columns clip,label."
+LABEL_FOLDERS_HELP = "Label clips without another label by their folder's name (CLASS/file.amc)."
+
+
+def labels_option(labels: Path | None) -> dict[str, str] | None:
+    """The clip -> label mapping of a ``--labels`` CSV (None without the option)."""
+    from quatmotion.io.labels import read_labels_csv
+
+    return read_labels_csv(require_file(labels)) if labels is not None else None
 
 
 def _units_value(value: str | None) -> str | float | None:

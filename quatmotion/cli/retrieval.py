@@ -20,6 +20,8 @@ from rich.table import Table
 
 from quatmotion.cli._app import app
 from quatmotion.cli._common import (
+    LABEL_FOLDERS_HELP,
+    LABELS_HELP,
     CliInputError,
     JointMapOption,
     JsonOption,
@@ -34,6 +36,7 @@ from quatmotion.cli._common import (
     error_console,
     fail,
     joint_map_entries,
+    labels_option,
     print_json,
     progress_bar,
     read_clip,
@@ -118,12 +121,6 @@ def _settings(
     return base.replace(**given)
 
 
-def _labels_from(labels: Path | None) -> dict[str, str] | None:
-    from quatmotion.io.labels import read_labels_csv
-
-    return read_labels_csv(require_file(labels)) if labels is not None else None
-
-
 def _build(
     paths: list[Path],
     output: Path,
@@ -138,7 +135,7 @@ def _build(
     from quatmotion.retrieval.index import ClipIndex
 
     with user_errors():
-        label_map = _labels_from(labels)
+        label_map = labels_option(labels)
         for path in paths:
             if not path.exists():
                 raise CliInputError(f"{path}: no such file or folder")
@@ -206,7 +203,6 @@ _SKELETON_HELP = (
     "ASF of the AMC clips: one file (every AMC's), or a folder of them (each found by its name)."
 )
 _SKELETONS_HELP = "Same as --skeleton with a folder (kept for older scripts)."
-_LABEL_FOLDERS_HELP = "Label clips without another label by their folder's name (CLASS/file.amc)."
 SkeletonPath = Annotated[Path | None, typer.Option("--skeleton", "-s", help=_SKELETON_HELP)]
 
 
@@ -214,7 +210,7 @@ SkeletonPath = Annotated[Path | None, typer.Option("--skeleton", "-s", help=_SKE
 def build_command(
     paths: Annotated[list[Path], typer.Argument(help="Folders (searched recursively) or clips.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Index file to write (.qidx).")],
-    labels: Annotated[Path | None, typer.Option(help="CSV with columns clip,label.")] = None,
+    labels: Annotated[Path | None, typer.Option(help=LABELS_HELP)] = None,
     skeleton: SkeletonPath = None,
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
@@ -222,7 +218,7 @@ def build_command(
         str | None, typer.Option(help=f"{_KINDS_HELP} Default: motion.", show_default=False)
     ] = None,
     method: Annotated[list[str] | None, typer.Option(help=_BUILD_METHOD_HELP)] = None,
-    label_folders: Annotated[bool, typer.Option(help=_LABEL_FOLDERS_HELP)] = False,
+    label_folders: Annotated[bool, typer.Option(help=LABEL_FOLDERS_HELP)] = False,
     joint_map: JointMapOption = None,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
@@ -244,7 +240,7 @@ def build_command(
 def add_command(
     index: Annotated[Path, typer.Argument(help="Index file (.qidx).")],
     paths: Annotated[list[Path], typer.Argument(help="Folders (searched recursively) or clips.")],
-    labels: Annotated[Path | None, typer.Option(help="CSV with columns clip,label.")] = None,
+    labels: Annotated[Path | None, typer.Option(help=LABELS_HELP)] = None,
     skeleton: SkeletonPath = None,
     skeletons: Annotated[Path | None, typer.Option(help=_SKELETONS_HELP, hidden=True)] = None,
     units: UnitsOption = None,
@@ -254,7 +250,7 @@ def add_command(
     method: Annotated[list[str] | None, typer.Option(help=_BUILD_METHOD_HELP)] = None,
     label_folders: Annotated[
         bool | None,
-        typer.Option(help=f"{_LABEL_FOLDERS_HELP} Default: the index's.", show_default=False),
+        typer.Option(help=f"{LABEL_FOLDERS_HELP} Default: the index's.", show_default=False),
     ] = None,
     joint_map: JointMapOption = None,
     workers: WorkersOption = None,
@@ -277,7 +273,7 @@ def add_command(
 @index_app.command("label")
 def label_command(
     index: Annotated[Path, typer.Argument(help="Index file (.qidx).")],
-    labels: Annotated[Path, typer.Option(help="CSV with columns clip,label.")],
+    labels: Annotated[Path, typer.Option(help=LABELS_HELP)],
 ) -> None:
     """Set or change the labels of indexed clips (by name, file name, stem or path), without
     reading the clips again."""
@@ -285,7 +281,7 @@ def label_command(
     from quatmotion.retrieval.index import ClipIndex
 
     with user_errors():
-        given = _labels_from(labels) or {}
+        given = labels_option(labels) or {}
         require_file(index)
         check_outputs([index], [labels], replace=True)
         with ClipIndex.open(index, write=True) as idx:

@@ -1,15 +1,18 @@
 """``quatmotion serve``: the web app over a library, an index and a pose index (uvicorn).
 
 With no file, it serves the demo's generated library, and with a folder (``serve DIR``) that
-folder's clips: either is compressed, indexed and pose-indexed first, into a temporary folder
-removed when the server stops. The port is bound before anything else, so a port in use is one
-``error:`` line (exit code 2) at once, and ``--port 0`` serves on a free port it names.
+folder's clips: either is indexed, compressed and pose-indexed into a temporary folder removed
+when the server stops, in the background: the server listens at once, the page shows the
+build's progress (stderr too) and serves each file as it is complete
+(:mod:`quatmotion.server.building`). The port is bound before anything else, so a port in use
+is one ``error:`` line (exit code 2) at once, and ``--port 0`` serves on a free port it names.
 """
 
 from __future__ import annotations
 
 import contextlib
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -17,12 +20,15 @@ import typer
 
 from quatmotion.cli._app import app
 from quatmotion.cli._common import (
+    LABEL_FOLDERS_HELP,
+    LABELS_HELP,
     CliInputError,
     JointMapOption,
     at_least,
     console,
     error_console,
     joint_map_entries,
+    labels_option,
     progress_bar,
     report_skipped,
     require_file,
@@ -30,7 +36,7 @@ from quatmotion.cli._common import (
 )
 
 if TYPE_CHECKING:
-    from quatmotion.demo import BuiltLibrary
+    from quatmotion.server.building import LibraryBuild
 
 
 @app.command()
@@ -38,8 +44,9 @@ def serve(
     folder: Annotated[
         Path | None,
         typer.Argument(
-            help="A folder of clips to serve: compressed and indexed first, into a temporary "
-            "folder. Without it and without files: the demo's generated library.",
+            help="A folder of clips to serve: indexed, compressed and pose-indexed into a "
+            "temporary folder while the server already answers (the page shows the progress). "
+            "Without it and without files: the demo's generated library.",
             show_default=False,
         ),
     ] = None,
@@ -52,6 +59,12 @@ def serve(
     poses: Annotated[
         Path | None, typer.Option(help="A pose index (quatmotion pose index): pose search.")
     ] = None,
+    labels: Annotated[
+        Path | None, typer.Option(help=f"With a folder: {LABELS_HELP}", show_default=False)
+    ] = None,
+    label_folders: Annotated[
+        bool, typer.Option(help=f"With a folder: {LABEL_FOLDERS_HELP}")
+    ] = False,
     port: Annotated[int, typer.Option(help="TCP port, 1 to 65535; 0: a free one.")] = 8000,
     host: Annotated[
         str, typer.Option(help="Address to bind; other than the loopback, with a warning.")
@@ -59,10 +72,24 @@ def serve(
     max_upload: Annotated[
         str, typer.Option(help="Largest upload (request body): e.g. 50MB, 500kB, 2MiB.")
     ] = "50MB",
+    upload_memory: Annotated[
+        str,
+        typer.Option(
+            help="Memory the parsing of uploads may use at once (an upload costs some 40 times "
+            "its size); a larger upload is refused (413), others wait their turn."
+        ),
+    ] = "2GB",
     joint_map: JointMapOption = None,
 ) -> None:
     """Serve a local web app to browse, play, compare and search a motion library."""
-    from quatmotion.server import allowed_hosts_for, create_app, is_loopback, listen, parse_size
+    from quatmotion.server import (
+        UploadGate,
+        allowed_hosts_for,
+        create_app,
+        is_loopback,
+        listen,
+        parse_size,
+    )
 
     with contextlib.ExitStack() as stack, user_errors():
         given = [p for p in (library, index, poses) if p is not None]
@@ -74,29 +101,43 @@ def serve(
             )
         if poses is not None and library is None and index is None:
             raise CliInputError("--poses needs --library or --index beside it")
+        if given and (labels is not None or label_folders):
+            raise CliInputError(
+                "--labels and --label-folders label the clips of a folder; label an index "
+                "with quatmotion index label"
+            )
         at_least("--port", port, 0, 65535)
-        try:
-            upload_limit = parse_size(max_upload)
-        except ValueError as error:
-            raise CliInputError(f"--max-upload: {error}") from None
+        upload_limit = _size("--max-upload", max_upload, parse_size)
+        uploads = UploadGate(memory=_size("--upload-memory", upload_memory, parse_size))
         for path in given:
             require_file(path)
         if folder is not None and not folder.is_dir():
             raise CliInputError(f"{folder}: not a folder (give files with --library, --index)")
+        if folder is not None:
+            from quatmotion.io import MOTION_SUFFIXES, find_motion_files
+
+            if not find_motion_files([folder]):
+                raise CliInputError(
+                    f"{folder}: no motion files ({', '.join(MOTION_SUFFIXES)}) in it or below"
+                )
+        label_map = labels_option(labels)
         stack.enter_context(listen.sigterm_exits())  # SIGTERM, too, removes the temporary folder
         sock = stack.enter_context(listen.bind(host, port))  # first: a busy port fails at once
+        build = None
         if not given:
             work = Path(
                 stack.enter_context(tempfile.TemporaryDirectory(prefix="quatmotion-serve-"))
             )
-            built = _build(work, folder, joint_map_entries(joint_map))
-            library, index, poses = built.library, built.index, built.poses
+            build = _background_build(
+                work, folder, label_map, label_folders, labels, joint_map_entries(joint_map)
+            )
+            stack.callback(build.stop)  # before the folder is removed (the stack unwinds LIFO)
         application = create_app(
-            library,
-            index,
-            poses,
+            *((library, index, poses) if build is None else ()),
             max_upload=upload_limit,
             allowed_hosts=allowed_hosts_for(host),
+            build=build,
+            uploads=uploads,
         )
         if not is_loopback(host):
             error_console.print(
@@ -106,43 +147,75 @@ def serve(
                 highlight=False,
                 soft_wrap=True,
             )
-        if given:
-            what = ""
-        elif folder is None:
-            what = " of the demo's generated library"
+        if build is None:
+            what = f"{len(application.state.catalogue)} clips"
         else:
-            what = f" of {folder}"
+            what = f"{build.source}, being built (the page shows the progress)"
         console.print(
-            f"quatmotion serve: {len(application.state.catalogue)} clips{what} at "
-            f"{listen.url_of(sock)} (API docs at /docs; Ctrl+C stops)",
+            f"quatmotion serve: {what} at {listen.url_of(sock)} (API docs at /docs; Ctrl+C stops)",
             markup=False,
             highlight=False,
             soft_wrap=True,
         )
-        listen.serve_on(application, sock)
+        listen.serve_on(application, sock)  # the app starts the build once it answers
 
 
-def _build(work: Path, folder: Path | None, joint_map: tuple[str, ...] = ()) -> BuiltLibrary:
-    """The demo's library, or ``folder``'s clips, compressed and indexed in ``work``."""
-    from quatmotion.cli._kernels import ensure_kernels
-    from quatmotion.demo import build_library
+def _size(option: str, text: str, parse) -> int:  # parse: quatmotion.server.parse_size
+    try:
+        return int(parse(text))
+    except ValueError as error:
+        raise CliInputError(f"{option}: {error}") from None
 
-    ensure_kernels("read", "codec", "retrieval", "pose")
+
+def _background_build(
+    work: Path,
+    folder: Path | None,
+    labels: dict[str, str] | None,
+    label_folders: bool,
+    labels_file: Path | None,
+    joint_map: tuple[str, ...] = (),
+) -> LibraryBuild:
+    """The demo's library, or ``folder``'s clips, to be indexed, compressed and pose-indexed
+    in ``work`` while the server answers; its progress on stderr (a bar, a line per stage)."""
+    from quatmotion.cli.codec import _reporter  # the build's steps, one bar each
+    from quatmotion.server.building import LibraryBuild
+
     source = str(folder) if folder is not None else "the demo's generated library"
     error_console.print(
-        f"building {source}: compressed, indexed and pose-indexed in {work} (removed at exit)",
+        f"building {source}: indexed, compressed and pose-indexed in {work} (removed at exit)",
         markup=False,
         highlight=False,
         soft_wrap=True,
     )
-    from quatmotion.cli.codec import _reporter  # the codec's steps, one bar each
+    bar = progress_bar(error_console)
 
-    with progress_bar(error_console) as bar:
-        built = build_library(
-            work,
-            [folder] if folder is not None else [],
-            progress=_reporter(bar),
-            joint_map=joint_map,
-        )
-    report_skipped(built.failed)
-    return built
+    def say(message: str) -> None:
+        error_console.print(message, markup=False, highlight=False, soft_wrap=True)
+
+    def run(progress, publish) -> Sequence[str]:  # LibraryBuild's Progress and Publish
+        from quatmotion.cli._kernels import ensure_kernels
+        from quatmotion.demo import build_library
+
+        bar.start()
+        try:
+            ensure_kernels("read", "codec", "retrieval", "pose")
+            built = build_library(
+                work,
+                [folder] if folder is not None else [],
+                progress=progress,
+                labels=labels,
+                label_folders=label_folders,
+                joint_map=joint_map,
+                on_stage=publish,
+            )
+        finally:
+            bar.stop()
+        report_skipped(built.failed)
+        if built.unmatched_labels:
+            say(
+                f"{labels_file}: {len(built.unmatched_labels)} keys name no clip "
+                f"({', '.join(built.unmatched_labels[:5])})"
+            )
+        return built.failed
+
+    return LibraryBuild(source, run, echo=_reporter(bar), on_stage=say)

@@ -14,10 +14,20 @@ Conventions
   Responses name clips, never the server's files.
 * Uploads (``POST /api/search/upload``, multipart) are read and parsed in memory, never
   written anywhere; every request body is limited to ``max_upload`` bytes (413 beyond it,
-  before reading when the request declares its length).
+  before reading when the request declares its length); they are admitted and parsed under
+  the rules of :mod:`quatmotion.server.uploads` (one per client, a few at once, a memory
+  budget).
+* Every POST carries the header :data:`CSRF_HEADER` and no ``Origin``/``Sec-Fetch-Site`` of
+  another site (:class:`CsrfGuard`); a bound loopback answers its host names only
+  (:class:`HostCheck`, ``[::1]`` included).
 * Errors are JSON ``{"detail": "<one line>"}``: 400 for a bad request (malformed or invalid
-  parameters, an upload the parsers reject, with their message), 404 for an unknown clip or
-  something the server was not started with, 413 for a body over the limit.
+  parameters, an upload the parsers reject, with their message: whatever an uploaded file
+  holds, never a 500), 403 for a POST the CSRF guard refuses, 404 for an unknown clip or
+  something the server was not started with, 413 for a body over the limit or an upload over
+  the parsing budget, 415 for a kind of file whose optional reader is not installed, 429 for
+  a second upload of one client, 503 (with ``Retry-After``) when the uploads' slots are taken
+  or, while a library is being built (:mod:`quatmotion.server.building`), for what may still
+  come.
 * Work that takes time (decoding, searching, parsing an upload) runs in the thread pool, off
   the event loop, so the server answers other requests meanwhile.
 """
@@ -27,6 +37,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import ipaddress
+import logging
 import sys
 import time
 from collections.abc import AsyncIterator, Sequence
@@ -45,18 +56,20 @@ from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
-from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 import quatmotion
 from quatmotion.errors import FormatError
 from quatmotion.io import MOTION_SUFFIXES, parse_motion
+from quatmotion.motion import Motion
+from quatmotion.server.building import LibraryBuild
 from quatmotion.server.clips import (
     SORT_KEYS,
     ClipCatalogue,
     ClipNotFoundError,
     UnavailableError,
 )
+from quatmotion.server.uploads import UploadGate
 from quatmotion.viz import frame_data
 from quatmotion.viz.viewer import static_folder
 
@@ -90,6 +103,12 @@ _VIEWER_SCRIPTS = (
     '<script src="/assets/viewer/viewer.js"></script>\n'
 )
 
+CSRF_HEADER = "X-Quatmotion-Request"
+"""The header every POST must carry (any value; the pages send ``1``): the guard against
+cross-site request forgery (:class:`CsrfGuard`)."""
+
+_SAFE_METHODS = ("GET", "HEAD", "OPTIONS")
+_log = logging.getLogger("quatmotion.server")
 MAX_TOP = 200
 _CLIP_ID = r"^[A-Za-z0-9_.~-]{1,120}$"
 _PAGE_POLICY = (
@@ -185,6 +204,22 @@ class InfoModel(BaseModel):
     default_method: str | None
     max_upload_bytes: int
     motion_suffixes: list[str]
+    building: bool = Field(description="A library is being built: see /api/build.")
+
+
+class BuildModel(BaseModel):
+    """A library being built while the server answers (``quatmotion serve DIR``)."""
+
+    state: Literal["none", "building", "ready", "failed", "stopped"]
+    source: str = ""
+    step: str = Field("", description="What it is doing (index, compress: encode, poses...).")
+    done: int = 0
+    total: int = 0
+    served: list[str] = Field([], description="Stages served so far: index, library, poses.")
+    clips: int = Field(0, description="Clips served now.")
+    failed: list[str] = Field([], description="'file: reason' of each clip left out.")
+    message: str = Field("", description="Why it failed.")
+    seconds: float = 0.0
 
 
 class SearchHitModel(BaseModel):
@@ -225,6 +260,15 @@ class PoseResponse(BaseModel):
 
 
 _UPLOAD_BODY = {
+    "parameters": [
+        {
+            "name": CSRF_HEADER,
+            "in": "header",
+            "required": True,
+            "schema": {"type": "string", "default": "1"},
+            "description": "Any value: the guard against cross-site request forgery.",
+        }
+    ],
     "requestBody": {
         "required": True,
         "content": {
@@ -236,7 +280,7 @@ _UPLOAD_BODY = {
                         "file": {
                             "type": "string",
                             "format": "binary",
-                            "description": "The query clip: an .amc or .bvh file.",
+                            "description": "The query clip: .amc, .bvh, .glb or .gltf.",
                         },
                         "asf": {
                             "type": "string",
@@ -249,7 +293,7 @@ _UPLOAD_BODY = {
                 }
             }
         },
-    }
+    },
 }
 
 
@@ -331,6 +375,75 @@ class SecurityHeaders:
         await self.app(scope, receive, with_headers if scope["type"] == "http" else send)
 
 
+def host_name(header: str) -> str:
+    """The host name of a ``Host`` header, lower-case, without its port: ``[::1]:8000`` ->
+    ``::1``, ``localhost:8000`` -> ``localhost``."""
+    text = header.strip().lower()
+    if text.startswith("["):
+        return text[1 : text.find("]")] if "]" in text else ""
+    return text.rsplit(":", 1)[0] if text.count(":") == 1 else text
+
+
+class HostCheck:
+    """ASGI middleware: a request whose ``Host`` is not one of ``allowed`` gets 400 (the
+    defence against DNS rebinding); ``("*",)`` allows any. IPv6 hosts come bracketed
+    (``[::1]:8000``)."""
+
+    def __init__(self, app: ASGIApp, allowed: Sequence[str]) -> None:
+        self.app = app
+        self.any = "*" in allowed
+        self.allowed = {host_name(h) if h.startswith("[") else h.lower() for h in allowed}
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] in ("http", "websocket") and not self.any:
+            header = dict(scope["headers"]).get(b"host", b"").decode("latin-1")
+            if host_name(header) not in self.allowed:
+                response = JSONResponse({"detail": "invalid host header"}, status_code=400)
+                await response(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+
+class CsrfGuard:
+    """ASGI middleware: a request that may change something (any method but GET, HEAD and
+    OPTIONS) gets 403 unless it carries the header :data:`CSRF_HEADER` and nothing says it
+    comes from another site (``Sec-Fetch-Site`` other than ``same-origin``/``none``, or an
+    ``Origin`` other than the server's own).
+
+    A form of another site, posted to the server by the browser of a person who visits it,
+    can set neither that header nor its own origin; the app's pages send the header.
+    """
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http" and scope["method"] not in _SAFE_METHODS:
+            reason = self._refused(dict(scope["headers"]))
+            if reason:
+                await JSONResponse({"detail": reason}, status_code=403)(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+    @staticmethod
+    def _refused(headers: dict[bytes, bytes]) -> str:
+        site = headers.get(b"sec-fetch-site", b"").decode("latin-1").lower()
+        if site and site not in ("same-origin", "none"):
+            return f"cross-site request refused (Sec-Fetch-Site: {site})"
+        origin = headers.get(b"origin")
+        if origin is not None:
+            own = headers.get(b"host", b"").decode("latin-1").lower()
+            given = origin.decode("latin-1").lower()
+            if given.partition("://")[2] != own:
+                return f"cross-origin request refused (Origin: {given[:100]})"
+        if not headers.get(CSRF_HEADER.lower().encode()):
+            return (
+                f"a {CSRF_HEADER} header is required on this request (the app's pages send it; "
+                "another site's form cannot)"
+            )
+        return ""
+
+
 class _InMemoryMultiPartParser(MultiPartParser):
     # Starlette spools file parts over 1 MB to a temporary file; an upload here stays in
     # memory (the body limit bounds it), so nothing of it is ever written to disk.
@@ -345,6 +458,8 @@ def create_app(
     *,
     max_upload: int = DEFAULT_MAX_UPLOAD,
     allowed_hosts: Sequence[str] = LOOPBACK_HOSTS,
+    build: LibraryBuild | None = None,
+    uploads: UploadGate | None = None,
 ) -> FastAPI:
     """The web app serving a motion library.
 
@@ -362,6 +477,13 @@ def create_app(
     allowed_hosts : sequence of str, keyword-only
         Host names (the ``Host`` header) the app answers; others get 400. ``("*",)`` for any.
         The default suits a server bound to the loopback (:func:`allowed_hosts_for`).
+    build : LibraryBuild, keyword-only, optional
+        A library to build (:mod:`quatmotion.server.building`), instead of files: the app
+        starts it when it starts, serves each of its files as it is complete, and stops it
+        when it shuts down.
+    uploads : UploadGate, keyword-only, optional
+        How many uploads are taken at once and the memory their parsing may use
+        (:class:`~quatmotion.server.uploads.UploadGate`; its defaults when None).
 
     Returns
     -------
@@ -372,18 +494,29 @@ def create_app(
     Raises
     ------
     ValueError
-        Neither a library nor an index, or a limit below one byte.
+        Neither a library nor an index nor a build, files beside a build, or a limit below
+        one byte.
     FileNotFoundError, FormatError
         A file missing or not of its format (naming it).
     """
     if max_upload < 1:
         raise ValueError(f"max_upload must be at least 1 byte, got {max_upload}")
-    catalogue = ClipCatalogue.open(library, index, poses)
+    if build is not None and (library, index, poses) != (None, None, None):
+        raise ValueError("give the files to serve or a build, not both")
+    catalogue = ClipCatalogue.open(library, index, poses) if build is None else None
+
+    def close() -> None:
+        if catalogue is not None:
+            catalogue.close()
+        if build is not None:
+            build.stop()
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        if build is not None:
+            build.start()  # once the server answers: its first pages come before the work
         yield
-        catalogue.close()
+        close()
 
     try:
         app = FastAPIOffline(
@@ -394,19 +527,29 @@ def create_app(
             lifespan=lifespan,
         )
         app.state.catalogue = catalogue
-        # Added last is outermost: the Host check, then the body limit, then the headers.
+        app.state.build = build
+        app.state.uploads = uploads or UploadGate()
+        # Added last is outermost: the Host check, the CSRF guard, the body limit, then
+        # the headers.
         app.add_middleware(SecurityHeaders)
         app.add_middleware(BodySizeLimit, max_bytes=max_upload)
-        app.add_middleware(TrustedHostMiddleware, allowed_hosts=list(allowed_hosts))
+        app.add_middleware(CsrfGuard)
+        app.add_middleware(HostCheck, allowed=list(allowed_hosts))
         _add_error_handlers(app)
         app.state.max_upload = max_upload
         _mount_assets(app)
         for router in (pages_router, clips_router, search_router, poses_router):
             app.include_router(router)
     except BaseException:
-        catalogue.close()
+        close()
         raise
     return app
+
+
+def served_catalogue(app: FastAPI) -> ClipCatalogue:
+    """The catalogue ``app`` serves now: its files', or its build's so far."""
+    build: LibraryBuild | None = app.state.build
+    return build.catalogue if build is not None else app.state.catalogue  # type: ignore[no-any-return]
 
 
 def _error(status: int, message: object) -> JSONResponse:
@@ -421,13 +564,17 @@ def _add_error_handlers(app: FastAPI) -> None:
         where = ".".join(str(p) for p in first.get("loc", ()) if p not in ("path", "query"))
         return _error(400, f"{where}: {first.get('msg', 'invalid request')}")
 
-    @app.exception_handler(ClipNotFoundError)
-    async def not_found(_request: Request, error: ClipNotFoundError) -> JSONResponse:
+    def missing(request: Request, error: Exception) -> JSONResponse:
+        # While a build runs, what is missing may come: 503, try again (not 404, not there).
+        build: LibraryBuild | None = request.app.state.build
+        if build is not None and build.running:
+            response = _error(503, f"{error} (the library is still being built: {build.where()})")
+            response.headers["retry-after"] = "2"
+            return response
         return _error(404, error)
 
-    @app.exception_handler(UnavailableError)
-    async def unavailable(_request: Request, error: UnavailableError) -> JSONResponse:
-        return _error(404, error)
+    app.add_exception_handler(ClipNotFoundError, missing)  # type: ignore[arg-type]
+    app.add_exception_handler(UnavailableError, missing)  # type: ignore[arg-type]
 
     @app.exception_handler(ValueError)  # FormatError included: bad input, the parser's line
     async def bad_input(_request: Request, error: ValueError) -> JSONResponse:
@@ -488,7 +635,7 @@ QueryClipId = Annotated[str, Query(pattern=_CLIP_ID, description="A clip id.")]
 
 def get_catalogue(request: Request) -> ClipCatalogue:
     """The catalogue the app serves (a dependency of every API route)."""
-    return request.app.state.catalogue  # type: ignore[no-any-return]
+    return served_catalogue(request.app)
 
 
 def get_max_upload(request: Request) -> int:
@@ -511,8 +658,9 @@ def clip_model(info: Any) -> ClipModel:
 
 
 @clips_router.get("/api/info", response_model=InfoModel, tags=["library"])
-def info(catalogue: Catalogue, max_upload: MaxUpload) -> InfoModel:
+def info(request: Request, catalogue: Catalogue, max_upload: MaxUpload) -> InfoModel:
     """What the server serves: its files (names only), clip count, search methods, limits."""
+    build: LibraryBuild | None = request.app.state.build
     return InfoModel(
         version=quatmotion.__version__,
         library=catalogue.library_path.name if catalogue.library_path else None,
@@ -523,7 +671,19 @@ def info(catalogue: Catalogue, max_upload: MaxUpload) -> InfoModel:
         default_method=catalogue.methods[0] if catalogue.methods else None,
         max_upload_bytes=max_upload,
         motion_suffixes=list(MOTION_SUFFIXES),
+        building=build is not None and build.running,
     )
+
+
+@clips_router.get("/api/build", response_model=BuildModel, tags=["library"])
+def build_status(request: Request) -> BuildModel:
+    """Where the library the server was started to build is (``quatmotion serve DIR``):
+    its step, the stages served so far, the clips left out. ``state`` is ``none`` for a
+    server started with its files."""
+    build: LibraryBuild | None = request.app.state.build
+    if build is None:
+        return BuildModel(state="none")
+    return BuildModel(**build.status())
 
 
 @clips_router.get("/api/clips", response_model=ClipList, tags=["library"])
@@ -599,30 +759,40 @@ def search_clip(
 )
 async def search_upload(request: Request, catalogue: Catalogue) -> SearchResponse:
     """Rank the indexed clips by likeness to an uploaded clip (multipart form: ``file``,
-    an .amc or .bvh; ``asf``, the skeleton an .amc needs; ``method``; ``top``). The
-    upload is parsed in memory and not kept; a file the parser rejects gets 400 with its
-    message."""
-    form = await _read_form(request)
-    upload = form.get("file")
-    if not isinstance(upload, UploadFile):
-        raise HTTPException(400, "the form needs a 'file' field holding an .amc or .bvh file")
-    asf = form.get("asf")
-    if asf is not None and not isinstance(asf, UploadFile):
-        raise HTTPException(400, "the 'asf' field must be a file (the ASF skeleton)")
-    method = form.get("method") or None
-    top = _form_int(form.get("top"), "top", 20, 1, MAX_TOP)
-    name = _upload_name(upload.filename, MOTION_SUFFIXES)
-    asf_name = _upload_name(asf.filename, (".asf",)) if asf is not None else "skeleton.asf"
-    data = await upload.read()
-    asf_data = await asf.read() if asf is not None else None
-    if name.lower().endswith(".amc") and asf_data is None:
-        raise HTTPException(
-            400,
-            f"{name}: an AMC holds no skeleton; upload its ASF file too (form field 'asf')",
+    an .amc, .bvh, .glb or .gltf; ``asf``, the skeleton an .amc needs; ``method``; ``top``).
+    The upload is parsed in memory and not kept; a file the parser rejects gets 400 with its
+    message. Requests need the header ``X-Quatmotion-Request`` (403 without). One upload at a
+    time per client (429), a few at once overall (503), parsed under a memory budget (413 for
+    a file that alone needs more)."""
+    gate: UploadGate = request.app.state.uploads
+    with gate.admitted(request.client.host if request.client else ""):
+        declared = request.headers.get("content-length", "")
+        if declared.isdigit():  # a body no reading of which fits the budget: refused unread
+            gate.check(gate.least_cost(int(declared)), "an upload of this size")
+        form = await _read_form(request)
+        upload = form.get("file")
+        if not isinstance(upload, UploadFile):
+            raise HTTPException(400, "the form needs a 'file' field holding a motion file")
+        asf = form.get("asf")
+        if asf is not None and not isinstance(asf, UploadFile):
+            raise HTTPException(400, "the 'asf' field must be a file (the ASF skeleton)")
+        method = form.get("method") or None
+        top = _form_int(form.get("top"), "top", 20, 1, MAX_TOP)
+        name = _upload_name(upload.filename, MOTION_SUFFIXES)
+        asf_name = _upload_name(asf.filename, (".asf",)) if asf is not None else "skeleton.asf"
+        data = await upload.read()
+        asf_data = await asf.read() if asf is not None else None
+        await form.close()
+        if name.lower().endswith(".amc") and asf_data is None:
+            raise HTTPException(
+                400,
+                f"{name}: an AMC holds no skeleton; upload its ASF file too (form field 'asf')",
+            )
+        cost = gate.cost(name, len(data)) + gate.cost(asf_name, len(asf_data or b""))
+        gate.check(cost, name)
+        return await run_in_threadpool(
+            _search_upload, catalogue, gate, cost, data, name, asf_data, asf_name, method, top
         )
-    return await run_in_threadpool(
-        _search_upload, catalogue, data, name, asf_data, asf_name, method, top
-    )
 
 
 @poses_router.get("/api/poses", response_model=PoseResponse, tags=["search"])
@@ -679,6 +849,8 @@ def _upload_name(filename: str | None, suffixes: Sequence[str]) -> str:
 
 def _search_upload(
     catalogue: ClipCatalogue,
+    gate: UploadGate,
+    cost: int,
     data: bytes,
     name: str,
     asf_data: bytes | None,
@@ -686,18 +858,19 @@ def _search_upload(
     method: str | None,
     top: int,
 ) -> SearchResponse:
-    """Parse an upload and search with it (in a worker thread)."""
+    """Parse an upload under the memory budget and search with it (in a worker thread)."""
     started = time.perf_counter()
-    try:
-        motion = parse_motion(data, name, asf_data, asf_name)
-    except FormatError as error:
-        raise HTTPException(400, str(error).splitlines()[0]) from None
-    # the file's content_hash (an AMC's with its ASF's bytes), its identity in the index
-    digest = hashlib.sha256(data)
-    if name.lower().endswith(".amc") and asf_data is not None:
-        digest.update(asf_data)
-    sha256 = digest.hexdigest()
-    used, hits, own = catalogue.search(motion, method=method, top=top, sha256=sha256)
+    with gate.parsing(cost):
+        motion = parse_upload(data, name, asf_data, asf_name)
+        # the file's content_hash (an AMC's with its ASF's bytes), its identity in the index
+        digest = hashlib.sha256(data)
+        if name.lower().endswith(".amc") and asf_data is not None:
+            digest.update(asf_data)
+        del data, asf_data
+        used, hits, own = catalogue.search(
+            motion, method=method, top=top, sha256=digest.hexdigest()
+        )
+        query_clip = frame_data.encode_clip(motion)
     return SearchResponse(
         query=motion.name,
         query_id=None,
@@ -705,5 +878,38 @@ def _search_upload(
         seconds=time.perf_counter() - started,
         left_out=own,
         results=[SearchHitModel(**h.__dict__) for h in hits],
-        query_clip=frame_data.encode_clip(motion),
+        query_clip=query_clip,
     )
+
+
+def parse_upload(
+    data: bytes, name: str, asf_data: bytes | None = None, asf_name: str = "skeleton.asf"
+) -> Motion:
+    """An uploaded motion file parsed (:func:`quatmotion.io.parse_motion`), every error of
+    the file an ``HTTPException`` with a 4xx and one line: the reader's message (400), a
+    file too deep or too large for the parser (413), a kind of file whose optional reader is
+    not installed (415), any other failure of the reader on these bytes (400, naming the
+    error's kind). Nothing the file holds makes a 500."""
+    try:
+        return parse_motion(data, name, asf_data, asf_name)
+    except FormatError as error:  # a limit of quatmotion.limits included; names its file
+        raise HTTPException(400, _one_line(error, "" if error.path else name)) from None
+    except ValueError as error:
+        raise HTTPException(400, _one_line(error, name)) from None
+    except (MemoryError, RecursionError) as error:
+        raise HTTPException(
+            413, f"{name}: too large or too deeply nested to parse ({type(error).__name__})"
+        ) from None
+    except ImportError as error:  # an optional reader not installed here: the server's lack
+        raise HTTPException(415, f"{name}: this server cannot read it ({error})") from None
+    except Exception as error:  # a reader's fault on odd bytes is still the file's answer
+        _log.warning("upload %s: the reader failed", name, exc_info=True)
+        raise HTTPException(
+            400, f"{name}: cannot be read ({type(error).__name__}: {_one_line(error, '')})"
+        ) from None
+
+
+def _one_line(error: BaseException, name: str) -> str:
+    lines = str(error).strip().splitlines()
+    text = lines[0] if lines else type(error).__name__
+    return text if not name or text.startswith(name) else f"{name}: {text}"

@@ -35,12 +35,17 @@ from pathlib import Path
 from typing import Any
 
 from quatmotion import codec
-from quatmotion.collection import content_hash, find_skeleton, unique_names
+from quatmotion.collection import (
+    ClipRef,
+    ReadSettings,
+    content_hash,
+    find_skeleton,
+    read_clip,
+    unique_names,
+)
 from quatmotion.errors import FormatError
-from quatmotion.io import read_motion
 from quatmotion.motion import Motion
 from quatmotion.pose.library import PoseLibrary
-from quatmotion.retrieval.build import skeleton_for
 from quatmotion.retrieval.index import ClipIndex, ClipRow
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS
 from quatmotion.retrieval.search import method_keys, query_row, search
@@ -160,6 +165,7 @@ class _Entry:
     library_position: int | None
     row: ClipRow | None
     pose_clip: int | None
+    original: ClipRef | None  # the clip's file: the index's reference, else the library's
 
 
 @dataclass
@@ -177,12 +183,16 @@ def clip_key(clip: Any, by_name: Mapping[str, str] | None = None) -> str | None:
     """The key on which the catalogue joins a clip of a library, an index or a pose index: the
     content SHA-256 of its motion file then its skeleton (``ClipRef.sha256``); None when unknown.
 
-    ``clip`` is anything with a ``sha256`` (a ``ClipRef``, an index row), a path of a motion
+    ``clip`` is anything with a ``sha256`` (a ``ClipRef``, an index row) or a ``ref`` read
+    from a file (a library's clip entry, version 2 on), a path of a motion
     file (hashed here, with the ASF an AMC's lookup finds), or a clip known by name only (a
     library entry written before clip references; a string that names no file): its key is
     ``by_name[name]`` then.
     """
     sha = getattr(clip, "sha256", None)
+    ref = getattr(clip, "ref", None)
+    if not sha and ref is not None and ref.path:  # hashed from its files, not from memory
+        sha = ref.sha256
     if sha:
         return str(sha)
     if isinstance(clip, str | Path):
@@ -249,6 +259,7 @@ class ClipCatalogue:
         rows: Sequence[ClipRow],
         methods: Sequence[str],
         poses: PoseLibrary | None,
+        read: ReadSettings | None = None,
     ) -> None:
         self.library_path = library_path
         self.index_path = index_path
@@ -256,6 +267,7 @@ class ClipCatalogue:
         self.methods = tuple(methods)
         self._archive = archive
         self._poses = poses
+        self._read = read or ReadSettings()  # how the index read the originals
         self._archive_lock = threading.Lock()
         self._poses_lock = threading.Lock()
         self._entries: dict[str, _Entry] = {}
@@ -296,10 +308,12 @@ class ClipCatalogue:
         try:
             rows: list[ClipRow] = []
             methods: list[str] = []
+            read = None
             if index is not None:
                 with ClipIndex.open(index) as idx:
                     rows = idx.rows()
                     stored = set().union(*idx.feature_keys().values())
+                    read = idx.settings.read
                 methods = [m for m in METHODS if set(method_keys(m)) <= stored]
                 methods.sort(key=lambda m: m != DEFAULT_METHOD)
             pose_library = PoseLibrary.open(poses) if poses is not None else None
@@ -315,7 +329,13 @@ class ClipCatalogue:
             rows,
             methods,
             pose_library,
+            read,
         )
+
+    @classmethod
+    def empty(cls) -> ClipCatalogue:
+        """A catalogue of no clip and no file (a server whose library is still being built)."""
+        return cls(None, None, None, None, [], [], None)
 
     def close(self) -> None:
         """Close the library file."""
@@ -372,6 +392,13 @@ class ClipCatalogue:
 
     def _add(self, slot: _Slot, used: set[str]) -> None:
         archive, row, position = self._archive, slot.row, slot.position
+        original: ClipRef | None = None
+        if row is not None:
+            original = dataclasses.replace(row.ref, path=row.path)  # where the index found it
+        elif position is not None and archive is not None:
+            original = _located(archive.entries[position].ref, self.library_path)
+        has_original = original is not None and original.path is not None
+        has_original = has_original and Path(str(original.path)).is_file()  # type: ignore[union-attr]
         if position is not None:
             assert archive is not None
             clip = archive.entries[position]
@@ -388,7 +415,7 @@ class ClipCatalogue:
                 in_library=True,
                 in_index=row is not None,
                 in_poses=slot.pose_clip is not None,
-                has_original=row is not None and Path(row.path).is_file(),
+                has_original=has_original,
             )
         else:
             assert row is not None
@@ -405,9 +432,9 @@ class ClipCatalogue:
                 in_library=False,
                 in_index=True,
                 in_poses=slot.pose_clip is not None,
-                has_original=Path(row.path).is_file(),
+                has_original=has_original,
             )
-        self._entries[info.id] = _Entry(info, position, row, slot.pose_clip)
+        self._entries[info.id] = _Entry(info, position, row, slot.pose_clip, original)
         if row is not None:
             self._by_row[row.id] = info.id
         if slot.pose_clip is not None:
@@ -504,23 +531,27 @@ class ClipCatalogue:
             return self._archive.read(entry.library_position)
 
     def _original(self, entry: _Entry) -> Motion:
-        """The clip's original file, read when it is still the file indexed."""
-        row = entry.row
-        if row is None:
+        """The clip's original file (named by the index, else by the library), read as it was
+        indexed, when it is still the file indexed or compressed (its content hash)."""
+        ref, name = entry.original, entry.info.name
+        if ref is None or ref.path is None:
             raise UnavailableError(
-                f"clip {entry.info.name!r} has no original file: it is not in the index (.qidx)"
+                f"clip {name!r} has no original file: neither the index (.qidx) nor the "
+                "library (.qmz) names one"
             )
-        path = Path(row.path)
-        name = entry.info.name
+        path = Path(ref.path)
         if not path.is_file():
             raise UnavailableError(f"the original file of clip {name!r} is missing")
         try:
-            skeleton = skeleton_for(path, None)
-            if content_hash(path, skeleton) != row.sha256:
+            skeleton = _skeleton_of(ref, path)
+            if content_hash(path, skeleton) != ref.sha256:
                 raise UnavailableError(
                     f"the original file of clip {name!r} changed since it was indexed"
                 )
-            return read_motion(path, skeleton)
+            located = dataclasses.replace(
+                ref, skeleton_path=None if skeleton is None else str(skeleton)
+            )
+            return read_clip(located, self._read).motion
         except (FormatError, OSError) as error:
             reason = getattr(error, "reason", None) or str(error)
             raise UnavailableError(
@@ -640,3 +671,26 @@ def _unique_id(name: str, used: set[str]) -> str:
         candidate = f"{base}~{n}"
     used.add(candidate)
     return candidate
+
+
+def _located(ref: ClipRef | None, library: Path | None) -> ClipRef | None:
+    """A library's clip reference with its files as found now (:meth:`ClipRef.locate`
+    against the library's folder); None for a version 1 clip (no reference)."""
+    if ref is None:
+        return None
+    path, skeleton = ref.locate(library.parent if library is not None else None)
+    return dataclasses.replace(
+        ref,
+        path=None if path is None else str(path),
+        skeleton_path=None if skeleton is None else str(skeleton),
+    )
+
+
+def _skeleton_of(ref: ClipRef, path: Path) -> Path | None:
+    """The ASF an AMC was read with: the one its reference names when still there, else the
+    one the lookup finds (:func:`quatmotion.collection.find_skeleton`)."""
+    if path.suffix.lower() != ".amc":
+        return None
+    if ref.skeleton_path and Path(ref.skeleton_path).is_file():
+        return Path(ref.skeleton_path)
+    return find_skeleton(path)

@@ -31,7 +31,22 @@
 
   /** JSON from the API; a failure throws an Error carrying the server's one-line detail. */
   async function api(path, options) {
-    const response = await fetch(path, options);
+    const request = Object.assign({}, options || {});
+    if (request.method && request.method !== 'GET') {
+      // The server refuses a POST without it (its guard against cross-site request forgery).
+      request.headers = Object.assign({ 'X-Quatmotion-Request': '1' }, request.headers || {});
+    }
+    let response = await fetch(path, request);
+    // 503 with Retry-After: the library is still being built and what was asked may come.
+    for (let waited = 0; response.status === 503 && response.headers.get('Retry-After') && !request.method && waited < 3600; ) {
+      const pause = Math.max(1, Number(response.headers.get('Retry-After')) || 2);
+      let detail = '';
+      try { detail = (await response.json()).detail || ''; } catch (_) { /* keep waiting */ }
+      status('Waiting: ' + detail);
+      await new Promise((done) => setTimeout(done, 1000 * pause));
+      waited += pause;
+      response = await fetch(path, request);
+    }
     let body = null;
     try { body = await response.json(); } catch (_) { /* not JSON: the status says it */ }
     if (!response.ok) {
@@ -96,7 +111,58 @@
     const info = await api('/api/info');
     const files = [info.library, info.index, info.poses].filter(Boolean).join(' \u00b7 ');
     $('#served').textContent = files + ' \u00b7 ' + info.clips + ' clips';
+    if (info.building) watchBuild(nav);
     return info;
+  }
+
+  // ---------------------------------------------------------------- a library being built
+  const STAGES = { index: 'listed, playable and searchable', library: 'compressed: compare', poses: 'pose search' };
+
+  /**
+   * A banner under the header while the server builds its library (quatmotion serve DIR):
+   * the step and its progress, polled from /api/build; each stage served fires the event
+   * 'quatmotion:stage' on document (the library page reloads its list). <html> carries
+   * data-build with the build's state.
+   */
+  function watchBuild(nav) {
+    const bar = el('progress', { max: '1', value: '0' });
+    const text = el('span', { class: 'build-step' });
+    const banner = el('div', { class: 'build', id: 'build', role: 'status' }, [text, bar]);
+    nav.after(banner);
+    let served = 0;
+    async function poll() {
+      let build;
+      try { build = await api('/api/build'); } catch (error) { text.textContent = 'build: ' + error.message; return setTimeout(poll, 3000); }
+      document.documentElement.dataset.build = build.state;
+      banner.className = 'build ' + build.state;
+      const got = build.served.map((s) => STAGES[s] || s).join('; ');
+      if (build.state === 'building') {
+        bar.max = Math.max(1, build.total);
+        bar.value = build.done;
+        text.textContent = 'Building ' + build.source + ': ' + build.step + (build.total ? ' ' + build.done + '/' + build.total : '') +
+          ' \u00b7 ' + Math.round(build.seconds) + ' s' + (got ? ' \u00b7 ' + build.clips + ' clips ' + got : ' \u00b7 the clips appear when they are indexed');
+      } else {
+        bar.remove();
+        const left = build.failed.length ? ' \u00b7 ' + build.failed.length + ' files left out' : '';
+        text.textContent = build.state === 'ready'
+          ? 'Built ' + build.source + ' in ' + Math.round(build.seconds) + ' s: ' + build.clips + ' clips' + left
+          : 'The build of ' + build.source + ' ' + (build.state === 'failed' ? 'failed: ' + build.message : 'stopped') + left;
+        if (build.failed.length) {
+          banner.appendChild(el('details', {}, [el('summary', { text: 'left out' }),
+            ...build.failed.map((f) => el('div', { text: f }))]));
+        }
+      }
+      if (build.served.length !== served) {
+        served = build.served.length;
+        api('/api/info').then((info) => {
+          const names = [info.library, info.index, info.poses].filter(Boolean).join(' \u00b7 ');
+          $('#served').textContent = names + ' \u00b7 ' + info.clips + ' clips';
+        }).catch(() => {});
+        document.dispatchEvent(new CustomEvent('quatmotion:stage', { detail: build }));
+      }
+      if (build.state === 'building') setTimeout(poll, 1000);
+    }
+    poll();
   }
 
   function clipLinks(clip) {
@@ -167,6 +233,7 @@
       status(data.clips.length + ' clips' + (state.label !== null ? ' labelled \u201c' + (state.label || '(unlabelled)') + '\u201d' : ''));
       ready();
     }
+    document.addEventListener('quatmotion:stage', () => load().catch(fail));
     await load();
   }
 

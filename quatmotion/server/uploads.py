@@ -1,0 +1,141 @@
+"""How many uploads the web app takes at once, and how much memory their parsing may use.
+
+Conventions
+-----------
+* An upload is a file parsed in memory (``POST /api/search/upload``). Parsing a motion file
+  costs many times its size (the text split into numbers, the arrays made from them): the
+  cost is estimated before parsing as :data:`PARSE_COST` bytes per byte of each file, by its
+  suffix (measured, with a margin: ``docs/performance.md``).
+* Admission, before the body is read: one upload at a time per client (its address; 429
+  otherwise) and at most ``slots`` at once overall (503 otherwise), each with
+  ``Retry-After``. A client sending slowly keeps its slot as long as it sends: the server
+  never drops it, and the slots bound the bodies held in memory (``slots`` times the body
+  limit at most).
+* Parsing, after the body is read: under a memory budget. An upload whose estimated cost is
+  over the whole budget is refused with 413 (with a declared ``Content-Length``, before the
+  body is read); the others wait their turn until the budget has room for them, so that at any
+  time the parses in flight are estimated to need no more than the budget together.
+* Thread safety: every method may be called from any thread (the parses run in the server's
+  thread pool; admission in its event loop).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Iterator
+from pathlib import PurePosixPath
+
+from starlette.exceptions import HTTPException
+
+__all__ = [
+    "DEFAULT_UPLOAD_MEMORY",
+    "DEFAULT_UPLOAD_SLOTS",
+    "PARSE_COST",
+    "UploadGate",
+]
+
+DEFAULT_UPLOAD_MEMORY = 2_000_000_000
+"""Memory the parses of uploads may use together, bytes (2 GB): a 50 MB BVH fits, alone."""
+
+DEFAULT_UPLOAD_SLOTS = 4
+"""Uploads taken at once, over every client."""
+
+PARSE_COST = {".bvh": 40, ".amc": 40, ".asf": 40, ".gltf": 40, ".glb": 20, ".fbx": 40}
+"""Estimated peak memory of parsing a file and searching with it, bytes per byte of the
+file, by suffix."""
+
+_DEFAULT_COST = 40
+_FRAMING = 65_536  # multipart headers, boundaries and form fields, bytes at most
+_RETRY_AFTER_S = "2"
+_WAIT_S = 600.0  # longest wait for the budget before 503
+
+
+def _busy(status: int, message: str) -> HTTPException:
+    return HTTPException(status, message, headers={"Retry-After": _RETRY_AFTER_S})
+
+
+class UploadGate:
+    """Admission and memory budget of uploads (module conventions).
+
+    Parameters
+    ----------
+    slots : int
+        Uploads taken at once over every client (at least 1).
+    memory : int
+        Bytes the parses in flight may use together (at least 1).
+    """
+
+    def __init__(
+        self, slots: int = DEFAULT_UPLOAD_SLOTS, memory: int = DEFAULT_UPLOAD_MEMORY
+    ) -> None:
+        if slots < 1:
+            raise ValueError(f"upload slots must be at least 1, got {slots}")
+        if memory < 1:
+            raise ValueError(f"the upload memory budget must be at least 1 byte, got {memory}")
+        self.slots = slots
+        self.memory = memory
+        self._clients: dict[str, int] = {}
+        self._used = 0
+        self._lock = threading.Lock()
+        self._room = threading.Condition(self._lock)
+
+    @staticmethod
+    def cost(name: str, size: int) -> int:
+        """Estimated memory of parsing a file of ``size`` bytes named ``name``, bytes."""
+        return PARSE_COST.get(PurePosixPath(name).suffix.lower(), _DEFAULT_COST) * size
+
+    @staticmethod
+    def least_cost(body: int) -> int:
+        """The least memory parsing what a request body of ``body`` bytes holds may need
+        (all of it one file of the cheapest kind, less the multipart framing)."""
+        return min(PARSE_COST.values()) * max(0, body - _FRAMING)
+
+    def check(self, cost: int, what: str = "the upload") -> None:
+        """413 when ``cost`` alone is over the whole budget."""
+        if cost > self.memory:
+            raise HTTPException(
+                413,
+                f"{what} would need about {cost / 1e6:,.0f} MB to parse, over the server's "
+                f"budget of {self.memory / 1e6:,.0f} MB for uploads (--upload-memory): "
+                "upload a shorter clip",
+            )
+
+    @contextlib.contextmanager
+    def admitted(self, client: str) -> Iterator[None]:
+        """Hold a slot for ``client``'s upload: 429 when it has one already, 503 when every
+        slot is held."""
+        with self._lock:
+            if self._clients.get(client):
+                raise _busy(429, "one upload at a time per client: wait for the last one's answer")
+            if sum(self._clients.values()) >= self.slots:
+                raise _busy(503, f"the server is taking {self.slots} uploads already: retry")
+            self._clients[client] = 1
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._clients.pop(client, None)
+
+    @contextlib.contextmanager
+    def parsing(self, cost: int) -> Iterator[None]:
+        """Hold ``cost`` bytes of the budget while parsing, waiting until it has room
+        (``cost`` is first checked against the whole budget: :meth:`check`). Blocks the
+        calling thread: call it in a worker thread."""
+        self.check(cost)
+        with self._room:
+            if not self._room.wait_for(lambda: self._used + cost <= self.memory, _WAIT_S):
+                raise _busy(503, "the server is busy parsing other uploads: retry")
+            self._used += cost
+        try:
+            yield
+        finally:
+            with self._room:
+                self._used -= cost
+                self._room.notify_all()
+
+    @property
+    def in_use(self) -> int:
+        """Bytes of the budget held now."""
+        with self._lock:
+            return self._used
