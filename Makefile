@@ -3,7 +3,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench browser clean
+.PHONY: demo test lint bench browser fuzz clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -40,6 +40,12 @@ lint: $(STAMP)
 # What the browser tests need: Playwright (dev extras) and Debian's chromium (apt-get if missing).
 browser: $(STAMP)
 	tools/install-browser
+
+# The readers fuzzed for longer than make test does: FUZZ_MINUTES per reader (a finding is kept
+# in tests/fuzz/regressions/READER/, which the suite re-reads; exit 1 if anything was found).
+FUZZ_MINUTES ?= 10
+fuzz: $(STAMP)
+	$(BIN)/python tests/fuzz/run.py --minutes $(FUZZ_MINUTES) --jobs 2 $(FUZZ_ARGS)
 
 bench: $(STAMP)
 	$(BIN)/quatmotion bench io --out bench-io.json --force

@@ -186,6 +186,8 @@ def check(
     ceiling = getattr(limits, limit)  # AttributeError: a limit that does not exist is a bug
     unit = _UNITS[limit]
     try:
+        if isinstance(value, bool | str | bytes):
+            raise TypeError("a truth value or a text is no number")
         number = float(value)
     except (TypeError, ValueError, OverflowError):
         raise FormatError(f"{field} is {value!r}, not a number", source, line) from None

@@ -28,7 +28,7 @@ def test_check_names_file_field_and_limit() -> None:
     limits.check("frames", limits.current().frames, "clip.bvh", "Frames:")  # the limit itself
 
 
-@pytest.mark.parametrize("value", [-1, float("nan"), float("inf"), None])
+@pytest.mark.parametrize("value", [-1, float("nan"), float("inf"), None, True, "12"])
 def test_check_refuses_invalid_counts_whatever_the_limit(value) -> None:
     with pytest.raises(FormatError, match="a.amc: frame count is"):
         limits.check("frames", value, "a.amc", "frame count")

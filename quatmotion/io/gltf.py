@@ -537,7 +537,7 @@ class _Reader:
         if acc.get("type") != kind:
             raise self.fail(f"{where} is {acc.get('type')!r}, expected {kind}")
         component = acc.get("componentType")
-        if component not in _DTYPES or isinstance(component, bool):
+        if not _is_index(component) or component not in _DTYPES:
             raise self.fail(f"{where} has componentType {component!r}")
         if acc.get("sparse") is not None:
             raise self.fail(f"{where} is sparse, which is not read")
@@ -728,7 +728,8 @@ class _Reader:
             target = channel.get("target")
             if not _is_object(target):
                 raise self.fail(f"{field}.target is missing")
-            j = index.get(target.get("node"))  # type: ignore[arg-type]
+            node = target.get("node")
+            j = index.get(node) if _is_index(node) else None
             path = target.get("path")
             if j is None or path not in ("rotation", "translation"):
                 continue  # another node's, or weights and scale
