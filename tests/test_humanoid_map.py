@@ -259,6 +259,11 @@ def test_index_build_stores_the_joint_map_and_info_prints_the_mapping(tmp_path: 
         assert idx.settings.read.joint_map == ("LHip=joint_a", "RHip=joint_b")
     info = runner.invoke(app, ["info", str(clip), "--joint-map", str(map_file)])
     assert "joint_a (user)" in info.output
+    listing = runner.invoke(app, ["index", "ls", str(index)])
+    assert "2 by user" in listing.output and "LHip=joint_a" in listing.output, listing.output
+    doc = json.loads(runner.invoke(app, ["index", "ls", str(index), "--json"]).output)
+    (entry,) = doc["skeletons"].values()
+    assert entry["joints"]["LHip"] == {"joint": "joint_a", "how": "user"}
     bad = runner.invoke(
         app, ["index", "build", str(clip), "-o", str(tmp_path / "y.qidx"), "--joint-map",
               str(tmp_path / "missing.json")]

@@ -76,11 +76,13 @@ __all__ = [
     "labels_option",
     "number_in",
     "print_json",
+    "print_mappings",
     "printable",
     "progress_bar",
     "read_clip",
     "report_skipped",
     "require_file",
+    "skeleton_mappings",
     "unit_label",
     "unit_text",
     "user_errors",
@@ -319,6 +321,45 @@ def joint_map_entries(path: Path | None) -> tuple[str, ...]:
         return joint_map_pairs(read_joint_map(path))
     except FormatError as error:
         raise CliInputError(f"--joint-map: {error}") from None
+
+
+def skeleton_mappings(refs: Iterable[object], read: object = None) -> dict[str, dict]:
+    """How each skeleton of a collection maps onto the 16-joint body (what ``index ls`` and
+    ``pose ls`` show): per skeleton fingerprint, its first clip read again with the
+    collection's reading settings and mapped (:func:`quatmotion.pose.skeleton16.humanoid_map`):
+    ``{"clip", "clips", "mapping"}`` (a one-line summary) and ``"joints"`` (canonical -> file
+    joint and how), or ``"error"`` (a file gone, a skeleton not mapped)."""
+    from quatmotion.collection import read_clip as read_collection_clip
+    from quatmotion.pose.skeleton16 import humanoid_map
+
+    groups: dict[str, list] = {}
+    for ref in refs:
+        groups.setdefault(getattr(ref, "skeleton", "") or "", []).append(ref)
+    out: dict[str, dict] = {}
+    for fingerprint, members in groups.items():
+        entry: dict[str, object] = {"clip": members[0].name, "clips": len(members)}
+        try:
+            motion = read_collection_clip(members[0], read).motion  # type: ignore[arg-type]
+            mapping = humanoid_map(motion.skeleton)
+            entry["mapping"] = mapping.summary()
+            entry["joints"] = mapping.as_dict()
+        except (OSError, ValueError) as error:
+            entry["error"] = str(error).splitlines()[0]
+        out[fingerprint] = entry
+    return out
+
+
+def print_mappings(mappings: dict[str, dict]) -> None:
+    """One line per skeleton of :func:`skeleton_mappings`."""
+    for fingerprint, entry in mappings.items():
+        how = entry.get("mapping") or f"not mapped: {entry.get('error')}"
+        console.print(
+            f"skeleton {fingerprint[:8] or '-'} ({entry['clips']} clips, e.g. {entry['clip']}): "
+            f"16-joint body {how}",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
 
 
 def check_translations(translations: str) -> str:

@@ -41,11 +41,13 @@ from quatmotion.cli._common import (
     error_console,
     joint_map_entries,
     print_json,
+    print_mappings,
     progress_bar,
     read_clip,
     report_skipped,
     require_file,
     say_wrote,
+    skeleton_mappings,
     user_errors,
     warn,
 )
@@ -247,6 +249,8 @@ def ls_command(
     with user_errors():
         library = PoseLibrary.open(library_path)
         refs = library.clips()
+        read = library.settings.read if library.settings is not None else None
+        mappings = skeleton_mappings(refs, read)
     settings = library.settings.to_dict() if library.settings is not None else None
     counts = np.bincount(library.clip_of, minlength=len(refs))
     if as_json:
@@ -257,6 +261,7 @@ def ls_command(
                 "clips": [
                     {**r.to_dict(), "poses": int(n)} for r, n in zip(refs, counts, strict=True)
                 ],
+                "skeletons": mappings,
             }
         )
         return
@@ -272,6 +277,7 @@ def ls_command(
         f"{library.version}; {made}",
         markup=False,
     )
+    print_mappings(mappings)
 
 
 class _StageBars:

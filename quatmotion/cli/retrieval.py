@@ -38,11 +38,13 @@ from quatmotion.cli._common import (
     joint_map_entries,
     labels_option,
     print_json,
+    print_mappings,
     progress_bar,
     read_clip,
     report_skipped,
     require_file,
     say_wrote,
+    skeleton_mappings,
     user_errors,
 )
 
@@ -323,12 +325,14 @@ def ls_command(
     with user_errors(), ClipIndex.open(index) as idx:
         rows = idx.rows()
         settings, version = idx.settings, idx.version
+        mappings = skeleton_mappings(idx.clips(), settings.read)
     if as_json:
         print_json(
             {
                 "format": {"name": idx.format.name, "version": version},
                 "settings": settings.to_dict(),
                 "clips": [r.as_dict() for r in rows],
+                "skeletons": mappings,
             }
         )
         return
@@ -340,7 +344,9 @@ def ls_command(
     _say(
         f"{len(rows)} clips; index version {version}; features {', '.join(settings.kinds)}; "
         f"units {read.units or 'guessed'}; skeleton {read.skeleton or 'found by name'}"
+        + (f"; joint map {', '.join(read.joint_map)}" if read.joint_map else "")
     )
+    print_mappings(mappings)
 
 
 _QUERIES_HELP = (
