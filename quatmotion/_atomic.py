@@ -22,6 +22,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
+    "output_lock",
 ]
 
 
@@ -69,6 +70,55 @@ def _permissions(path: Path) -> int:
         umask = os.umask(0)
         os.umask(umask)
         return 0o666 & ~umask
+
+
+class OutputBusyError(OSError):
+    """Another process is writing the file (it holds the file's :func:`output_lock`)."""
+
+
+@contextlib.contextmanager
+def output_lock(path: str | Path) -> Iterator[None]:
+    """Hold the write lock of ``path`` for the block: an exclusive ``flock`` on
+    ``.NAME.lock`` beside it, removed when the block ends.
+
+    Two writers of one file (two ``append`` to a library, two ``compress`` to one ``-o``) would
+    each read the old file and rename their own over it, one losing the other's work: the
+    second is refused at once instead.
+
+    Raises
+    ------
+    OutputBusyError
+        Naming ``path``: another process holds its lock.
+    """
+    import fcntl
+
+    path = Path(path)
+    lock = path.parent / f".{path.name}.lock"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OutputBusyError(
+                errno.EBUSY,
+                f"is being written by another quatmotion process (lock {lock.name}); try again "
+                "when it has finished",
+                str(path),
+            ) from None
+        try:  # the lock file may have been removed by the holder just before: lock the new one
+            if os.fstat(fd).st_ino == os.stat(lock).st_ino:
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(lock)
+        os.close(fd)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:

@@ -290,7 +290,7 @@ def run_command(args: Sequence[str], cwd: Path | None = None) -> Outcome:
     env = {**os.environ, "COLUMNS": "200", "NO_COLOR": "1"}
     t0 = time.perf_counter()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "quatmotion", *args],
+        [str(Path(sys.executable).parent / "quatmotion"), *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,

@@ -12,7 +12,7 @@ import pytest
 
 from quatmotion.retrieval import _kernels, quick
 from quatmotion.retrieval.distances import pack_sequences
-from quatmotion.retrieval.index import FEATURE_PARAMETERS, FORMAT, ClipIndex
+from quatmotion.retrieval.index import FORMAT, ClipIndex
 from quatmotion.retrieval.methods import DEFAULT_METHOD, FUSED_RADIUS
 from quatmotion.retrieval.search import search
 from quatmotion.synthetic import KINDS, generate_clip
@@ -24,7 +24,6 @@ def test_its_constants_are_the_index_and_the_defaults():
     assert quick.METHOD == DEFAULT_METHOD
     assert quick.RADIUS == FUSED_RADIUS
     assert (FORMAT.name, FORMAT.version) == (quick.FORMAT_NAME, quick.INDEX_VERSION)
-    assert quick._FEATURE_PARAMETERS == FEATURE_PARAMETERS
 
 
 def test_fused_distances_are_the_kernels_dtw_bit_for_bit():
@@ -122,7 +121,8 @@ def test_a_shell_query_by_name_imports_no_numba_and_answers_as_the_numba_path(in
 
 
 def test_stored_arrays_read_as_np_load_reads_them():
-    from quatmotion.retrieval.index import _from_blob, _to_blob
+    from quatmotion.retrieval.index import _to_blob
+    from quatmotion.retrieval.stored import read_array as _from_blob
 
     rng = np.random.default_rng(1)
     for a in (

@@ -38,7 +38,6 @@ from quatmotion.cli._common import (
     user_errors,
     write_clip,
 )
-from quatmotion.collection.refs import duplicates
 from quatmotion.errors import FormatError
 
 _METHODS = "best, spline, naive, qssd or ksvd"
@@ -289,6 +288,8 @@ def decompress(
                 planned.append(
                     (i, clip_files(clip_output(out, entry.name, f".{fmt}", library), skeleton))
                 )
+            from quatmotion.collection.refs import duplicates
+
             targets = [f for _, files in planned for f in files]
             twice = duplicates(str(f) for f in targets)
             if twice:

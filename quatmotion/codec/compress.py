@@ -18,6 +18,7 @@ before 0.4.0, kept as thin wrappers.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import itertools
 import json
@@ -30,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from quatmotion._atomic import atomic_output
+from quatmotion._atomic import atomic_output, output_lock
 from quatmotion.codec.archive import Archive
 from quatmotion.codec.binary import Writer
 from quatmotion.codec.channels import layout_key, to_channels
@@ -681,7 +682,9 @@ class _Coded:
 def _spool(models: SharedModels, blobs: list[bytes], coded: Iterable[CodedClip]) -> _Coded:
     import tempfile
 
-    out = _Coded(models, blobs, tempfile.NamedTemporaryFile(prefix="quatmotion-spool-"))  # noqa: SIM115 (closed by _Coded.close)
+    from quatmotion.parallel import scratch
+
+    out = _Coded(models, blobs, tempfile.NamedTemporaryFile(prefix=scratch.prefix("spool")))  # noqa: SIM115 (closed by _Coded.close)
     try:
         offset = 0
         for clip in coded:
@@ -1043,6 +1046,22 @@ def build_library(
     FormatError
         A malformed input file (naming it), with ``on_error="raise"``.
     """
+    lock = contextlib.nullcontext() if out is None else output_lock(out)
+    with lock:  # two builds of one file: the second is refused, not silently overwritten
+        return _build_library(
+            sources, out, settings, runner, progress, on_doubt, source_sizes
+        )  # fmt: skip
+
+
+def _build_library(
+    sources: Iterable[Any],
+    out: str | Path | None,
+    settings: CompressSettings | None,
+    runner: Runner | None,
+    progress: Progress | None,
+    on_doubt: OnDoubt | None,
+    source_sizes: Sequence[tuple[int, str]] | None,
+) -> BuildReport:
     t0 = time.perf_counter()
     settings = settings or CompressSettings()
     report = progress or (lambda *_: None)
@@ -1100,12 +1119,24 @@ def add_to_library(
     :class:`CompressSettings`; the method is always the file's). A clip whose content hash the
     file already holds is skipped (in ``report.skipped``); a new clip whose name the file
     holds is an error. The file keeps the settings it was made with. A version 1 file is
-    rewritten in the current version.
+    rewritten in the current version. Another writer of ``path`` at the same time is refused
+    (:func:`quatmotion._atomic.output_lock`).
     """
+    with output_lock(path):  # read, code and rewrite: no other writer between
+        return _add_to_library(Path(path), sources, settings, runner, progress, on_doubt)
+
+
+def _add_to_library(
+    path: Path,
+    sources: Iterable[Any],
+    settings: CompressSettings | None,
+    runner: Runner | None,
+    progress: Progress | None,
+    on_doubt: OnDoubt | None,
+) -> BuildReport:
     from dataclasses import replace
 
     t0 = time.perf_counter()
-    path = Path(path)
     report = progress or (lambda *_: None)
     with Archive.open(path) as archive:
         old = archive.header

@@ -20,7 +20,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-from quatmotion.parallel import _context, _worker
+from quatmotion.parallel import _context, _worker, scratch
 from quatmotion.parallel._protocol import Outcome, _Collector, _Task
 
 __all__ = ["run", "shutdown_pools"]
@@ -64,8 +64,12 @@ def _shared_pool(n: int, module: str | None, *, import_main: bool) -> ProcessPoo
             if module and module != "__main__":
                 preload.append(module)
             context.set_forkserver_preload(preload)
+            scratch.use_for_multiprocessing()
             pool = ProcessPoolExecutor(
-                max_workers=n, mp_context=context, initializer=_worker.limit_threads_in_worker
+                max_workers=n,
+                mp_context=context,
+                initializer=_worker.start_worker,
+                initargs=(os.getpid(),),
             )
             _pools[n, import_main] = pool
         return pool
@@ -98,7 +102,7 @@ class _ContextFile:
             return
         data = pickle.dumps(context, protocol=pickle.HIGHEST_PROTOCOL)
         self.names_main = _names_main(data)
-        fd, path = tempfile.mkstemp(prefix="quatmotion-context-", suffix=".pickle")
+        fd, path = tempfile.mkstemp(prefix=scratch.prefix("context"), suffix=".pickle")
         with os.fdopen(fd, "wb") as file:
             file.write(data)
         self.ref = (uuid.uuid4().hex, path)

@@ -45,6 +45,65 @@ def one_line(exc: BaseException) -> str:
     return f"{name}: {first}" if first else name
 
 
+def start_worker(parent: int) -> None:
+    """The initializer of a local pool's worker: one thread (:func:`limit_threads_in_worker`),
+    and death with the run that started it (:func:`die_with`)."""
+    die_with(parent)
+    limit_threads_in_worker()
+
+
+def die_with(parent: int) -> None:
+    """End this process when process ``parent`` ends, however it ends (``kill -9`` too).
+
+    A local pool's worker is a child of the fork server, not of the run, and would otherwise
+    live on after the run is killed, holding its memory. On Linux the kernel kills it when its
+    parent (the fork server) dies (``PR_SET_PDEATHSIG``), and a thread waits on the run itself
+    (a pidfd; elsewhere it asks every second) and ends the process when the run is gone.
+    """
+    import signal
+
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        with _ignored():
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
+    if parent == os.getpid():
+        return
+
+    def watch() -> None:
+        import select
+
+        try:
+            fd = os.pidfd_open(parent)
+        except (AttributeError, OSError):  # no pidfds: ask
+            while _alive(parent):
+                time.sleep(1.0)
+        else:
+            select.select([fd], [], [])  # readable when the process has ended
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    if not _alive(parent):
+        os.kill(os.getpid(), signal.SIGKILL)
+    threading.Thread(target=watch, name="quatmotion-parent-watch", daemon=True).start()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _ignored():
+    import contextlib
+
+    return contextlib.suppress(OSError, AttributeError)
+
+
 def limit_threads_in_worker() -> None:
     """Make this worker process (and the calling thread, for Numba) single-threaded.
 

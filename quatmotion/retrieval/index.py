@@ -40,14 +40,15 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
+from quatmotion._atomic import atomic_output
 from quatmotion._format import FileFormat
 from quatmotion._settings import Interval, Settings
 from quatmotion.collection import ClipRef, ReadSettings, unique_names
 from quatmotion.collection.refs import content_hash
 from quatmotion.errors import ClipNameError, FormatError
 from quatmotion.io.names import match_clip
-from quatmotion.retrieval import features as feat
 from quatmotion.retrieval.methods import FEATURE_KINDS, Library
+from quatmotion.retrieval.stored import FEATURE_PARAMETERS, FORMAT, check_index, read_array
 
 if TYPE_CHECKING:
     from quatmotion.collection import BuildReport
@@ -65,22 +66,9 @@ __all__ = [
     "content_hash",
 ]
 
-FORMAT = FileFormat("quatmotion-retrieval-index", 2, 1, "a quatmotion clip index")
 FORMAT_NAME = FORMAT.name
 FORMAT_VERSION = FORMAT.version
 _SQLITE_MAGIC = b"SQLite format 3\x00"
-
-FEATURE_PARAMETERS = {
-    "feature_fps": feat.FEATURE_FPS,
-    "height_cm": feat.HEIGHT_CM,
-    "horizon_s": feat.HORIZON_S,
-    "yaw_radius_cm": feat.YAW_RADIUS_CM,
-    "dictionary_atoms": feat.DICTIONARY_ATOMS,
-    "dictionary_sparsity": feat.DICTIONARY_SPARSITY,
-    "dictionary_max_fps": feat.DICTIONARY_MAX_FPS,
-    "dictionary_max_iter": feat.DICTIONARY_MAX_ITER,
-}
-"""What the stored features depend on; an index built with other values must be rebuilt."""
 
 
 @dataclass(frozen=True)
@@ -217,10 +205,6 @@ def _to_blob(a: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def _from_blob(b: bytes) -> np.ndarray:
-    return np.load(io.BytesIO(b), allow_pickle=False)
-
-
 @contextlib.contextmanager
 def _writing(path: Path) -> Iterator[None]:
     """SQLite's write errors as an ``OSError`` naming the index file ("unable to open database
@@ -309,23 +293,25 @@ class ClipIndex:
         if path.exists() and path.stat().st_size > 0:
             raise FileExistsError(errno.EEXIST, "an index is already there", str(path))
         settings = settings or IndexSettings()
-        path.parent.mkdir(parents=True, exist_ok=True)
+        # The schema and the meta table go into a temporary file renamed into place: a new
+        # index appears whole or not at all (sqlite3's executescript commits each statement).
+        with atomic_output(path) as temp:
+            db = sqlite3.connect(temp)
+            try:
+                with _writing(path), db:
+                    db.executescript(_SCHEMA)
+                    db.executemany(
+                        "INSERT INTO meta VALUES (?, ?)",
+                        [
+                            ("format", FORMAT_NAME),
+                            ("version", str(FORMAT_VERSION)),
+                            ("features", json.dumps(FEATURE_PARAMETERS, sort_keys=True)),
+                            ("settings", json.dumps(settings.to_dict(), sort_keys=True)),
+                        ],
+                    )
+            finally:
+                db.close()
         db = sqlite3.connect(path)
-        try:
-            with _writing(path), db:
-                db.executescript(_SCHEMA)
-                db.executemany(
-                    "INSERT INTO meta VALUES (?, ?)",
-                    [
-                        ("format", FORMAT_NAME),
-                        ("version", str(FORMAT_VERSION)),
-                        ("features", json.dumps(FEATURE_PARAMETERS, sort_keys=True)),
-                        ("settings", json.dumps(settings.to_dict(), sort_keys=True)),
-                    ],
-                )
-        except BaseException:
-            db.close()
-            raise
         db.execute("PRAGMA foreign_keys = ON")
         return cls(db, path, FORMAT_VERSION, settings)
 
@@ -352,21 +338,7 @@ class ClipIndex:
         uri = f"{path.resolve().as_uri()}?mode={'rw' if write else 'ro'}"
         db = sqlite3.connect(uri, uri=True)
         try:
-            meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
-            db.execute("SELECT count(*) FROM clips").fetchone()
-            db.execute("SELECT count(*) FROM features").fetchone()
-            db.execute("PRAGMA quick_check").fetchone()
-        except sqlite3.DatabaseError as error:
-            db.close()
-            raise FormatError(f"not a readable quatmotion index ({error})", path) from None
-        try:
-            version = FORMAT.check(meta.get("format"), meta.get("version"), path)
-            if json.loads(meta.get("features", "{}")) != FEATURE_PARAMETERS:
-                raise FormatError(
-                    "index built with other feature parameters; rebuild it "
-                    "(quatmotion index build)",
-                    path,
-                )
+            version, meta = check_index(db, path)
             if version == 1 and write:
                 raise FormatError(
                     "a version-1 index (quatmotion 0.3.0) is read-only: rebuild it with "
@@ -374,7 +346,7 @@ class ClipIndex:
                     path,
                 )
             settings = _stored_settings(meta, version, path)
-        except (FormatError, ValueError) as error:
+        except (FormatError, ValueError, TypeError) as error:
             db.close()
             if isinstance(error, FormatError):
                 raise
@@ -445,7 +417,7 @@ class ClipIndex:
             for clip, key, data in self._db.execute(
                 f"SELECT clip, key, data FROM features WHERE key IN ({marks})", keys
             ):
-                arrays[int(clip)][key] = _from_blob(data)
+                arrays[int(clip)][key] = read_array(data, self.path, f"feature {key!r}")
         rows = [r for r in rows if all(k in arrays[r.id] for k in keys)]
         stored = {}
         if self.version != 1:
@@ -571,7 +543,7 @@ class ClipIndex:
 def _stored_settings(meta: dict[str, str], version: int, path: Path) -> IndexSettings:
     if version == 1 or "settings" not in meta:
         return IndexSettings()  # 0.3.0 stored none: the defaults of that release
-    return IndexSettings.from_dict(json.loads(meta["settings"]), path)
+    return IndexSettings.from_dict(json.loads(meta["settings"]), path)  # check_index's JSON
 
 
 def _rows_v2(db: sqlite3.Connection, path: Path) -> list[ClipRow]:
