@@ -193,7 +193,7 @@ def compress(
     from quatmotion.codec.compress import build_library, runner_of
     from quatmotion.collection import ReadSettings
 
-    with user_errors():
+    with user_errors(out):
         check_units(units)
         if skeleton is not None:
             require_file(skeleton)
@@ -264,7 +264,7 @@ def decompress(
     """Write the clips of a .qmz file as AMC (+ASF) or BVH, each under its own name."""
     from quatmotion.codec import Archive
 
-    with user_errors():
+    with user_errors(out):
         require_file(library)
         if format is not None and format.lower().lstrip(".") not in ("amc", "bvh"):
             raise CliInputError(f"--format must be amc or bvh, got {format!r}")
@@ -394,7 +394,7 @@ def append(
     from quatmotion.codec import Archive
     from quatmotion.codec.compress import add_to_library, runner_of
 
-    with user_errors():
+    with user_errors(library):
         require_file(library)
         check_units(units)
         if skeleton is not None:

@@ -119,7 +119,7 @@ def index_command(
     from quatmotion.parallel import resolve_scheduler
     from quatmotion.pose.library import PoseLibrary
 
-    with user_errors():
+    with user_errors(output):
         settings = _pose_settings(
             fps=fps, height=height, metric=metric, rank=rank, n_unlabeled=unlabeled,
             n_pairs=pairs, seed=seed, fit_poses=fit_poses, index_threads=index_threads,
@@ -171,7 +171,7 @@ def add_command(
     from quatmotion.parallel import resolve_scheduler
     from quatmotion.pose.library import PoseLibrary
 
-    with user_errors():
+    with user_errors(library_path):
         if not library_path.is_file():
             raise CliInputError(f"{library_path}: no pose library there (pose index makes one)")
         check_units(units)
