@@ -209,7 +209,9 @@ def _show(value: float) -> str:
     return f"{int(number):,}" if whole else f"{number:g}"
 
 
-_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.DOTALL)
+# A JSON string, its loop unrolled: a run of plain characters at a time (an alternation per
+# character takes 17 s over a 40 MB data URI, this 1 s).
+_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
 
 
 def json_depth(data: bytes | str) -> int:

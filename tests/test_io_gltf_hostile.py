@@ -313,3 +313,15 @@ def test_zero_quaternions_are_refused(document):
     )
     del changed["accessors"][rotation]["bufferView"]  # all zeros, as the specification says
     _refused(changed, "output holds a zero quaternion")
+
+
+def test_huge_quaternion_components_are_read_as_the_rotation_they_are(document):
+    """A norm of 1e308-sized components overflows: they are scaled first (a fuzz finding)."""
+    changed = copy.deepcopy(document)
+    changed["nodes"][1]["rotation"] = [1e308, 0.0, 0.0, 1e308]  # x y z w: 90 degrees about x
+    anim = changed["animations"][0]
+    anim["channels"] = [c for c in anim["channels"] if c["target"]["node"] != 1]
+    motion = io.parse_motion(json.dumps(changed).encode(), "huge.gltf")
+    assert np.isfinite(motion.rotations).all()
+    half = np.sqrt(0.5)
+    assert np.allclose(motion.rotations[:, 1], [half, half, 0.0, 0.0])  # w x y z, the rest

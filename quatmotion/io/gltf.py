@@ -675,7 +675,8 @@ class _Reader:
         if matrix is not None and not np.array_equal(matrix, np.eye(4).ravel()):
             m = matrix.reshape(4, 4).T
             scales = np.linalg.norm(m[:3, :3], axis=0)
-            if not np.allclose(scales, scales[0], rtol=1e-6) or not scales[0] > 0:
+            uniform = np.allclose(scales, scales[0], rtol=1e-6)
+            if not (uniform and np.all(np.isfinite(scales)) and scales[0] > 0):
                 raise self.fail(f"{where}.matrix is not a rotation with a uniform scale")
             r = quat.from_matrix(m[:3, :3] / scales[0])
             return r, m[:3, 3].copy(), float(scales[0])
@@ -687,8 +688,10 @@ class _Reader:
         s = np.ones(3) if s is None else s
         if not np.allclose(s, s[0], rtol=1e-6) or not s[0] > 0:
             raise self.fail(f"{where}.scale {s.tolist()} is not uniform and positive")
-        if not np.linalg.norm(r) > 1e-12:
+        largest = np.max(np.abs(r))
+        if not largest > 0:
             raise self.fail(f"{where}.rotation is zero, not a rotation")
+        r = r / largest  # a norm of huge components would overflow
         return quat.normalize(r), t, float(s[0])
 
     def translation(self, n: int) -> NDArray:
@@ -752,8 +755,11 @@ class _Reader:
             ]
             if np.any(np.diff(times) < 0):
                 raise self.fail(f"{field}: keyframe times go backwards")
-            if path == "rotation" and not np.all(np.linalg.norm(values, axis=1) > 1e-12):
-                raise self.fail(f"{field} output holds a zero quaternion, not a rotation")
+            if path == "rotation":
+                largest = np.max(np.abs(values), axis=1, keepdims=True)  # no overflow below
+                if not np.all(largest > 0):
+                    raise self.fail(f"{field} output holds a zero quaternion, not a rotation")
+                values = values / largest
             (rotated if path == "rotation" else moved)[j] = (times, values, how)
         return rotated, moved
 

@@ -26,6 +26,9 @@ from quatmotion.synthetic import generate_clip
 DATA = data_root(must_exist=False)
 N_FRAMES = 20
 READERS = ("bvh", "asf", "amc", "gltf", "glb")
+ISOLATED = ("fbx",)
+"""Readers of C code (ufbx): fuzzed in a process of their own, where a crash is a finding."""
+FBX_SEEDS = ("bandai_bvh_names.fbx", "cmu_mixamo.fbx")  # tests/data/fbx, made by Blender
 NASTY_TOKENS = [
     "", "nan", "-inf", "1e999", "-", "abc", "{", "}", "JOINT", "End", "Site", "ROOT", "MOTION",
     "Frames:", "Frame Time:", "begin", "end", ":bonedata", ":hierarchy", ":units", "root",
@@ -154,6 +157,9 @@ def _as(reader: str, document: dict, made: dict[str, bytes]) -> bytes:
 @cache
 def seeds(reader: str) -> tuple[bytes, ...]:
     """Every seed of a reader: real heads, generated files, the hostile files."""
+    if reader == "fbx":
+        folder = Path(__file__).parents[1] / "data" / "fbx"
+        return tuple((folder / name).read_bytes() for name in FBX_SEEDS)
     found = [generated()[reader]]
     if DATA.is_dir():
         amc = sorted(DATA.glob("cmu/*/*.amc"))
@@ -191,7 +197,7 @@ def mutate(reader: str, data: bytes, rng: random.Random) -> bytes:
                 _mutate_json(document, rng)
             return _as(reader, document, generated())
     for _ in range(rng.randint(1, 3)):
-        data = _mutate_bytes(data, rng, text=reader not in ("gltf", "glb"))
+        data = _mutate_bytes(data, rng, text=reader not in ("gltf", "glb", "fbx"))
     return data
 
 
@@ -206,13 +212,18 @@ def _json_of(reader: str, data: bytes) -> dict | None:
 
 
 def _mutate_bytes(data: bytes, rng: random.Random, text: bool) -> bytes:
-    kinds = ["truncate", "flip", "delete", "duplicate", "insert"] + (["token"] * 3 if text else [])
+    kinds = ["truncate", "flip", "delete", "duplicate", "insert"]
+    kinds += ["token"] * 3 if text else ["integer"] * 3
     kind = rng.choice(kinds)
     if kind == "truncate":
         return data[: rng.randint(0, len(data))]
     if kind == "flip" and data:
         i = rng.randrange(len(data))
         return data[:i] + bytes([rng.randrange(256)]) + data[i + 1 :]
+    if kind == "integer" and len(data) >= 4:  # a count, length or offset of a binary format
+        i = rng.randrange(len(data) - 3)
+        value = rng.choice([0, 1, 0x7FFFFFFF, 0xFFFFFFFF, 0x80000000, rng.randrange(1 << 32)])
+        return data[:i] + struct.pack("<I", value) + data[i + 4 :]
     if kind == "insert":
         i = rng.randint(0, len(data))
         return data[:i] + rng.choice([b"\0", b"\xff\xff\xff\x7f", b"\n", b"{", b"}"]) + data[i:]

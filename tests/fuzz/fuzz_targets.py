@@ -20,6 +20,7 @@ NAMES = {
     "amc": "fuzz.amc",
     "gltf": "fuzz.gltf",
     "glb": "fuzz.glb",
+    "fbx": "fuzz.fbx",
 }
 
 

@@ -19,19 +19,22 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from fuzz_corpus import READERS, mutate, seeds  # noqa: E402
+from fuzz_corpus import ISOLATED, READERS, mutate, seeds  # noqa: E402
 from fuzz_targets import FindingError, run  # noqa: E402
 
 REGRESSIONS = Path(__file__).parent / "regressions"
 
 
-def fuzz(reader: str, seconds: float, seed: int) -> dict[str, int]:
+def fuzz(reader: str, seconds: float, seed: int, examples: int | None = None) -> dict[str, int]:
     rng = random.Random(f"{reader}:{seed}")
     corpus = list(seeds(reader))
     counts = {"read": 0, "refused": 0, "found": 0}
     found: set[str] = set()
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
+    started = time.monotonic()
+    deadline = started + seconds
+    done = 0
+    while time.monotonic() < deadline and (examples is None or done < examples):
+        done += 1
         data = mutate(reader, rng.choice(corpus), rng)
         try:
             counts[run(reader, data)] += 1
@@ -45,7 +48,8 @@ def fuzz(reader: str, seconds: float, seed: int) -> dict[str, int]:
             (REGRESSIONS / reader).mkdir(parents=True, exist_ok=True)
             (REGRESSIONS / reader / name).write_bytes(data)
             print(f"{reader}: found {finding} -> regressions/{reader}/{name}", flush=True)
-    print(f"{reader}: {counts} in {seconds:.0f} s (seed {seed})", flush=True)
+    elapsed = time.monotonic() - started
+    print(f"{reader}: {counts} in {elapsed:.0f} s (seed {seed})", flush=True)
     return counts
 
 
@@ -70,14 +74,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--minutes", type=float, default=10.0, help="per reader")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--jobs", type=int, default=1)
+    parser.add_argument("--examples", type=int, help="stop after so many files per reader")
     args = parser.parse_args(argv)
-    readers = args.readers or list(READERS)
-    unknown = sorted(set(readers) - set(READERS))
+    known = READERS + ISOLATED
+    readers = args.readers or list(known)
+    unknown = sorted(set(readers) - set(known))
     if unknown:
-        parser.error(f"no reader {', '.join(unknown)}; the readers: {', '.join(READERS)}")
+        parser.error(f"no reader {', '.join(unknown)}; the readers: {', '.join(known)}")
     with ProcessPoolExecutor(args.jobs) as pool:
         results = list(
-            pool.map(fuzz, readers, [args.minutes * 60] * len(readers), [args.seed] * len(readers))
+            pool.map(
+                fuzz,
+                readers,
+                [args.minutes * 60] * len(readers),
+                [args.seed] * len(readers),
+                [args.examples] * len(readers),
+            )
         )
     return 1 if any(r["found"] for r in results) else 0
 

@@ -7,11 +7,13 @@ finding of a long run, ``make fuzz``, kept). The long runs: ``tests/fuzz/run.py`
 from __future__ import annotations
 
 import random
+import subprocess
+import sys
 from datetime import timedelta
 from pathlib import Path
 
 import pytest
-from fuzz_corpus import READERS, hostile, mutate, seeds
+from fuzz_corpus import ISOLATED, READERS, hostile, mutate, seeds
 from fuzz_targets import run
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -43,9 +45,27 @@ def test_mutated_files_are_read_or_refused(reader, rng: random.Random, which: in
 
 @pytest.mark.parametrize(
     "path",
-    sorted(p for reader in READERS for p in (REGRESSIONS / reader).glob("*") if p.is_file()),
+    sorted(
+        p for reader in READERS + ISOLATED for p in (REGRESSIONS / reader).glob("*") if p.is_file()
+    ),
     ids=lambda p: f"{p.parent.name}-{p.name}",
 )
 def test_regressions(path: Path):
     """A file a long run found (``regressions/READER/NAME``): read or refused now."""
     run(path.parent.name, path.read_bytes())
+
+
+@pytest.mark.parametrize("reader", ISOLATED)
+def test_mutated_files_of_c_readers_in_a_process_of_their_own(reader):
+    """ufbx is C: a mutated FBX that crashed it would end the test run; in a child process it
+    is one failed test (a negative exit code: the signal), and a finding is kept as a file."""
+    pytest.importorskip("ufbx")
+    run_py = Path(__file__).parent / "run.py"
+    done = subprocess.run(
+        [sys.executable, str(run_py), "--examples", "30", "--seed", "1", reader],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr[-2000:]
+    assert "'found': 0" in done.stdout
