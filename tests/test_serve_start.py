@@ -101,7 +101,7 @@ class _Server:
         pytest.fail(f"serve did not answer within {timeout} s: {self.stderr()}")
 
     def get(self, path: str):
-        with urllib.request.urlopen(f"{self.url}{path}", timeout=30) as response:
+        with urllib.request.urlopen(f"{self.url}{path}", timeout=120) as response:
             return json.load(response)
 
     def stderr(self) -> str:

@@ -205,3 +205,34 @@ def test_play_compare_and_search_pages_keep_every_family_in_view(
         assert all(url.startswith(served) for url in requests), requests
         page.close()
     assert not problems, "\n".join(problems)
+
+
+def test_clip_names_and_labels_are_shown_as_text_never_as_html(browser, tmp_path):
+    """A clip whose file name and label are HTML (a label comes from any CSV or sidecar): the
+    pages show them as text; no element of theirs is made, no script of theirs runs."""
+    from quatmotion.io import write_motion
+    from quatmotion.retrieval import ClipIndex, IndexSettings
+    from quatmotion.synthetic import generate_clip
+
+    hostile = '<img src=x onerror="document.documentElement.dataset.pwned=1">'
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    name = "<b>bold<i>"
+    write_motion(generate_clip("walk", 1, n_frames=60), clips / f"{name}.bvh")
+    write_motion(generate_clip("walk", 2, n_frames=60), clips / "plain.bvh")
+    index = tmp_path / "x.qidx"
+    settings = IndexSettings(kinds=("motion",))
+    ClipIndex.build([clips], index, settings, labels={name: hostile, "plain": hostile}, workers=1)
+    with _serve(tmp_path / "serve.log", "--index", str(index)) as base:
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(f"{base}/")
+        _state(page, "ready")
+        assert page.locator("#clips img, #clips b, #clips i").count() == 0
+        text = page.locator("#clips").inner_text()
+        assert name in text and hostile in text
+        page.goto(f"{base}/search?clip=plain")
+        _state(page, "ready")
+        assert page.locator("#results img, #results b").count() == 0
+        assert name in page.locator("#results").inner_text()
+        assert page.evaluate("document.documentElement.dataset.pwned || null") is None
+        page.close()
