@@ -256,8 +256,9 @@ def test_every_command_that_reads_motion_takes_units_and_skeleton(clips, tmp_pat
 def test_compress_reads_a_studio_layout_in_its_unit_and_warns_about_a_giant(tmp_path, studio_walk):
     """Issue 17's case: a 135 cm figure written in inches, its rest pose laid out along X, read
     as 53 cm (guessed cm) when the guess looked at the rest pose. The stature chain reads it in
-    inches (issue 21, item 7); a figure no unit makes human (300 cm in cm) is warned about, and
-    ``--units`` then keeps the bound in the unit given."""
+    inches (issue 21, item 7); a figure no unit makes human (300 cm in cm) is warned about,
+    guessed or given (issue 29: a unit given is checked as hard), and ``--units`` keeps the
+    bound in the unit given (no unit is likelier: it is no refusal)."""
     truth, studio = studio_walk(135.0, INCH_CM)
     bvh = tmp_path / "studio.bvh"
     io.write_bvh(studio, bvh)
@@ -277,7 +278,9 @@ def test_compress_reads_a_studio_layout_in_its_unit_and_warns_about_a_giant(tmp_
     lib = tmp_path / "given.qmz"
     result = _invoke("compress", bvh, "-o", lib, "--max-error", "1", "--units", "cm")
     assert result.exit_code == 0, result.output
-    assert _warnings(result) == [] and "length unit: cm (given)" in result.stdout
+    (warning,) = _warnings(result)
+    assert "the unit given" in warning and "50 to 220 cm" in warning
+    assert "length unit: cm (given)" in result.stdout
     with codec.Archive.open(lib) as archive:
         decoded = archive.read(0)
     assert _max_error(truth, decoded) <= 1.0 + 1e-6  # the bound holds on the true figure
@@ -317,7 +320,9 @@ def test_batch_commands_warn_about_a_doubtful_unit_from_their_workers(tmp_path, 
         "index", "build", clips / "studio.bvh", "-o", tmp_path / "y.qidx", "--kinds", "motion",
         "--units", "cm",
     )  # fmt: skip
-    assert given.exit_code == 0 and _warnings(given) == [], given.output
+    assert given.exit_code == 0, given.output
+    (warning,) = _warnings(given)  # a unit given is checked as hard as one guessed (issue 29)
+    assert "the unit given" in warning and "50 to 220 cm" in warning
 
 
 # --- small things: a frame time of 1,000 s -------------------------------------------------------

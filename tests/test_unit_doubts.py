@@ -8,6 +8,7 @@ no longer fools it; and the library's batch functions take ``units=`` and report
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -66,8 +67,8 @@ def test_compress_reads_in_the_unit_given_and_hears_the_doubts(tmp_path, studio_
     heard.clear()
     result = codec.compress(
         [path], max_error=1.0, units="cm", workers=1, on_doubt=lambda *doubt: heard.append(doubt)
-    )
-    assert heard == []
+    )  # a unit given is checked too (issue 29): still no human, and no unit likelier
+    assert [(doubt.kind, doubt.likely_unit) for _, doubt in heard] == [("unit", None)]
     with codec.Archive.open(result.data) as archive:
         decoded = archive.read(0)
     assert decoded.skeleton.extras["bvh_scale"] == 1.0
@@ -91,7 +92,103 @@ def test_build_index_hears_the_doubts_its_workers_find(tmp_path, studio_walk):
     heard.clear()
     settings = IndexSettings(kinds=("motion",), read=ReadSettings(units="cm"))
     ClipIndex.build(
-        [folder / "studio.bvh"], tmp_path / "y.qidx", settings, workers=1,
+        [folder / "studio.bvh", folder / "walk.bvh"], tmp_path / "y.qidx", settings, workers=1,
         on_doubt=lambda source, doubt: heard.append(source),
     )  # fmt: skip
-    assert heard == []
+    assert heard == [str(folder / "studio.bvh")]  # a unit given is checked too (issue 29)
+
+
+def _metre_walk(tmp_path, studio_walk):
+    """A 170 cm walk written in metres (the studio layout), and its file."""
+    truth, metres = studio_walk(170.0, 100.0)
+    path = tmp_path / "metres.bvh"
+    io.write_bvh(metres, path)
+    return truth, path
+
+
+def test_a_unit_given_or_stated_is_checked_as_hard_as_one_guessed(tmp_path, studio_walk):
+    """Issue 29 item 3: a metre file read with a given cm is a 1.7 cm figure; an ASF stating
+    a unit 100 times too small likewise. Both are doubts naming the likely unit; the unit that
+    makes the figure human is no doubt, given or stated."""
+    _, path = _metre_walk(tmp_path, studio_walk)
+    assert io.implausible_values(io.read_motion(path, units="m")) == []
+    (doubt,) = io.implausible_values(io.read_motion(path, units="cm"))
+    assert doubt.kind == "unit" and doubt.likely_unit == "m", doubt
+    assert "the unit given" in doubt.message and "read in m" in doubt.message
+    clip = generate_clip("walk", 1, n_frames=30)  # on CMU's skeleton, ASF units 0.45
+    io.write_asf(clip.skeleton, tmp_path / "walk.asf")
+    io.write_amc(clip, tmp_path / "walk.amc")
+    assert io.implausible_values(io.read_motion(tmp_path / "walk.amc")) == []
+    text = (tmp_path / "walk.asf").read_text()
+    length = re.search(r"^  length (\S+)$", text, re.MULTILINE)
+    shrunk = f"  length {float(length.group(1)) * 100:.10g}"
+    (tmp_path / "walk.asf").write_text(text.replace(length.group(0), shrunk))
+    (doubt,) = io.implausible_values(io.read_motion(tmp_path / "walk.amc"))
+    assert doubt.kind == "unit" and doubt.likely_unit == "asf", doubt
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["info", "{clip}"],
+        ["convert", "{clip}", "{tmp}/out.bvh"],
+        ["view", "{clip}", "-o", "{tmp}/v.html"],
+        ["index", "build", "{clip}", "-o", "{tmp}/x.qidx", "--workers", "1"],
+        ["search", "{clip}", "--index", "{idx}"],
+        ["compress", "{clip}", "-o", "{tmp}/x.qmz", "--max-error", "1", "--force-units"],
+    ],
+    ids=lambda c: " ".join(c[:2]) if c[0] == "index" else c[0],
+)
+def test_every_command_warns_of_a_unit_given_naming_the_likely_one(tmp_path, studio_walk, command):
+    """One home (:func:`quatmotion.io.implausible_values`), one warning line naming the likely
+    unit, whichever command reads the file."""
+    from typer.testing import CliRunner
+
+    from quatmotion.cli import app
+
+    _, path = _metre_walk(tmp_path, studio_walk)
+    index = tmp_path / "i.qidx"
+    if command[0] == "search":
+        other = tmp_path / "other.bvh"
+        io.write_bvh(generate_clip("walk", 2, n_frames=60), other)
+        ClipIndex.build([other], index, IndexSettings(kinds=("motion",)), workers=1)
+    args = [a.format(clip=path, tmp=tmp_path, idx=index) for a in command]
+    result = CliRunner().invoke(app, [*args, "--units", "cm"])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
+    assert len(warnings) == 1 and "--units m" in warnings[0], result.stderr
+
+
+def test_compress_and_append_refuse_a_unit_that_makes_no_human_unless_forced(tmp_path, studio_walk):
+    """``compress --units cm`` of a metre file declared 0.0x cm errors that were metres: it
+    is one error line naming the likely unit, exit 2, nothing written; ``--force-units`` goes
+    on (the bound then holds in the unit read); ``append`` the same."""
+    from typer.testing import CliRunner
+
+    from quatmotion.cli import app
+
+    truth, path = _metre_walk(tmp_path, studio_walk)
+    out = tmp_path / "x.qmz"
+    run = CliRunner().invoke
+    for args in (["compress", str(path), "-o", str(out)], ["compress", str(path), "-o", str(out)]):
+        result = run(app, [*args, "--units", "cm", "--max-error", "1"])
+        assert result.exit_code == 2, result.output
+        errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+        assert len(errors) == 1 and "likely --units m" in errors[0], result.stderr
+        assert "Traceback" not in result.output and not out.exists()
+        args[-1] = str(tmp_path / "y.qmz")
+    result = run(app, ["compress", str(path), "-o", str(out), "--units", "m", "--max-error", "1"])
+    assert result.exit_code == 0 and "warning" not in result.stderr, result.output
+    before = out.read_bytes()
+    other = tmp_path / "again.bvh"
+    other.write_bytes(path.read_bytes().replace(b"Frame Time", b"Frame Time", 1) + b"\n")
+    result = run(app, ["append", str(out), str(other), "--units", "cm"])
+    assert result.exit_code == 2 and "likely --units m" in result.stderr, result.output
+    assert out.read_bytes() == before
+    result = run(app, ["append", str(out), str(other), "--units", "cm", "--force-units"])
+    assert result.exit_code == 0, result.output
+    with codec.Archive.open(out) as archive:
+        assert archive.read(0).skeleton.extras["bvh_scale"] == 100.0
+        decoded = archive.read(0)
+    error = forward_kinematics(decoded).all_positions() - forward_kinematics(truth).all_positions()
+    assert np.linalg.norm(error, axis=-1).max() <= 1.0 + 1e-6

@@ -49,6 +49,7 @@ __all__ = [
     "LABEL_FOLDERS_HELP",
     "CliInputError",
     "ForceOption",
+    "ForceUnitsOption",
     "JointMapOption",
     "JsonOption",
     "Outputs",
@@ -80,6 +81,7 @@ __all__ = [
     "printable",
     "progress_bar",
     "read_clip",
+    "refuse_unit",
     "report_skipped",
     "require_file",
     "skeleton_mappings",
@@ -486,19 +488,52 @@ def read_clip(
 def warn_doubt(source: object, doubt: Doubt, target: Console | None = None) -> None:
     """A ``warning:`` line for a doubtful clip (:func:`quatmotion.io.implausible_values`), on
     stderr or ``target`` (a progress bar's console), saying what to do about a unit."""
-    hint = "; give the unit with --units" if doubt.kind == "unit" else ""
-    if doubt.kind == "read" and "--bvh-translations" in doubt.message:
-        hint = ""
+    hint = ""
+    if doubt.kind == "unit":
+        likely = doubt.likely_unit
+        hint = f"; give --units {likely} if the file is in {likely}" if likely else ""
+        hint = hint or "; give the unit with --units"
     (target or error_console).print(
         f"warning: {source}: {doubt.message}{hint}", markup=False, highlight=False, soft_wrap=True
     )
 
 
-def doubt_reporter(progress: Progress) -> Callable[[str, Doubt], None]:
+def refuse_unit(source: object, doubt: Doubt) -> None:
+    """For a command that declares lengths (``compress``'s error bound, in centimetres): a
+    unit that makes no plausible human while another unit does is :class:`CliInputError`
+    naming that unit, and ``--force-units`` to go on. Other doubts pass."""
+    if doubt.kind == "unit" and doubt.likely_unit:
+        raise CliInputError(
+            f"{source}: {doubt.message}: likely --units {doubt.likely_unit} (--force-units "
+            "keeps the unit as read)"
+        )
+
+
+ForceUnitsOption = Annotated[
+    bool,
+    typer.Option(
+        "--force-units",
+        help="Go on with a length unit that makes no plausible human figure while another "
+        "unit would (else an error naming that unit): the error bound holds in the unit read.",
+    ),
+]
+"""``--force-units`` of the commands that refuse a doubtful unit (:func:`refuse_unit`)."""
+
+
+def doubt_reporter(
+    progress: Progress, *, refuse_units: bool = False
+) -> Callable[[str, Doubt], None]:
     """``on_doubt(source, doubt)`` for the library's batch functions: a warning on stderr,
-    above the bar (a bar on stdout lets stderr through above it too)."""
+    above the bar (a bar on stdout lets stderr through above it too); with ``refuse_units``,
+    :func:`refuse_unit` first (it stops the batch before anything is written)."""
     target = progress.console if progress.console.stderr else None
-    return lambda source, doubt: warn_doubt(source, doubt, target)
+
+    def report(source: str, doubt: Doubt) -> None:
+        if refuse_units:
+            refuse_unit(source, doubt)
+        warn_doubt(source, doubt, target)
+
+    return report
 
 
 def unit_label(skeleton: Skeleton) -> dict[str, object]:

@@ -13,6 +13,7 @@ from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
+    ForceUnitsOption,
     JsonOption,
     Outputs,
     SchedulerOption,
@@ -181,6 +182,7 @@ def compress(
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
     force: ForceOption = False,
+    force_units: ForceUnitsOption = False,
     as_json: JsonOption = False,
 ) -> None:
     """Compress clips into one .qmz library (default: every joint within 1 cm).
@@ -216,7 +218,8 @@ def compress(
         with progress_bar(error_console if as_json else console) as progress:
             report = build_library(
                 inputs, out, settings, runner=runner_of(workers, scheduler),
-                progress=_reporter(progress), on_doubt=doubt_reporter(progress),
+                progress=_reporter(progress),
+                on_doubt=doubt_reporter(progress, refuse_units=not force_units),
             )  # fmt: skip
         with Archive.open(out) as archive:
             rows = _clip_rows(archive)
@@ -387,6 +390,7 @@ def append(
     ] = None,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    force_units: ForceUnitsOption = False,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
@@ -412,7 +416,8 @@ def append(
         with progress_bar() as progress:
             report = add_to_library(
                 library, inputs, settings, runner=runner_of(workers, scheduler),
-                progress=_reporter(progress), on_doubt=doubt_reporter(progress),
+                progress=_reporter(progress),
+                on_doubt=doubt_reporter(progress, refuse_units=not force_units),
             )  # fmt: skip
         if not report.added:
             console.print(f"added 0 clips to {library}: it already holds all {len(report.skipped)}")

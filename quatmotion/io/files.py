@@ -287,6 +287,10 @@ class Doubt(NamedTuple):
     reader tolerated or assumed (:func:`read_motion_checked`)."""
     message: str
     """One sentence, without the file name."""
+    likely_unit: str | None = None
+    """For a ``"unit"`` doubt whose unit makes no plausible human while another unit of
+    :data:`LENGTH_UNITS` does: that unit's name (the reading nearest a typical adult). What a
+    command that declares lengths (``compress``'s error bound) refuses to go on without."""
 
 
 PLAUSIBLE_FPS = (1.0, 1000.0)
@@ -299,13 +303,15 @@ def implausible_values(motion: Motion) -> list[Doubt]:
 
     Three checks:
 
-    * the stature, whatever the format, when the length unit was guessed (a BVH) or stated by
-      the file (an ASF, a glTF), not given by the user: the body's size
-      (:func:`quatmotion.io.units.body_size`: the stature chain from an ankle to the head, or
-      the posed figure's extent) falls outside :data:`PLAUSIBLE_FIGURE_CM`, or another unit of
+    * the stature, whatever the format and wherever the length unit came from (guessed for a
+      BVH, stated by the file, or given by the user: a unit given is checked as hard as one
+      guessed): the body's size (:func:`quatmotion.io.units.body_size`: the stature chain from
+      an ankle to the head, or the posed figure's extent) falls outside
+      :data:`PLAUSIBLE_FIGURE_CM`, or, for a guessed unit, another unit of
       :data:`LENGTH_UNITS` makes it a plausible figure nearer a typical adult's 170 cm. The
-      message names the other readings. A guessed unit of a skeleton that is not a body (a lone
-      hand) is a doubt too: nothing could be guessed from its size;
+      message names the other readings, and :attr:`Doubt.likely_unit` the likeliest. A guessed
+      unit of a skeleton that is not a body (a lone hand) is a doubt too: nothing could be
+      guessed from its size;
     * coordinates or bones beyond :data:`FAR_CM`;
     * a frame rate outside :data:`PLAUSIBLE_FPS`.
 
@@ -371,9 +377,9 @@ def unit_reading(skeleton: Skeleton) -> tuple[float, str, str]:
 
 
 def _unit_doubt(motion: Motion) -> Doubt | None:
-    """The doubt about a guessed or stated unit, if any (see :func:`implausible_values`)."""
+    """The doubt about the unit a clip was read in, if any (see :func:`implausible_values`)."""
     cm, source, unit = unit_reading(motion.skeleton)
-    if source not in ("guessed", "stated"):
+    if source == "cm":  # made in code, in centimetres: no file unit to doubt
         return None
     size = body_size(motion)
     if size is None:
@@ -396,21 +402,26 @@ def _unit_doubt(motion: Motion) -> Doubt | None:
     }
     plausible = low <= size <= high
     likelier = {n: v for n, v in readings.items() if typicality(v) < typicality(size)}
-    if plausible and (source == "stated" or not likelier):
+    if plausible and (source != "guessed" or not likelier):
         return None
     shown = likelier if plausible else readings
     others = " or ".join(f"{value:.3g} cm read in {name}" for name, value in shown.items())
     said = f"; it would be {others}" if others else ""
-    how = f"with the length unit guessed as {unit}" if source == "guessed" else f"in {unit}"
+    how = {
+        "guessed": f"with the length unit guessed as {unit}",
+        "given": f"in {unit}, the unit given",
+    }.get(source, f"in {unit}")
     if plausible:
         return Doubt(
             "unit",
             f"the figure is {size:.3g} cm tall {how}, small for an adult and near a unit "
             f"boundary{said}",
         )
+    likely = min(readings, key=lambda n: typicality(readings[n])) if readings else None
     return Doubt(
         "unit",
         f"the figure is {size:.3g} cm tall {how}; a human figure is {low:g} to {high:g} cm{said}",
+        likely,
     )
 
 
