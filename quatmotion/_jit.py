@@ -25,14 +25,13 @@ environment, so pool workers, the fork server and local Dask workers use the sam
 from __future__ import annotations
 
 import contextlib
-import importlib.abc
 import importlib.machinery
 import os
 import sys
-import tempfile
 import threading
 from collections.abc import Callable, MutableMapping
 from pathlib import Path
+from typing import Any
 
 __all__ = [
     "CACHE_ENV",
@@ -51,6 +50,8 @@ def _writable_folder(path: Path) -> bool:
     """Whether ``path`` exists or can be made, and a file can be created in it (Numba's test)."""
     try:
         path.mkdir(parents=True, exist_ok=True)
+        import tempfile
+
         tempfile.TemporaryFile(dir=path).close()
     except OSError:
         return False
@@ -92,6 +93,8 @@ def configure_cache(
     if chosen is None and not _writable_folder(package_dir / "__pycache__"):
         candidates = [user_cache_dir(env)]
         uid = os.getuid() if hasattr(os, "getuid") else os.getpid()
+        import tempfile
+
         candidates.append(Path(tempfile.gettempdir()) / f"quatmotion-numba-{uid}")
         for folder in candidates:
             if _writable_folder(folder):
@@ -164,7 +167,9 @@ def _install_listener() -> None:
         _listener_installed = True
 
 
-class _AfterNumbaImport(importlib.abc.MetaPathFinder):
+# Finder and loader by protocol, not by importlib.abc's base classes: importing importlib.abc
+# (and the importlib.resources it brings) is most of what ``import quatmotion`` costs.
+class _AfterNumbaImport:
     """Finds nothing itself: when ``numba`` is about to be imported, wraps its loader so that
     the compile listener is installed once the package has run (then leaves ``sys.meta_path``)."""
 
@@ -179,10 +184,10 @@ class _AfterNumbaImport(importlib.abc.MetaPathFinder):
         return spec
 
 
-class _ThenListen(importlib.abc.Loader):
+class _ThenListen:
     """A module loader that installs the compile listener after the module ran."""
 
-    def __init__(self, loader: importlib.abc.Loader) -> None:
+    def __init__(self, loader: Any) -> None:
         self._loader = loader
 
     def __getattr__(self, name: str) -> object:  # resources, is_package... of the real loader

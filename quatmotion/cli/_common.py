@@ -27,6 +27,7 @@ import json
 import math
 import os
 import re
+import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -163,6 +164,18 @@ def say_wrote(path: object, what: str = "") -> None:
     )
 
 
+class _NeverRaisedError(Exception):
+    """The class of an error whose module no code imported, so none raised it."""
+
+
+def _imported_error(module: str, name: str) -> type[Exception]:
+    """Error class ``name`` of ``module`` if the module was imported (an ``except`` clause's
+    class is looked up when an exception reaches it: importing the module for it would cost
+    every command its imports)."""
+    found = sys.modules.get(module)
+    return getattr(found, name) if found is not None else _NeverRaisedError
+
+
 @contextlib.contextmanager
 def user_errors(output: Path | None = None) -> Iterator[None]:
     """Turn bad-input exceptions into exit code 2 with a one-line message.
@@ -171,13 +184,12 @@ def user_errors(output: Path | None = None) -> Iterator[None]:
     full disk under a temporary spool).
     """
     from quatmotion._atomic import WRITE_ERRNOS
-    from quatmotion.datasets import DataNotFoundError, FetchError
 
     try:
         yield
     except FormatError as error:
         raise fail(str(error)) from None
-    except DataNotFoundError as error:
+    except _imported_error("quatmotion.datasets.catalogue", "DataNotFoundError") as error:
         raise fail(_os_message(error)) from None
     except OSError as error:  # a file that cannot be read or written: no disk, no permission
         if getattr(error, "filename", None) is None and error.errno in WRITE_ERRNOS:
@@ -186,7 +198,12 @@ def user_errors(output: Path | None = None) -> Iterator[None]:
         if getattr(error, "filename", None) is None and not isinstance(error, FileNotFoundError):
             raise  # not about a file the user named: a bug, shown in full
         raise fail(_os_message(error)) from None
-    except (CliInputError, FetchError, ValueError, KeyError) as error:
+    except (
+        CliInputError,
+        _imported_error("quatmotion.datasets.fetch", "FetchError"),
+        ValueError,
+        KeyError,
+    ) as error:
         text = error.args[0] if isinstance(error, KeyError) and error.args else error
         raise fail(str(text)) from None
 

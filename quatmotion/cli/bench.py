@@ -9,7 +9,6 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from quatmotion import bench as bench_package
 from quatmotion.cli._app import app
 from quatmotion.cli._common import (
     CliInputError,
@@ -31,6 +30,8 @@ def bench(
     force: ForceOption = False,
 ) -> None:
     """Run one benchmark of quatmotion.bench: its JSON result in --out, figures beside it."""
+    from quatmotion import bench as bench_package  # (its provenance reads package metadata)
+
     with user_errors():
         available = bench_package.names()
         if name not in available:

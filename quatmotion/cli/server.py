@@ -82,14 +82,7 @@ def serve(
     joint_map: JointMapOption = None,
 ) -> None:
     """Serve a local web app to browse, play, compare and search a motion library."""
-    from quatmotion.server import (
-        UploadGate,
-        allowed_hosts_for,
-        create_app,
-        is_loopback,
-        listen,
-        parse_size,
-    )
+    from quatmotion.server import listen  # the application after the port: a busy one at once
 
     with contextlib.ExitStack() as stack, user_errors():
         given = [p for p in (library, index, poses) if p is not None]
@@ -107,8 +100,6 @@ def serve(
                 "with quatmotion index label"
             )
         at_least("--port", port, 0, 65535)
-        upload_limit = _size("--max-upload", max_upload, parse_size)
-        uploads = UploadGate(memory=_size("--upload-memory", upload_memory, parse_size))
         for path in given:
             require_file(path)
         if folder is not None and not folder.is_dir():
@@ -123,6 +114,17 @@ def serve(
         label_map = labels_option(labels)
         stack.enter_context(listen.sigterm_exits())  # SIGTERM, too, removes the temporary folder
         sock = stack.enter_context(listen.bind(host, port))  # first: a busy port fails at once
+        # the web app and the codec it decodes with (seconds of imports), once the port is ours
+        from quatmotion.server import (
+            UploadGate,
+            allowed_hosts_for,
+            create_app,
+            is_loopback,
+            parse_size,
+        )
+
+        upload_limit = _size("--max-upload", max_upload, parse_size)
+        uploads = UploadGate(memory=_size("--upload-memory", upload_memory, parse_size))
         build = None
         if not given:
             work = Path(

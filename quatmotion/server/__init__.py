@@ -13,17 +13,24 @@
   :mod:`quatmotion.viz`, served by the app.
 """
 
-from quatmotion.server.app import (
-    CSRF_HEADER,
-    DEFAULT_MAX_UPLOAD,
-    allowed_hosts_for,
-    create_app,
-    is_loopback,
-    parse_size,
-)
-from quatmotion.server.building import LibraryBuild
-from quatmotion.server.clips import ClipCatalogue
-from quatmotion.server.uploads import UploadGate
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+# Loaded on first use: ``quatmotion serve`` binds its port (``server.listen``) before the
+# application and the codec it decodes with are imported, so a busy port is said at once.
+_HOMES = {
+    "CSRF_HEADER": "app",
+    "DEFAULT_MAX_UPLOAD": "app",
+    "allowed_hosts_for": "app",
+    "create_app": "app",
+    "is_loopback": "app",
+    "parse_size": "app",
+    "LibraryBuild": "building",
+    "ClipCatalogue": "clips",
+    "UploadGate": "uploads",
+}
 
 __all__ = [
     "CSRF_HEADER",
@@ -36,3 +43,15 @@ __all__ = [
     "is_loopback",
     "parse_size",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _HOMES:
+        raise AttributeError(f"module 'quatmotion.server' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"quatmotion.server.{_HOMES[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_HOMES])
