@@ -331,10 +331,10 @@ def check_units(units: str | float | None) -> str | float | None:
 def joint_map_entries(path: Path | None) -> tuple[str, ...]:
     """``--joint-map``'s file as settings store it (``"LHip=thigh_l"``...; empty without
     one): :class:`CliInputError` naming the file and line of a malformed one."""
+    if path is None:
+        return ()  # (before quatmotion.io: it imports Numba, which a query by name spares)
     from quatmotion.io import joint_map_pairs, read_joint_map
 
-    if path is None:
-        return ()
     require_file(path)
     try:
         return joint_map_pairs(read_joint_map(path))
