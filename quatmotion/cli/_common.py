@@ -234,9 +234,11 @@ LABEL_FOLDERS_HELP = "Label clips without another label by their folder's name (
 
 def labels_option(labels: Path | None) -> dict[str, str] | None:
     """The clip -> label mapping of a ``--labels`` CSV (None without the option)."""
+    if labels is None:
+        return None  # (before quatmotion.io: it imports Numba)
     from quatmotion.io.labels import read_labels_csv
 
-    return read_labels_csv(require_file(labels)) if labels is not None else None
+    return read_labels_csv(require_file(labels))
 
 
 def _units_value(value: str | None) -> str | float | None:
