@@ -294,8 +294,6 @@ def decompress(
             from quatmotion.collection.refs import duplicates
 
             targets = [f for _, files in planned for f in files]
-            from quatmotion.collection.refs import duplicates  # (the package imports Numba)
-
             twice = duplicates(str(f) for f in targets)
             if twice:
                 raise CliInputError(
