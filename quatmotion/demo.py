@@ -373,8 +373,9 @@ def _dictionary_comparison(
     samples = [angular_displacements(m, step=sample_step(m)) for m, _ in clips]
     if len({s.shape[1] for s in samples}) != 1:
         console.print(
-            "[yellow]the clips have different skeletons; the dictionary comparison "
-            "needs one skeleton, so it is skipped.[/yellow]"
+            "the clips have different skeletons; the dictionary comparison needs one "
+            "skeleton, so it is skipped.",
+            style="yellow",
         )
         return {"methods": []}
     Y = np.concatenate(samples)

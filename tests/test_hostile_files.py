@@ -351,3 +351,13 @@ def test_a_full_disk_ends_a_writer_with_one_line_naming_its_file(qmz, tmp_path, 
     line = _one_error(_invoke("compress", clip, "-o", out, "--workers", "1"))
     assert "full.qmz" in line and "no space left" in line
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ["[/bold]", "[link=file:///etc/passwd]y"])
+def test_names_are_printed_as_text_never_as_markup(qmz, tmp_path, name):
+    bad = mutants.rewrite_qmz(
+        qmz["best"], tmp_path / "m.qmz", lambda h: mutants._clip(h, 0, name=name)
+    )
+    result = _invoke("ls", bad)
+    assert result.exit_code == 0, result.output
+    assert name in result.output and "\x1b]8;" not in result.output

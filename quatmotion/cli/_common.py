@@ -134,8 +134,10 @@ def printable(text: str) -> str:
 
 
 _PIPE_WIDTH = 10_000
-console = _Console()
-error_console = _Console(stderr=True)
+# No markup: what is printed holds names from files ("[/x]" would end in a MarkupError, a
+# "[link=...]" would print a link); styles are given as style=, never in the text.
+console = _Console(markup=False)
+error_console = _Console(stderr=True, markup=False)
 
 
 class CliInputError(Exception):
