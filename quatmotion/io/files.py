@@ -24,17 +24,20 @@ from quatmotion.io.units import (
     PLAUSIBLE_FIGURE_CM,
     TYPICAL_HEIGHT_CM,
     body_size,
+    find_body,
     posed_extent,
     unit_name,
 )
-from quatmotion.motion import Motion, Skeleton
+from quatmotion.motion import Motion, Skeleton, forward_kinematics
 
 __all__ = [
+    "BELOW_FLOOR",
     "FAR_CM",
     "MOTION_SUFFIXES",
     "PLAUSIBLE_FPS",
     "WRITTEN_SUFFIXES",
     "Doubt",
+    "feet_below_floor",
     "find_motion_files",
     "implausible_values",
     "parse_motion",
@@ -280,11 +283,12 @@ def write_motion(motion: Motion, path: str | Path) -> None:
 class Doubt(NamedTuple):
     """Something unlikely in a clip that was read without error."""
 
-    kind: Literal["unit", "far", "rate", "read"]
+    kind: Literal["unit", "far", "rate", "read", "floor"]
     """``"unit"``: a guessed or stated unit makes an implausible figure, or another unit a
     likelier one, or a skeleton that is no body gave no ground to guess; ``"far"``: beyond
     1 km; ``"rate"``: a frame rate motion capture does not run at; ``"read"``: something the
-    reader tolerated or assumed (:func:`read_motion_checked`)."""
+    reader tolerated or assumed (:func:`read_motion_checked`); ``"floor"``: the feet below the
+    floor for the whole clip (:func:`feet_below_floor`)."""
     message: str
     """One sentence, without the file name."""
     likely_unit: str | None = None
@@ -313,7 +317,8 @@ def implausible_values(motion: Motion) -> list[Doubt]:
       unit of a skeleton that is not a body (a lone hand) is a doubt too: nothing could be
       guessed from its size;
     * coordinates or bones beyond :data:`FAR_CM`;
-    * a frame rate outside :data:`PLAUSIBLE_FPS`.
+    * a frame rate outside :data:`PLAUSIBLE_FPS`;
+    * the feet below the floor for the whole clip (:func:`feet_below_floor`).
 
     Readers accept all of these (the numbers are valid); a caller shows the messages as
     warnings.
@@ -342,6 +347,10 @@ def implausible_values(motion: Motion) -> list[Doubt]:
         doubt = _unit_doubt(motion)
         if doubt is not None:
             doubts.append(doubt)
+    if bones <= FAR_CM and root <= FAR_CM:
+        doubt = feet_below_floor(motion)
+        if doubt is not None:
+            doubts.append(doubt)
     low, high = PLAUSIBLE_FPS
     if not low <= motion.fps <= high:
         doubts.append(
@@ -352,6 +361,54 @@ def implausible_values(motion: Motion) -> list[Doubt]:
             )
         )
     return doubts
+
+
+BELOW_FLOOR = 0.1
+"""Feet deeper than this share of the figure's size under the floor at every frame are no
+floor contact (a foot in a hole, a jump down): the clip is placed under the floor."""
+
+
+def feet_below_floor(motion: Motion, n_frames: int = 60) -> Doubt | None:
+    """The ``"floor"`` doubt of a clip whose feet stay under the floor (Y = 0, Y up) for the
+    whole clip, at best :data:`BELOW_FLOOR` of the figure's size under it, or None.
+
+    A markerless capture's BVH puts the root's rest height in its ``OFFSET`` and near-zero
+    values in its position channels; read as absolute (as a root's channels are), the figure
+    stands half under the floor. When the root's offset would lift the feet to the floor, the
+    message names that reading: ``--bvh-translations relative`` (the root's channels too).
+    ``n_frames`` evenly spaced frames are measured; the feet are the ankles
+    (:func:`~quatmotion.io.units.find_body`), else the figure's lowest point.
+    """
+    if motion.n_frames == 0:
+        return None
+    body = find_body(motion.skeleton)
+    size = body_size(motion)
+    if body is None or size is None or not (np.isfinite(size) and size > 0):
+        return None
+    clip = motion.slice(0, None, max(1, motion.n_frames // n_frames))
+    with np.errstate(over="ignore", invalid="ignore"):
+        heights = forward_kinematics(clip).all_positions()[..., 1]
+        feet = heights[:, list(body.ankles)] if body.ankles else heights
+        highest_low = float(np.max(np.min(feet, axis=1)))  # the least deep frame
+    if not highest_low < -BELOW_FLOOR * size:
+        return None
+    message = (
+        f"the feet stay below the floor for the whole clip (Y up, at least "
+        f"{-highest_low:.3g} cm under it)"
+    )
+    sk = motion.skeleton
+    lift = float(sk.offsets[0, 1])
+    relative = sk.extras.get("bvh_root_relative") or sk.extras.get("bvh_translations") == (
+        "relative"
+    )
+    if sk.extras.get("format") == "bvh" and not relative and lift > 0:
+        lifted = highest_low + lift
+        if -BELOW_FLOOR * size <= lifted <= 0.5 * size:  # on the floor, not floating
+            message += (
+                f"; the root's OFFSET ({lift:.3g} cm up) would put them on it: the root's "
+                "position channels may be relative to it (--bvh-translations relative)"
+            )
+    return Doubt("floor", message)
 
 
 def unit_reading(skeleton: Skeleton) -> tuple[float, str, str]:
