@@ -236,3 +236,30 @@ def test_clip_names_and_labels_are_shown_as_text_never_as_html(browser, tmp_path
         assert name in page.locator("#results").inner_text()
         assert page.evaluate("document.documentElement.dataset.pwned || null") is None
         page.close()
+
+
+def test_serve_dir_shows_the_build_in_the_page_and_fills_the_list_as_it_lands(
+    browser, tmp_path, artifact_dir
+):
+    """``serve DIR`` answers before its library is built: the page shows the build's step and
+    progress, then the clips once indexed, then the build's end."""
+    from quatmotion.io import write_motion
+    from quatmotion.synthetic import generate_clip
+
+    folder = tmp_path / "studio"
+    folder.mkdir()
+    for k, kind in enumerate(("walk", "walk", "squat")):
+        write_motion(generate_clip(kind, k, n_frames=90), folder / f"{kind}_{k}.bvh")
+    with _serve(tmp_path / "serve.log", str(folder)) as base:
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(f"{base}/")
+        page.wait_for_selector("#build", state="attached", timeout=60_000)
+        assert page.locator("#build").inner_text().startswith("Building ")
+        page.wait_for_selector("html[data-build=ready]", state="attached", timeout=600_000)
+        page.wait_for_selector("#clips tbody tr:nth-child(3)", state="attached", timeout=60_000)
+        assert "Built " in page.locator("#build").inner_text()
+        page.screenshot(path=str(artifact_dir / "server-built.png"))
+        page.goto(f"{base}/compare?clip=walk_0")
+        _state(page, "ready", timeout=120_000)
+        assert "measured: ARMS" in page.locator("#status").inner_text()
+        page.close()
