@@ -84,7 +84,7 @@ def test_library_round_trip_and_projection(tmp_path: pathlib.Path) -> None:
     path = tmp_path / "lib.idx"
     lib.save(path)
     assert [p.name for p in tmp_path.iterdir()] == ["lib.idx"]  # no temporary file left
-    back = PoseLibrary.load(path)
+    back = PoseLibrary.open(path)
     assert back.clip_names == lib.clip_names and back.meta["fps"] == 30.0
     for key in model:
         np.testing.assert_array_equal(back.model[key], model[key])
@@ -99,7 +99,7 @@ def test_library_round_trip_and_projection(tmp_path: pathlib.Path) -> None:
     bad = tmp_path / "bad.npz"
     np.savez(bad, x=np.zeros(3))
     with pytest.raises(ValueError, match="pose library"):
-        PoseLibrary.load(bad)
+        PoseLibrary.open(bad)
 
 
 def _named_library(names: list[str], frames: int = 10) -> PoseLibrary:
@@ -246,11 +246,11 @@ def test_library_file_checks_its_format_version(tmp_path: pathlib.Path) -> None:
         with open(path, "wb") as fh:
             np.savez(fh, **arrays)
         with pytest.raises(FormatError, match=word) as caught:
-            PoseLibrary.load(path)
+            PoseLibrary.open(path)
         assert str(path) in str(caught.value)
     path.write_bytes(b"not a library at all")
     with pytest.raises(FormatError, match="pose library"):
-        PoseLibrary.load(path)
+        PoseLibrary.open(path)
 
 
 @pytest.mark.parametrize("n_clips", [1, 3])
@@ -343,7 +343,7 @@ def test_pose_index_library_and_the_benchmark_method_give_the_same_distances(
          "--rank", "12", "--workers", "1"],
     )  # fmt: skip
     assert res.exit_code == 0, res.output
-    lib = PoseLibrary.load(out)
+    lib = PoseLibrary.open(out)
     assert lib.meta["metric"] == metric_name
     clips = [  # as the command loaded them, in the library's order
         load_pose_clip(name, fps=lib.meta["fps"], height=lib.meta["height_cm"])

@@ -108,7 +108,7 @@ def test_pose_index_cli_skips_a_bad_file_and_exits_1(
     assert res.exit_code == 1, res.output
     assert "skipped" in res.output and "broken.bvh" in res.output
     assert "1 of 4 clips failed" in res.output
-    built = PoseLibrary.load(out)
+    built = PoseLibrary.open(out)
     assert sorted(pathlib.Path(n).name for n in built.clip_names) == [
         "kick.bvh",
         "squat.bvh",

@@ -473,9 +473,10 @@ def test_clips_of_one_stem_in_two_folders_stay_two_rows_joined_on_their_content(
     files (labels, pose search, compare with its own original)."""
     import dataclasses
 
+    from quatmotion.parallel import Runner
     from quatmotion.pose.data import PoseClip
     from quatmotion.pose.library import PoseLibrary
-    from quatmotion.retrieval.build import build_index
+    from quatmotion.retrieval import ClipIndex, IndexSettings
 
     files = {
         "s1/take_001": ("walk", 1),
@@ -489,8 +490,10 @@ def test_clips_of_one_stem_in_two_folders_stay_two_rows_joined_on_their_content(
         write_motion(generate_clip(kind, seed, n_frames=90), path)
         paths[name] = path
     labels = {str(p): files[n][0] for n, p in paths.items()}
-    report = build_index([tmp_path / "clips"], tmp_path / "c.qidx", kinds=("motion",),
-                         labels=labels, workers=1)  # fmt: skip
+    report = ClipIndex.build(
+        [tmp_path / "clips"], tmp_path / "c.qidx", IndexSettings(kinds=("motion",)),
+        labels=labels, runner=Runner.inline(),
+    )  # fmt: skip
     assert len(report.added) == 3 and not report.failures, report
     display = {"s1/take_001": "s1/take_001", "s2/take_001": "s2/take_001", "s1/kick_0": "kick_0"}
     motions = [dataclasses.replace(read_motion(p), name=display[n]) for n, p in paths.items()]
