@@ -77,3 +77,23 @@ def test_no_floor_doubt_about_the_shared_libraries(collection):
     for path in files[:12]:
         motion = io.read_motion(path)
         assert [d for d in io.implausible_values(motion) if d.kind == "floor"] == [], path
+
+
+def test_the_viewer_floor_follows_feet_that_stay_under_it(browser, tmp_path):
+    """The viewer's grid is the floor at Y = 0, unless the figure stays under it all clip
+    long: then it is at the clip's lowest point (the page says where: ``data-floor``)."""
+    from quatmotion.viz import write_view
+
+    path, _ = markerless_rig(tmp_path)
+    under = io.read_motion(path)
+    lowest = float(forward_kinematics(under).all_positions()[..., 1].min())
+    for motion, floor in ((under, lowest), (io.read_motion(path, translations="relative"), 0.0)):
+        page_path = tmp_path / f"{floor:.0f}.html"
+        write_view(page_path, [motion])
+        page = browser.new_page(viewport={"width": 800, "height": 600})
+        page.goto(page_path.as_uri())
+        page.wait_for_selector("html[data-first-play-ms], html[data-error]", state="attached")
+        assert page.evaluate("document.documentElement.dataset.error || null") is None
+        shown = float(page.evaluate("document.documentElement.dataset.floor"))
+        assert shown == pytest.approx(floor, abs=1.0), (shown, floor)
+        page.close()

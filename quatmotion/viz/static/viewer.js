@@ -116,7 +116,7 @@
     const pos = clip.positions, P = clip.nPoints, T = clip.nFrames, visible = clip.visible;
     let minX = Infinity, maxX = -Infinity, minY = Infinity, maxY = -Infinity, minZ = Infinity, maxZ = -Infinity;
     let fx0 = Infinity, fx1 = -Infinity, fz0 = Infinity, fz1 = -Infinity;
-    let height = 0;
+    let height = 0, highestLow = -Infinity;
     for (let t = 0; t < T; t++) {
       let lo = Infinity, hi = -Infinity;
       for (const p of visible) {
@@ -127,12 +127,18 @@
         if (y < lo) lo = y; if (y > hi) hi = y;
       }
       height = Math.max(height, hi - lo);
+      highestLow = Math.max(highestLow, lo);
       const f = (t * P + clip.follow) * 3;
       fx0 = Math.min(fx0, pos[f]); fx1 = Math.max(fx1, pos[f]); fz0 = Math.min(fz0, pos[f + 2]); fz1 = Math.max(fz1, pos[f + 2]);
     }
     if (!(minX <= maxX)) { minX = maxX = minY = maxY = minZ = maxZ = 0; fx0 = fx1 = fz0 = fz1 = 0; }
+    // The floor is y = 0, unless the figure stays under it all clip long (deeper than a tenth
+    // of its height at every frame: a root read as absolute that was relative, issue 29): then
+    // the floor follows the feet, at the clip's lowest point, and says so (data-floor).
+    const under = T > 0 && highestLow < -0.1 * (height || 170);
     return {
       minX, maxX, minY, maxY, minZ, maxZ,
+      floor: under ? minY : 0,
       centre: new THREE.Vector3((minX + maxX) / 2, 0, (minZ + maxZ) / 2),
       height: height || 170,
       travel: Math.max(fx1 - fx0, fz1 - fz0),
@@ -404,7 +410,9 @@
       const cell = size > 3000 ? 100 : 50;
       const divisions = Math.min(600, Math.ceil(size / cell));
       this.grid = floorGrid(divisions, cell);
-      this.grid.position.set((minX + maxX) / 2, 0, (minZ + maxZ) / 2);
+      const floor = Math.min(...this.stats.map((s) => s.floor));
+      document.documentElement.dataset.floor = String(Math.round(floor * 10) / 10);
+      this.grid.position.set((minX + maxX) / 2, floor, (minZ + maxZ) / 2);
       this.scene.add(this.grid);
     }
 
