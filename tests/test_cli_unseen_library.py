@@ -329,7 +329,7 @@ def test_batch_commands_warn_about_a_doubtful_unit_from_their_workers(tmp_path, 
 
 
 @pytest.mark.parametrize(
-    ("frame_time", "doubtful"), [(1000.0, True), (1e-5, True), (1 / 120, False)]
+    ("frame_time", "doubtful"), [(1000.0, True), (1e-4, True), (1 / 120, False)]
 )
 def test_an_absurd_frame_rate_is_warned_about(tmp_path, frame_time, doubtful):
     clip = generate_clip("walk", 1, n_frames=10)
@@ -343,6 +343,14 @@ def test_an_absurd_frame_rate_is_warned_about(tmp_path, frame_time, doubtful):
     assert bool(warnings) == doubtful, result.stderr
     if doubtful:
         assert "slow.bvh" in warnings[0] and "frames per second" in warnings[0]
+
+
+def test_a_frame_rate_over_the_readers_limit_is_refused_naming_the_line_and_the_limit(tmp_path):
+    # 100,000 frames/s: past quatmotion.limits' frame rate, refused before the frames are read
+    text = re.sub(r"Frame Time: \S+", "Frame Time: 1e-05", io.bvh_text(generate_clip("walk", 1)))
+    path = tmp_path / "fast.bvh"
+    path.write_text(text)
+    _assert_bad_input(_invoke("info", path), "over the limit of 10,000")
 
 
 # --- small things: one clip-name matcher ---------------------------------------------------------
