@@ -495,6 +495,9 @@ def _build(
     for array in (t_rest, r_rest, s_rest, t_anim, r_anim, s_anim):
         if not np.all(np.isfinite(array)):
             raise FormatError("a node's transform is not finite", path)
+    for array in (s_rest, s_anim):  # a mirror or a collapse is no rotation (a fuzz finding)
+        if not np.all(np.prod(array, axis=-1) > 0):
+            raise FormatError("a node's scale is zero or mirrors it (negative): not read", path)
     rest_world, rest_position = _world(t_rest, r_rest, s_rest, parents)
     animated_world, position = _world(t_anim, r_anim, s_anim, parents)
     joints = slice(n_chain, N)
