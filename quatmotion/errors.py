@@ -29,6 +29,13 @@ class FormatError(ValueError):
         self.reason = message
 
 
+class MissingDependencyError(ImportError):
+    """An optional package a command needs is not installed; the message says what to install.
+
+    The command line reports it in one line (exit code 2), as bad input: the user can act on it.
+    """
+
+
 class ClipNameError(KeyError, ValueError):
     """A clip name that names no clip of a collection, or several (the message lists them).
 

@@ -221,6 +221,20 @@ def _quatmotion(*args: object, cwd: Path) -> subprocess.CompletedProcess:
     )
 
 
+def test_an_install_without_ufbx_says_what_to_install_in_one_line(tmp_path):
+    code = (
+        "import sys\nsys.modules['ufbx'] = None  # as if it were not installed\n"
+        "from quatmotion.cli import main\nmain()"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code, "info", str(FIXTURES / "cmu_bvh_names.fbx")],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path,
+    )  # fmt: skip
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("error: reading FBX needs the ufbx package"), result.stderr
+    assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
 def test_every_command_on_fbx_ends_by_itself(tmp_path):
     """info, convert (to BVH and glTF), compress, view, index build and pose index on FBX
     input (every fixture: BVH, Mixamo and Unreal names), and a bad FBX: each in

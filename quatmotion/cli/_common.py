@@ -37,7 +37,7 @@ from rich.console import Console, ConsoleDimensions
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.segment import Segment
 
-from quatmotion.errors import FormatError
+from quatmotion.errors import FormatError, MissingDependencyError
 
 if TYPE_CHECKING:
     from quatmotion.io import Doubt
@@ -189,7 +189,7 @@ def user_errors(output: Path | None = None) -> Iterator[None]:
 
     try:
         yield
-    except FormatError as error:
+    except (FormatError, MissingDependencyError) as error:
         raise fail(str(error)) from None
     except _imported_error("quatmotion.datasets.catalogue", "DataNotFoundError") as error:
         raise fail(_os_message(error)) from None

@@ -57,7 +57,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion import limits, quat
-from quatmotion.errors import FormatError, FormatWarning
+from quatmotion.errors import FormatError, FormatWarning, MissingDependencyError
 from quatmotion.io.gltf import _unique
 from quatmotion.io.units import length_unit
 from quatmotion.motion import Motion, Skeleton
@@ -133,8 +133,8 @@ def fbx_takes(data: bytes, path: str | Path) -> list[str]:
 def _ufbx() -> Any:
     try:
         import ufbx
-    except ImportError as error:  # pragma: no cover - a dependency of the package
-        raise ImportError(
+    except ImportError as error:  # a dependency of the package, but an install can lack it
+        raise MissingDependencyError(
             f"reading FBX needs the ufbx package ({error}): pip install 'ufbx>=0.0.5'"
         ) from None
     return ufbx
