@@ -286,7 +286,7 @@ def test_crafted_indexes_are_refused_by_every_reader(qidx, tmp_path):
 
 
 def test_a_new_index_appears_whole_or_not_at_all(tmp_path, monkeypatch):
-    from quatmotion.retrieval import index as index_module
+    from quatmotion.retrieval import index_file as index_module
     from quatmotion.retrieval.index import ClipIndex
 
     path = tmp_path / "new.qidx"

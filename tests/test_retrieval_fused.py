@@ -131,9 +131,9 @@ def test_labels_learned_on_some_clips_rank_others(library):
 
 
 def test_index_build_with_labels_stores_the_learned_model(tmp_path):
+    from quatmotion.retrieval.build import store_models
     from quatmotion.retrieval.features_fused import MODEL_KEY_LABELS
     from quatmotion.retrieval.index import ClipIndex
-    from quatmotion.retrieval.methods import store_models
 
     clips = [generate_clip(k, s) for k in KINDS[:2] for s in range(2)]
     out = tmp_path / "b.qidx"

@@ -121,7 +121,7 @@ def test_a_shell_query_by_name_imports_no_numba_and_answers_as_the_numba_path(in
 
 
 def test_stored_arrays_read_as_np_load_reads_them():
-    from quatmotion.retrieval.index import _to_blob
+    from quatmotion.retrieval.index_file import _to_blob
     from quatmotion.retrieval.stored import read_array as _from_blob
 
     rng = np.random.default_rng(1)

@@ -10,14 +10,17 @@ distances
 methods
     ``METHODS``: every retrieval method by name (the paper's, the DTW baseline, ours) and
     ``DEFAULT_METHOD``; ``Library``, clips' features packed in memory.
-index
-    ``ClipIndex`` (``build``/``open``/``add``/``search``): the SQLite ``.qidx`` file (clip
-    references, labels, features, settings; versioned), ``IndexSettings``.
+index_file
+    ``IndexFile``: the SQLite ``.qidx`` file (clip references, labels, features, settings),
+    read and written, one reader per format version; ``IndexSettings``.
 build
-    The build's steps: a pure per-clip feature function mapped over all cores, one writer
-    (``build_index``: the deprecated keyword form of ``ClipIndex.build``).
+    The writer: the build's steps, a pure per-clip feature function mapped over all cores, one
+    writer (``build_index``: the deprecated keyword form of ``ClipIndex.build``).
 search
-    ``search`` and ``search_within`` (subsequence DTW inside long takes).
+    The reader: ``search`` and ``search_within`` (subsequence DTW inside long takes).
+index
+    ``ClipIndex`` (``build``/``open``/``add``/``search``): the file with the writer and the
+    reader, a thin facade above both (the file's names re-exported).
 
 Names are loaded on first use, so ``import quatmotion.retrieval`` stays cheap. The function
 ``search`` is imported from its module (``from quatmotion.retrieval.search import search``):

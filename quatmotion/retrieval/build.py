@@ -34,8 +34,15 @@ from quatmotion.io import Doubt
 from quatmotion.io.labels import read_labels_csv
 from quatmotion.parallel import Failure, Runner, Scheduler
 from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
-from quatmotion.retrieval.index import ClipIndex, ClipRecord, IndexSettings
-from quatmotion.retrieval.methods import store_models
+from quatmotion.retrieval.features_fused import (
+    FIT_CLIPS,
+    MODEL_KEY,
+    MODEL_KEY_LABELS,
+    fit_fused_model,
+    labels_digest,
+)
+from quatmotion.retrieval.index_file import ClipRecord, IndexFile, IndexSettings
+from quatmotion.retrieval.methods import fit_labels, stored_model
 
 __all__ = [
     "ClipJob",
@@ -45,6 +52,7 @@ __all__ = [
     "index_clip",
     "read_labels_csv",
     "skeleton_for",
+    "store_models",
 ]
 
 
@@ -105,19 +113,19 @@ def _find(sources: Iterable[Any], read: ReadSettings, report: BuildReport) -> li
     return found
 
 
-def _open(out: Path, settings: IndexSettings, report: BuildReport) -> ClipIndex:
+def _open(out: Path, settings: IndexSettings, report: BuildReport) -> IndexFile:
     """Step 2: a new index, or the existing one resumed (noted in the report)."""
     if out.exists() and out.stat().st_size > 0:
-        index = ClipIndex.open(out, write=True)
+        index = IndexFile.open(out, write=True)
         report.details["resumed"] = True
         report.details["clips_before"] = len(index)
         index.write_settings(settings)
         return index
     report.details["resumed"] = False
-    return ClipIndex._create(out, settings)
+    return IndexFile._create(out, settings)
 
 
-def _plan(index: ClipIndex, found: list[ClipSource], report: BuildReport) -> list[ClipSource]:
+def _plan(index: IndexFile, found: list[ClipSource], report: BuildReport) -> list[ClipSource]:
     """Step 3: the clips to compute. Those already indexed (same path and content hash) are
     skipped; names are unique across the old clips and the new ones (a stem shared with an
     indexed clip makes both names relative paths: the old clip is renamed)."""
@@ -148,7 +156,7 @@ def _plan(index: ClipIndex, found: list[ClipSource], report: BuildReport) -> lis
 
 
 def _compute_and_write(
-    index: ClipIndex,
+    index: IndexFile,
     jobs: list[ClipJob],
     labels: Mapping[str, str],
     report: BuildReport,
@@ -199,7 +207,7 @@ def _key(s: ClipSource) -> tuple[str, str]:
 
 
 def _relabel(
-    index: ClipIndex,
+    index: IndexFile,
     found: list[ClipSource],
     todo: list[ClipSource],
     given: Mapping[str, str] | None,
@@ -225,7 +233,7 @@ def _relabel(
 
 
 def _run(
-    index: ClipIndex,
+    index: IndexFile,
     found: list[ClipSource],
     report: BuildReport,
     *,
@@ -258,6 +266,43 @@ def _run(
         report.labels_changed += sum(1 for r in report.added if given.get(r.name))
     report.settings = settings
     return report
+
+
+def store_models(index: IndexFile, seed: int = 0) -> list[str]:
+    """Step 6: fit and store in ``index`` (open for writing) the default's model when it is
+    missing, damaged, of other parameters, or fitted on fewer clips than it would be now; and,
+    when the index has labels, ``dtw-fused-labels``'s when it is missing, damaged or learned
+    from other labels. Returns the keys written."""
+    n = len(index)
+    if n == 0 or not index.holds_blobs:  # a version-1 index has no blobs table
+        return []
+    labels = [r.label for r in index.rows()]
+    model = stored_model(index.blob(MODEL_KEY))
+    learned = stored_model(index.blob(MODEL_KEY_LABELS)) if any(labels) else None
+    refit = model is None or model.fitted_clips < min(FIT_CLIPS, n)
+    relearn = any(labels) and (
+        refit
+        or learned is None
+        or learned.labels_digest != labels_digest(labels)
+        or model is None
+        or learned.scales != model.scales
+    )
+    if not (refit or relearn):
+        return []  # what is stored is current: the clips' features are not read
+    rows, library = index.load(("frames", "path"))
+    if len(library) == 0:
+        return []
+    written = []
+    if refit:
+        model = fit_fused_model(library._need("frames"), library._need("path"), seed)
+        index.set_blob(MODEL_KEY, model.to_bytes())
+        written.append(MODEL_KEY)
+    if relearn:
+        library.labels = [r.label for r in rows]
+        learned = fit_labels(library, model, seed)
+        index.set_blob(MODEL_KEY_LABELS, learned.to_bytes())
+        written.append(MODEL_KEY_LABELS)
+    return written
 
 
 def build(
@@ -343,7 +388,7 @@ def add(
         No index at ``path``.
     """
     path = Path(path)
-    with ClipIndex.open(path, write=True) as index:
+    with IndexFile.open(path, write=True) as index:
         settings = settings or index.settings
         if settings != index.settings:
             index.write_settings(settings)

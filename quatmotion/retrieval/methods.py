@@ -25,7 +25,8 @@ features of every method it was built for.
   clip: with ``k`` given, LB_Keogh on the model's projection and the projection's DTW prune
   clips that cannot be among the ``k`` nearest, the full DTW abandons early; ``k=None``
   computes every distance. The model (scales, projection) is stored in an index
-  (:func:`store_models`) and refitted when missing, damaged or of other parameters.
+  (:func:`quatmotion.retrieval.build.store_models`) and refitted when missing, damaged or of
+  other parameters.
 - ``"dtw-fused-labels"``: ``dtw-fused`` with a projection learned from the library's labels
   appended to its stream (:func:`quatmotion.retrieval.features_fused.fit_label_projection`);
   without labels, ``dtw-fused`` itself. Not the default: measured on actors and styles it was
@@ -54,7 +55,6 @@ from quatmotion.retrieval.features_fused import (
     FusedModel,
     fit_fused_model,
     fit_label_projection,
-    labels_digest,
 )
 
 __all__ = [
@@ -65,7 +65,8 @@ __all__ = [
     "QueryFeatures",
     "Ranking",
     "RetrievalMethod",
-    "store_models",
+    "fit_labels",
+    "stored_model",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -271,14 +272,16 @@ def fused_model(library: Library, learned: bool = False) -> FusedModel:
             except ValueError:  # FormatError included: refit
                 model = None
         if model is None and learned:
-            model = _fit_labels(library, fused_model(library))
+            model = fit_labels(library, fused_model(library))
         elif model is None:
             model = fit_fused_model(library._need("frames"), library._need("path"))
         library._cache[key] = model
     return library._cache[key]  # type: ignore[return-value]
 
 
-def _fit_labels(library: Library, model: FusedModel, seed: int = 0) -> FusedModel:
+def fit_labels(library: Library, model: FusedModel, seed: int = 0) -> FusedModel:
+    """``model`` with a projection learned from ``library.labels`` (``model`` itself when the
+    library has no labels)."""
     if not library.labels:
         return model
     return fit_label_projection(
@@ -342,45 +345,8 @@ class FusedDTW:
         return _sorted(ids[keep], d[keep], exclude, k)
 
 
-def store_models(index: object, seed: int = 0) -> list[str]:
-    """Fit and store in ``index`` (a writable :class:`~quatmotion.retrieval.index.ClipIndex`)
-    the default's model when it is missing, damaged, of other parameters, or fitted on fewer
-    clips than it would be now; and, when the index has labels, ``dtw-fused-labels``'s when it
-    is missing, damaged or learned from other labels. Returns the keys written."""
-    from quatmotion.retrieval.features_fused import FIT_CLIPS
-
-    n = len(index)  # type: ignore[arg-type]
-    if n == 0 or getattr(index, "version", 2) == 1:  # a version-1 index has no blobs table
-        return []
-    labels = [r.label for r in index.rows()]  # type: ignore[attr-defined]
-    model = _stored(index.blob(MODEL_KEY))  # type: ignore[attr-defined]
-    learned = _stored(index.blob(MODEL_KEY_LABELS)) if any(labels) else None  # type: ignore[attr-defined]
-    refit = model is None or model.fitted_clips < min(FIT_CLIPS, n)
-    relearn = any(labels) and (
-        refit
-        or learned is None
-        or learned.labels_digest != labels_digest(labels)
-        or learned.scales != model.scales  # type: ignore[union-attr]
-    )
-    if not (refit or relearn):
-        return []  # what is stored is current: the clips' features are not read
-    rows, library = index.load(("frames", "path"))  # type: ignore[attr-defined]
-    if len(library) == 0:
-        return []
-    written = []
-    if refit:
-        model = fit_fused_model(library._need("frames"), library._need("path"), seed)
-        index.set_blob(MODEL_KEY, model.to_bytes())  # type: ignore[attr-defined]
-        written.append(MODEL_KEY)
-    if relearn:
-        library.labels = [r.label for r in rows]
-        learned = _fit_labels(library, model, seed)  # type: ignore[arg-type]
-        index.set_blob(MODEL_KEY_LABELS, learned.to_bytes())  # type: ignore[attr-defined]
-        written.append(MODEL_KEY_LABELS)
-    return written
-
-
-def _stored(data: bytes | None) -> FusedModel | None:
+def stored_model(data: bytes | None) -> FusedModel | None:
+    """The model stored as ``data``; None when there is none or it is damaged (refit it)."""
     if data is None:
         return None
     try:

@@ -20,7 +20,7 @@ from quatmotion.collection.refs import motion_hash
 from quatmotion.motion import Motion
 from quatmotion.retrieval import distances as dist
 from quatmotion.retrieval.features import clip_features, feature_step, skeleton_fingerprint
-from quatmotion.retrieval.index import ClipIndex, ClipRow, _match
+from quatmotion.retrieval.index_file import ClipRow, IndexFile, match_row
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, QueryFeatures
 
 __all__ = [
@@ -89,7 +89,7 @@ _FALLBACK_METHODS = ("pooled+dtw",)
 _WITHIN_METHOD = "dtw-motion"
 
 
-def default_method(index: ClipIndex) -> str:
+def default_method(index: IndexFile) -> str:
     """The method a search uses when none is named: :data:`DEFAULT_METHOD`, or for an index
     built before its features existed, the first of the earlier defaults the index serves."""
     stored: set[str] = set().union(*index.feature_keys().values()) if len(index) else set()
@@ -111,7 +111,7 @@ def _same_content(rows: list[ClipRow], sha256: str | None, path: str | Path | No
 
 
 def query_row(
-    index: ClipIndex,
+    index: IndexFile,
     query: Motion | str,
     *,
     sha256: str | None = None,
@@ -131,13 +131,13 @@ def query_row(
     """
     rows = index.rows()
     if isinstance(query, str):
-        return rows[_match(query, rows, str(index.path))]
+        return rows[match_row(query, rows, str(index.path))]
     own = _same_content(rows, sha256 or motion_hash(query), path)
     return rows[own] if own >= 0 else None
 
 
 def _query(
-    index: ClipIndex,
+    index: IndexFile,
     query: Motion | str,
     method: str,
     sha256: str | None = None,
@@ -159,12 +159,12 @@ def _query(
         own = _same_content(rows, sha256 or motion_hash(query), path)
         return rows, library, query_features(query, method), own
     where = f"{index.path} (the clips with {method} features)"
-    i = _match(query, rows, where)
+    i = match_row(query, rows, where)
     return rows, library, QueryFeatures(library.features[i], rows[i].skeleton), i
 
 
 def search(
-    index: ClipIndex,
+    index: IndexFile,
     query: Motion | str,
     *,
     method: str | None = None,
@@ -177,7 +177,7 @@ def search(
 
     Parameters
     ----------
-    index : ClipIndex
+    index : IndexFile
     query : Motion or str
         A clip, or an indexed clip as a name, path, file name or number reads it
         (:func:`quatmotion.io.names.match_clip`).
@@ -220,7 +220,7 @@ def search(
 
 
 def search_within(
-    index: ClipIndex,
+    index: IndexFile,
     query: Motion | str,
     *,
     k: int = 20,
