@@ -111,7 +111,7 @@ class _Server:
         if self.process.poll() is None:
             self.process.send_signal(how)
             try:
-                self.process.wait(timeout=30)
+                self.process.wait(timeout=120)  # a build is stopped at its next clip
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()

@@ -128,7 +128,12 @@ def serve(
         build = None
         if not given:
             work = Path(
-                stack.enter_context(tempfile.TemporaryDirectory(prefix="quatmotion-serve-"))
+                stack.enter_context(
+                    # A build stopped mid-file is waited for (LibraryBuild.stop), up to a limit.
+                    tempfile.TemporaryDirectory(
+                        prefix="quatmotion-serve-", ignore_cleanup_errors=True
+                    )
+                )
             )
             build = _background_build(
                 work, folder, label_map, label_folders, labels, joint_map_entries(joint_map)
