@@ -383,6 +383,21 @@ def test_pose_search_json_has_the_search_document_shape(pose_library):
     assert [r["rank"] for r in doc["results"]] == list(range(1, 11))
 
 
+def test_pose_search_other_clips_leaves_out_a_file_of_an_indexed_clip(pose_library):
+    """--other-clips leaves out the query's own clip whether it is named or given as its file
+    (the content hash): the same poses either way."""
+    library, clips = pose_library
+    # frame 32: an indexed pose (the library samples the 120 fps clips at 30 fps), so the
+    # file's query pose is the one --clip takes
+    args = ("--frame", "32", "--other-clips", "-k", "10", "--json")
+    by_clip = _invoke("pose", "search", library, "--clip", "squat", *args)
+    by_file = _invoke("pose", "search", library, "--file", clips / "squat.bvh", *args)
+    assert by_clip.exit_code == 0 and by_file.exit_code == 0, by_file.output
+    named, filed = json.loads(by_clip.stdout)["results"], json.loads(by_file.stdout)["results"]
+    assert "squat" not in {Path(r["clip"]).stem for r in filed}
+    assert [(r["clip"], r["frame"]) for r in filed] == [(r["clip"], r["frame"]) for r in named]
+
+
 def test_pose_search_clip_names_numbers_and_k(pose_library):
     library, _ = pose_library
     number = _invoke("pose", "search", library, "--clip", "1", "--frame", "0", "-k", "1", "--json")

@@ -365,7 +365,12 @@ def search_command(
             with np.errstate(all="ignore"):
                 query, found = library.motion_query(motion, frame)
                 start = library.transition_start(frame, motion=motion) if transitions else None
-            own_clip = -1
+            # a file of an indexed clip is that clip (its content hash), as --clip names it
+            from quatmotion.collection.reading import file_hash
+
+            sha256 = file_hash(file, skeleton)
+            same = [i for i, ref in enumerate(library.clips()) if ref.sha256 == sha256]
+            own_clip = same[0] if same else -1
             query_doc = {"clip": file.stem, "path": str(file), "frame": found}
         else:
             query, own_clip, found = library.pose_query(clip, frame)
