@@ -17,7 +17,10 @@ Layout (compression and decompression apart, format and math apart):
   :mod:`~quatmotion.codec.settings`, :mod:`~quatmotion.codec.library` (a collection prepared
   for encoding), :mod:`~quatmotion.codec.repair` (per-frame corrections that make the bound
   hold);
-* decompression: :mod:`~quatmotion.codec.archive` (lazy, random access) and
+* the facade: :mod:`~quatmotion.codec.qmz` (:class:`Archive`: the reader with the writer's
+  ``build``/``add`` on top, so neither imports the other's side);
+* decompression: :mod:`~quatmotion.codec.archive` (lazy, random access; imports no
+  compressor) and
   :mod:`~quatmotion.codec.sampling` (poses at any time; :class:`Sampler`, one clip bound).
 
 ``compress``, ``append``, ``open`` and ``open_archive`` are the names before 0.4.0 (thin
@@ -26,9 +29,10 @@ wrappers of the above).
 ``docs/format.md`` specifies the file byte by byte.
 """
 
-from quatmotion.codec.archive import Archive, DamagedClip, open_archive
+from quatmotion.codec.archive import DamagedClip, open_archive
 from quatmotion.codec.compress import CompressionResult, append, compress
 from quatmotion.codec.methods import METHODS
+from quatmotion.codec.qmz import Archive
 from quatmotion.codec.sampling import Sampler
 from quatmotion.codec.settings import DEFAULT_MAX_ERROR_CM, CompressSettings
 

@@ -1,8 +1,11 @@
-"""Reading ``.qmz`` files: lazy, random access to clips (decompression), and the file kind's
-surface (:meth:`Archive.build`, :meth:`Archive.open`, :meth:`Archive.add`).
+"""Reading ``.qmz`` files: lazy, random access to clips (decompression), apart from the
+writer: :class:`ArchiveReader` imports nothing of :mod:`~quatmotion.codec.compress`. Users call
+it as :class:`quatmotion.codec.Archive` (:mod:`~quatmotion.codec.qmz`), which adds the file
+kind's ``build``/``add`` on top.
 
-:meth:`Archive.open` reads the preamble, walks the chunk framing and parses the header (the
-decoder of the file's format version); nothing else. :meth:`Archive.read` decodes one clip
+:meth:`ArchiveReader.open` reads the preamble, walks the chunk framing and parses the header
+(the decoder of the file's format version); nothing else. :meth:`ArchiveReader.read` decodes
+one clip
 from its own chunk plus the skeleton record and library model it needs (each parsed once and
 cached), so one clip decodes without decoding any other.
 """
@@ -13,10 +16,10 @@ import hashlib
 import io
 import os
 from collections import OrderedDict
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO, Self
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -53,15 +56,13 @@ from quatmotion.motion import Motion, Skeleton
 
 if TYPE_CHECKING:
     from quatmotion.codec.settings import CompressSettings
-    from quatmotion.collection import BuildReport
-    from quatmotion.parallel import Runner
 
-__all__ = ["Archive", "ClipParts", "DamagedClip", "DecodedChannels", "open_archive"]
+__all__ = ["ArchiveReader", "ClipParts", "DamagedClip", "DecodedChannels", "open_archive"]
 
 
 @dataclass(frozen=True)
 class DamagedClip:
-    """A clip of a damaged file that cannot be decoded (:attr:`Archive.damaged`).
+    """A clip of a damaged file that cannot be decoded (:attr:`ArchiveReader.damaged`).
 
     Attributes
     ----------
@@ -80,7 +81,7 @@ class DamagedClip:
 
 @dataclass(frozen=True)
 class ClipParts:
-    """One clip's parts before its method payload is decoded (:meth:`Archive.clip_parts`)."""
+    """One clip's parts before its method payload is decoded (:meth:`ArchiveReader.clip_parts`)."""
 
     index: int
     entry: ClipEntry
@@ -104,8 +105,8 @@ class DecodedChannels:
     entry: ClipEntry
 
 
-class Archive:
-    """An open ``.qmz`` file (or bytes). Use as a context manager or call :meth:`close`.
+class ArchiveReader:
+    """An open ``.qmz`` file (or bytes), read. Use as a context manager or call :meth:`close`.
 
     Attributes
     ----------
@@ -123,26 +124,8 @@ class Archive:
 
     format: FileFormat = QMZ_FORMAT
 
-    # ------------------------------------------------------------------ the file kind
     @classmethod
-    def build(
-        cls,
-        sources: Iterable[Any],
-        out: str | Path | None,
-        settings: CompressSettings | None = None,
-        *,
-        runner: Runner | None = None,
-        progress: Callable[[str, int, int], None] | None = None,
-    ) -> BuildReport:
-        """Compress clips (files, folders, motions, :class:`~quatmotion.collection.ClipSource`)
-        into one ``.qmz`` library at ``out`` (atomically; None: bytes only, in
-        ``report.details["data"]``). See :func:`quatmotion.codec.compress.build_library`."""
-        from quatmotion.codec.compress import build_library
-
-        return build_library(sources, out, settings, runner=runner, progress=progress)
-
-    @classmethod
-    def open(cls, path: str | Path | bytes, *, recover: bool = False) -> Archive:
+    def open(cls, path: str | Path | bytes, *, recover: bool = False) -> Self:
         """Open a ``.qmz`` file (a path, or its bytes) for lazy clip access.
 
         With ``recover=True`` a damaged file (a flipped byte, a file cut short) opens as long
@@ -159,25 +142,6 @@ class Archive:
             If the path does not exist.
         """
         return cls(path, recover=recover)
-
-    @classmethod
-    def add(
-        cls,
-        path: str | Path,
-        sources: Iterable[Any],
-        settings: CompressSettings | None = None,
-        *,
-        runner: Runner | None = None,
-        progress: Callable[[str, int, int], None] | None = None,
-        labels: Any = None,
-    ) -> BuildReport:
-        """Add clips to an existing ``.qmz`` file (rewritten atomically), the clips already in
-        it kept byte for byte (:func:`quatmotion.codec.compress.add_to_library`)."""
-        if labels is not None:
-            raise ValueError("a .qmz library stores no labels (give them to the clip index)")
-        from quatmotion.codec.compress import add_to_library
-
-        return add_to_library(path, sources, settings, runner=runner, progress=progress)
 
     def __init__(self, source: str | Path | bytes, *, recover: bool = False):
         if isinstance(source, bytes | bytearray):
@@ -330,7 +294,7 @@ class Archive:
     def close(self) -> None:
         self._file.close()
 
-    def __enter__(self) -> Archive:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -626,6 +590,6 @@ def _known() -> set[str]:
     return set(METHODS)
 
 
-def open_archive(source: str | Path | bytes, *, recover: bool = False) -> Archive:
-    """:meth:`Archive.open` (the name before 0.4.0)."""
-    return Archive(source, recover=recover)
+def open_archive(source: str | Path | bytes, *, recover: bool = False) -> ArchiveReader:
+    """:meth:`quatmotion.codec.Archive.open` (the name before 0.4.0)."""
+    return ArchiveReader(source, recover=recover)

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from quatmotion._atomic import atomic_output, output_lock
-from quatmotion.codec.archive import Archive
+from quatmotion.codec.archive import ArchiveReader
 from quatmotion.codec.binary import Writer
 from quatmotion.codec.channels import layout_key, to_channels
 from quatmotion.codec.container import (
@@ -1138,7 +1138,7 @@ def _add_to_library(
 
     t0 = time.perf_counter()
     report = progress or (lambda *_: None)
-    with Archive.open(path) as archive:
+    with ArchiveReader.open(path) as archive:
         old = archive.header
         settings = settings or archive.settings or CompressSettings()
         settings = settings.replace(method=old.method)
@@ -1183,7 +1183,7 @@ def _add_to_library(
     )  # fmt: skip
     try:
         entries = _clip_entries(inputs, plan, clip_skeleton, coded.errors)
-        with Archive.open(path) as archive:
+        with ArchiveReader.open(path) as archive:
             chunks = itertools.chain(archive.clip_payloads(), coded.chunks())
             _write(path, layout, entries, layout.layout_chunks(plan, coded), chunks)
         details = _details(None, codec.name, inputs, coded, t0, q)
