@@ -20,6 +20,7 @@ Conventions
 
 from __future__ import annotations
 
+import errno
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -251,7 +252,8 @@ def read_clip(source: ClipSource | ClipRef, read: ReadSettings | None = None) ->
     if source.motion is not None:
         motion, doubts = source.motion, implausible_values(source.motion)
     else:
-        assert source.path is not None
+        if source.path is None:  # a reference stored without its file (a crafted index)
+            raise FileNotFoundError(errno.ENOENT, "no file is stored for this clip", source.name)
         amc = source.path.suffix.lower() == ".amc"
         bvh = source.path.suffix.lower() == ".bvh"
         motion, doubts = read_motion_checked(
