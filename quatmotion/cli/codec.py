@@ -192,7 +192,7 @@ def compress(
     with exit code 1.
     """
     from quatmotion.codec import Archive, CompressSettings
-    from quatmotion.codec.compress import build_library, runner_of
+    from quatmotion.codec.compress import runner_of
     from quatmotion.collection import ReadSettings
 
     with user_errors(out):
@@ -216,7 +216,7 @@ def compress(
         groups = ("read", "codec", "learn") if method in ("qssd", "ksvd") else ("read", "codec")
         ensure_kernels(*groups, workers=workers, scheduler=scheduler)
         with progress_bar(error_console if as_json else console) as progress:
-            report = build_library(
+            report = Archive.build(
                 inputs, out, settings, runner=runner_of(workers, scheduler),
                 progress=_reporter(progress),
                 on_doubt=doubt_reporter(progress, refuse_units=not force_units),
@@ -396,7 +396,7 @@ def append(
 ) -> None:
     """Add clips to a .qmz file without re-encoding the clips already in it."""
     from quatmotion.codec import Archive
-    from quatmotion.codec.compress import add_to_library, runner_of
+    from quatmotion.codec.compress import runner_of
 
     with user_errors(library):
         require_file(library)
@@ -414,7 +414,7 @@ def append(
         settings = _add_settings(made, max_error, units, skeleton)
         ensure_kernels("read", "codec", workers=workers, scheduler=scheduler)
         with progress_bar() as progress:
-            report = add_to_library(
+            report = Archive.add(
                 library, inputs, settings, runner=runner_of(workers, scheduler),
                 progress=_reporter(progress),
                 on_doubt=doubt_reporter(progress, refuse_units=not force_units),

@@ -17,6 +17,7 @@ from quatmotion.codec.compress import add_to_library, build_library
 if TYPE_CHECKING:
     from quatmotion.codec.settings import CompressSettings
     from quatmotion.collection import BuildReport
+    from quatmotion.io import Doubt
     from quatmotion.parallel import Runner
 
 __all__ = ["Archive"]
@@ -38,11 +39,14 @@ class Archive(ArchiveReader):
         *,
         runner: Runner | None = None,
         progress: Callable[[str, int, int], None] | None = None,
+        on_doubt: Callable[[str, Doubt], None] | None = None,
     ) -> BuildReport:
         """Compress clips (files, folders, motions, :class:`~quatmotion.collection.ClipSource`)
         into one ``.qmz`` library at ``out`` (atomically; None: bytes only, in
         ``report.details["data"]``). See :func:`quatmotion.codec.compress.build_library`."""
-        return build_library(sources, out, settings, runner=runner, progress=progress)
+        return build_library(
+            sources, out, settings, runner=runner, progress=progress, on_doubt=on_doubt
+        )
 
     @classmethod
     def add(
@@ -53,10 +57,13 @@ class Archive(ArchiveReader):
         *,
         runner: Runner | None = None,
         progress: Callable[[str, int, int], None] | None = None,
+        on_doubt: Callable[[str, Doubt], None] | None = None,
         labels: Any = None,
     ) -> BuildReport:
         """Add clips to an existing ``.qmz`` file (rewritten atomically), the clips already in
         it kept byte for byte (:func:`quatmotion.codec.compress.add_to_library`)."""
         if labels is not None:
             raise ValueError("a .qmz library stores no labels (give them to the clip index)")
-        return add_to_library(path, sources, settings, runner=runner, progress=progress)
+        return add_to_library(
+            path, sources, settings, runner=runner, progress=progress, on_doubt=on_doubt
+        )

@@ -4,10 +4,12 @@ A *collection* is a file of clips: a ``.qmz`` library (:class:`quatmotion.codec.
 ``.qidx`` clip index (:class:`quatmotion.retrieval.ClipIndex`) or a pose library
 (:class:`quatmotion.pose.PoseLibrary`). Each kind has the same surface:
 
-* ``Kind.build(sources, out, settings, *, runner=None) -> BuildReport``;
+* ``Kind.build(sources, out, settings, *, runner, progress, on_doubt) -> BuildReport``;
 * ``Kind.open(path)`` -> a reader with ``.clips()``, ``.settings`` and, where the kind
   searches, ``.search(query, k)``;
-* ``Kind.add(path, sources, *, runner=None) -> BuildReport``;
+* ``Kind.add(path, sources, settings, *, runner, progress, on_doubt) -> BuildReport``
+
+(:class:`quatmotion.collection.kind.Kind`, the protocol; a kind's own options come after);
 
 and this package gives them their common parts: the clip identity every file stores
 (:class:`ClipRef`), finding and reading clips by one set of rules (:func:`find_clips`,

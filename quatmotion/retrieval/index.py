@@ -11,7 +11,7 @@ The file's names (:data:`FORMAT`, :class:`IndexSettings`, :class:`ClipRecord`,
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -29,7 +29,9 @@ from quatmotion.retrieval.index_file import (
 
 if TYPE_CHECKING:
     from quatmotion.collection import BuildReport
+    from quatmotion.io import Doubt
     from quatmotion.motion import Motion
+    from quatmotion.parallel import Runner, Scheduler
     from quatmotion.retrieval.search import SearchResult
 
 __all__ = [
@@ -58,22 +60,47 @@ class ClipIndex(IndexFile):
         sources: Iterable[Any],
         out: str | Path,
         settings: IndexSettings | None = None,
-        **options: Any,
+        *,
+        runner: Runner | str | Scheduler | None = None,
+        progress: Callable[[int, int], None] | None = None,
+        on_doubt: Callable[[str, Doubt], None] | None = None,
+        workers: int | None = None,
+        labels: Mapping[str, str] | None = None,
     ) -> BuildReport:
         """Index ``sources`` into ``out``: a new file, or an existing index resumed (its clips
         with the same path and content hash skipped; ``report.details["resumed"]`` says so).
 
-        See :func:`quatmotion.retrieval.build.build` for the options (``runner``,
-        ``progress``, ``labels``, ``on_doubt``...).
+        See :func:`quatmotion.retrieval.build.build` for the parameters.
         """
         from quatmotion.retrieval.build import build
 
-        return build(sources, out, settings, **options)
+        return build(
+            sources,
+            out,
+            settings,
+            runner=runner,
+            workers=workers,
+            progress=progress,
+            labels=labels,
+            on_doubt=on_doubt,
+        )
 
     @classmethod
-    def add(cls, path: str | Path, sources: Iterable[Any], **options: Any) -> BuildReport:
+    def add(
+        cls,
+        path: str | Path,
+        sources: Iterable[Any],
+        settings: IndexSettings | None = None,
+        *,
+        runner: Runner | str | Scheduler | None = None,
+        progress: Callable[[int, int], None] | None = None,
+        on_doubt: Callable[[str, Doubt], None] | None = None,
+        workers: int | None = None,
+        labels: Mapping[str, str] | None = None,
+    ) -> BuildReport:
         """Add ``sources`` to the existing index ``path`` (with its stored settings unless
-        ``settings=`` is given); ``labels=`` also relabels clips already there.
+        ``settings`` is given); ``labels`` also relabels clips already there
+        (:func:`quatmotion.retrieval.build.add`).
 
         Raises
         ------
@@ -82,7 +109,16 @@ class ClipIndex(IndexFile):
         """
         from quatmotion.retrieval.build import add
 
-        return add(path, sources, **options)
+        return add(
+            path,
+            sources,
+            settings=settings,
+            runner=runner,
+            workers=workers,
+            progress=progress,
+            labels=labels,
+            on_doubt=on_doubt,
+        )
 
     def search(
         self, query: Motion | str, k: int = 10, *, method: str | None = None
