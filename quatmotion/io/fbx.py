@@ -498,8 +498,19 @@ def _build(
     for array in (s_rest, s_anim):  # a mirror or a collapse is no rotation (a fuzz finding)
         if not np.all(np.prod(array, axis=-1) > 0):
             raise FormatError("a node's scale is zero or mirrors it (negative): not read", path)
-    rest_world, rest_position = _world(t_rest, r_rest, s_rest, parents)
-    animated_world, position = _world(t_anim, r_anim, s_anim, parents)
+    for array in (r_rest, r_anim):  # scaled first: a norm of huge components overflows
+        largest = np.max(np.abs(array), axis=-1, keepdims=True)
+        if not np.all(largest > 0):
+            raise FormatError("a node's rotation is zero, no rotation: not read", path)
+        array /= largest
+        array /= np.linalg.norm(array, axis=-1, keepdims=True)
+    try:
+        rest_world, rest_position = _world(t_rest, r_rest, s_rest, parents)
+        animated_world, position = _world(t_anim, r_anim, s_anim, parents)
+    except ValueError:  # scipy: a matrix that is no rotation (fuzz findings)
+        raise FormatError(
+            "a node's world transform is no rotation (degenerate or mirrored): not read", path
+        ) from None
     joints = slice(n_chain, N)
     rest_rotation = rest_world[0, joints]  # W_j, (J, 4)
     rest_position = rest_position[0, joints] * scale
@@ -528,20 +539,24 @@ def _build(
     renumber[keep] = np.arange(len(keep))
     sites = np.flatnonzero(is_site)
     kept_names = _unique([names[j] for j in keep])
-    skeleton = Skeleton(
-        joint_names=tuple(kept_names),
-        parents=np.array([-1] + [renumber[jp[j]] for j in keep[1:]], dtype=np.int64),
-        offsets=offsets[keep],
-        channels=tuple(
-            (("tx", "ty", "tz") if j == 0 or moving[j] else ()) + ("rz", "ry", "rx") for j in keep
-        ),
-        euler="intrinsic",
-        site_names=tuple(_unique([names[s] for s in sites], taken=set(kept_names))),
-        site_parents=renumber[jp[sites]],
-        site_offsets=offsets[sites],
-        name=name,
-        extras=extras,
-    )
+    try:
+        skeleton = Skeleton(
+            joint_names=tuple(kept_names),
+            parents=np.array([-1] + [renumber[jp[j]] for j in keep[1:]], dtype=np.int64),
+            offsets=offsets[keep],
+            channels=tuple(
+                (("tx", "ty", "tz") if j == 0 or moving[j] else ()) + ("rz", "ry", "rx")
+                for j in keep
+            ),
+            euler="intrinsic",
+            site_names=tuple(_unique([names[s] for s in sites], taken=set(kept_names))),
+            site_parents=renumber[jp[sites]],
+            site_offsets=offsets[sites],
+            name=name,
+            extras=extras,
+        )
+    except ValueError as error:  # e.g. offsets that overflow once scaled (a fuzz finding)
+        raise FormatError(str(error), path) from None
     translations = None
     if moving.any():
         translations = np.where(moving[None, keep, None], moved[:, keep], offsets[None, keep])
