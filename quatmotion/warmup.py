@@ -320,15 +320,20 @@ def _learn(space: _Workspace) -> None:
 
 
 def _compress(space: _Workspace, methods: Iterable[str]) -> None:
-    from quatmotion import codec
+    from quatmotion.codec import Archive, CompressSettings
+    from quatmotion.parallel import Runner
 
     for method in methods:
         out = space.folder / f"{method}.qmz"
-        codec.compress(space.files, out, max_error=1.0, method=method, workers=1)
-        with codec.Archive.open(out) as library:
+        settings = CompressSettings(max_error=1.0, method=method)
+        Archive.build(space.files, out, settings, runner=Runner.inline())
+        with Archive.open(out) as library:
             for name in library.names():
                 library.read(name)
                 library.sample(name, [0.0, 0.01])
+                sampler = library.sampler(name)  # one pose per call, and a batch
+                sampler.pose(0.0)
+                sampler.poses([0.0, 0.01])
 
 
 def _codec(space: _Workspace) -> None:
