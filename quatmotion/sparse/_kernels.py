@@ -57,8 +57,13 @@ from quatmotion.quat.jit import rotate as _rotate
 # Samples per work unit of the parallel kernels that need scratch buffers: the buffers are
 # allocated once per unit instead of once per sample.
 _CHUNK = 16
-_FM = {"contract"}
-_FM_SUM = {"contract", "reassoc"}
+# No fast-math: contracting a product and a sum into one FMA, or reassociating a sum into
+# vector lanes, makes the results depend on the processor (its FMA unit, its vector width),
+# and these results are compared and ranked (dictionaries, codes, the paper-qssd retrieval
+# features, the bytes of a sparse .qmz). The named flags stay so that a kernel says which it
+# would take.
+_FM = False
+_FM_SUM = False
 
 # sin and cos together, written by hand because glibc's are slow scalar calls here, Numba
 # calls them one at a time and LLVM cannot vectorise a loop that calls them; they were most of
