@@ -8,8 +8,10 @@ Conventions
   **detached**: not followed, not drawn (no bone from it, no sphere on it), not framed. Its
   end sites are hidden with it. Positions and errors still cover every point (the payload
   keeps them), so nothing measured changes.
-* **Detached joints.** For a skeleton of the 16-joint mapping (:mod:`quatmotion.pose.skeleton16`:
-  CMU/HDM05 ASF, CMU BVH, Bandai BVH), the ancestors of its Hip. For any other skeleton, the
+* **Detached joints.** For a skeleton the humanoid mapping reads (:mod:`quatmotion.pose.skeleton16`:
+  by names or structure), the Hip's ancestors down to the deepest link above the Hip that is
+  not a bone (by the rule below: a static ``joint_Root``, a root on the floor; a reference
+  joint carried on the pelvis stays). For any other skeleton, the
   *root chain*: from joint 0, each step goes into the child whose subtree holds most points,
   as long as that subtree holds more than half of the skeleton's points (below that the body
   branches into its limbs). A link of the chain is *not a bone* when it is longer than
@@ -106,7 +108,7 @@ def body_framing(skeleton: Skeleton, positions: NDArray[np.floating]) -> BodyFra
     except ValueError:
         hip = None
     if hip is not None:
-        detached = _ancestors(skeleton, hip)
+        detached = _detached_above(skeleton, sample, hip)
         centre, rule = hip, "hip16"
     else:
         detached, centre = _detached_root_chain(skeleton, sample)
@@ -142,6 +144,19 @@ def _ancestors(skeleton: Skeleton, joint: int) -> list[int]:
         out.append(parent)
         parent = int(skeleton.parents[parent])
     return sorted(out)
+
+
+def _detached_above(skeleton: Skeleton, sample: NDArray[np.float64], hip: int) -> list[int]:
+    """The Hip's ancestors that are not the body: every one down to the deepest link of the
+    chain from the root to the Hip that is not a bone (:func:`_not_a_bone`); a reference joint
+    carried on the pelvis is a bone of the body and stays."""
+    path = [*_ancestors(skeleton, hip), hip]
+    deepest = -1
+    for k, (parent, child) in enumerate(zip(path[:-1], path[1:], strict=True)):
+        body = _subtree_points(skeleton, child)
+        if sample.shape[0] and _not_a_bone(sample, parent, child, body):
+            deepest = k
+    return path[: deepest + 1]
 
 
 def _subtree_points(skeleton: Skeleton, joint: int) -> NDArray[np.bool_]:
