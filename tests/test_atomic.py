@@ -60,7 +60,7 @@ def test_an_index_that_cannot_be_written_names_its_file(tmp_path):
     from quatmotion.retrieval.index import ClipIndex, ClipRecord
 
     path = tmp_path / "x.qidx"
-    ClipIndex.create(path).close()
+    ClipIndex._create(path).close()
     record = ClipRecord(ClipRef("walk", "0" * 64, "/walk.bvh"), "", 10, 30.0, "s", {})
     with ClipIndex.open(path) as index, pytest.raises(OSError) as caught:  # opened read-only
         index.store([record])

@@ -56,7 +56,7 @@ def test_an_index_finds_one_clip_of_a_name_or_says_which_ones(tmp_path):
         ref = ClipRef(name, "0" * 64, f"/data/{name}.bvh")
         return ClipRecord(ref, "", 10, 30.0, "s", {})
 
-    with ClipIndex.create(tmp_path / "x.qidx") as index:
+    with ClipIndex._create(tmp_path / "x.qidx") as index:
         index.store([record("a/walk"), record("b/walk"), record("run")])
         assert index.find("run").path == "/data/run.bvh"
         assert index.find("b/walk").name == "b/walk"

@@ -261,7 +261,7 @@ def test_index_build_stores_the_joint_map_and_info_prints_the_mapping(tmp_path: 
     assert "joint_a (user)" in info.output
     listing = runner.invoke(app, ["index", "ls", str(index)])
     assert "2 by user" in listing.output and "LHip=joint_a" in listing.output, listing.output
-    doc = json.loads(runner.invoke(app, ["index", "ls", str(index), "--json"]).output)
+    doc = json.loads(runner.invoke(app, ["index", "ls", str(index), "--json"]).stdout)
     (entry,) = doc["skeletons"].values()
     assert entry["joints"]["LHip"] == {"joint": "joint_a", "how": "user"}
     bad = runner.invoke(

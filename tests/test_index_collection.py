@@ -82,7 +82,7 @@ def test_one_stem_in_two_folders_is_two_clips_and_an_ambiguous_name(two_sessions
     assert "s2/take_001" in result.output
     ok = runner.invoke(app, ["search", "s2/take_001", "--index", str(out), "--json"])
     assert ok.exit_code == 0, ok.output
-    assert {r["clip"] for r in json.loads(ok.output)["results"]} == {"punch", "s1/take_001"}
+    assert {r["clip"] for r in json.loads(ok.stdout)["results"]} == {"punch", "s1/take_001"}
 
 
 def test_a_relative_build_stores_absolute_paths_found_after_a_move(
@@ -165,7 +165,7 @@ def test_build_report_failures_are_failures_and_settings_validate(tmp_path, two_
         IndexSettings(kinds=("colour",))
     with pytest.raises(ValueError, match="batch"):
         IndexSettings(batch=0)
-    with pytest.raises(FileExistsError):
+    with pytest.raises(FileExistsError), pytest.warns(DeprecationWarning, match="ClipIndex.create"):
         ClipIndex.create(tmp_path / "b.qidx")
     again = ClipIndex.build(
         [folder], tmp_path / "b.qidx", IndexSettings(kinds=("motion",)), workers=1

@@ -52,7 +52,7 @@ def test_a_library_built_from_files_stores_its_settings_and_references(tmp_path)
     assert all(Path(r.path).is_absolute() for r in back.clips())
     listed = runner.invoke(app, ["pose", "ls", str(out), "--json"])
     assert listed.exit_code == 0, listed.output
-    doc = json.loads(listed.output)
+    doc = json.loads(listed.stdout)
     assert doc["settings"]["rank"] == 2 and [c["poses"] for c in doc["clips"]] == [40, 40]
     built = report.details["library"]
     np.testing.assert_array_equal(back.frame_of, built.frame_of)

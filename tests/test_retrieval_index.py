@@ -77,7 +77,7 @@ def test_build_search_json_and_twice_indexed_clip(clip_folder, tmp_path):
     assert doc["results"][0]["distance"] == pytest.approx(0.0, abs=1e-9)
     assert [r["rank"] for r in doc["results"]] == [1, 2, 3, 4]
     by_name = runner.invoke(app, ["search", "squat_1", "--index", str(out), "--top", "2", "--json"])
-    assert {r["clip"] for r in json.loads(by_name.output)["results"]} == {"squat_0", "squat_2"}
+    assert {r["clip"] for r in json.loads(by_name.stdout)["results"]} == {"squat_0", "squat_2"}
 
 
 def test_bad_file_is_reported_and_skipped(clip_folder, tmp_path):
@@ -176,7 +176,7 @@ def test_remove_and_ls(clip_folder, tmp_path):
     _build(clip_folder, out)
     assert runner.invoke(app, ["index", "remove", str(out), "walk_1"]).exit_code == 0
     listed = runner.invoke(app, ["index", "ls", str(out), "--json"])
-    doc = json.loads(listed.output)
+    doc = json.loads(listed.stdout)
     names = {r["name"] for r in doc["clips"]}
     assert doc["settings"]["kinds"] == ["motion"] and doc["format"]["version"] == FORMAT_VERSION
     assert "walk_1" not in names and len(names) == 8
@@ -256,13 +256,13 @@ def test_search_queries_in_one_process_equal_one_at_a_time(clip_folder, tmp_path
     args = ["--index", str(out), "--top", "5", "--json"]
     batch = runner.invoke(app, ["search", "--queries", str(listing), *args])
     assert batch.exit_code == 0, batch.output
-    docs = json.loads(batch.output)["queries"]
+    docs = json.loads(batch.stdout)["queries"]
     assert [d["query"] for d in docs] == files + ["squat_1"]
     for d in docs:
         single = runner.invoke(app, ["search", d["query"], *args])
-        assert json.loads(single.output)["results"] == d["results"]
+        assert json.loads(single.stdout)["results"] == d["results"]
     folder = runner.invoke(app, ["search", "--queries", str(clip_folder), *args])
-    assert [d["query"] for d in json.loads(folder.output)["queries"]][:4] == files
+    assert [d["query"] for d in json.loads(folder.stdout)["queries"]][:4] == files
     both = runner.invoke(app, ["search", files[0], "--queries", str(listing), *args])
     assert both.exit_code != 0 and "not both" in both.output
 

@@ -52,7 +52,7 @@ def library(tmp_path_factory) -> tuple[Path, Path]:
 def _cli(*args: str) -> dict:
     done = runner.invoke(app, ["search", *args, "--top", str(TOP), "--json"])
     assert done.exit_code == 0, done.output
-    return json.loads(done.output)
+    return json.loads(done.stdout)
 
 
 def test_a_name_its_number_and_a_batch_give_the_same_bits(library):

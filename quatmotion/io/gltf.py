@@ -575,7 +575,8 @@ class _Reader:
             padded = np.zeros(stride * count, dtype=np.uint8)
             padded[: len(raw)] = raw
             values = padded.reshape(count, stride)[:, :element].copy().view(dtype)
-        values = values.astype(np.float64)
+        with np.errstate(invalid="ignore", over="ignore"):  # not finite: refused just below
+            values = values.astype(np.float64)
         if acc.get("normalized") is True and component in _NORMALIZED_MAX:
             values = np.maximum(values / _NORMALIZED_MAX[component], -1.0)
         if not np.all(np.isfinite(values)):
