@@ -16,10 +16,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, BinaryIO
 
 from quatmotion.errors import FormatError
 
-__all__ = ["FileFormat"]
+__all__ = ["FileFormat", "npy_header"]
 
 
 @dataclass(frozen=True)
@@ -99,3 +100,25 @@ class FileFormat:
                 path,
             )
         return number
+
+
+def npy_header(fh: BinaryIO) -> tuple[tuple[int, ...], Any]:
+    """The shape and dtype a stored ``.npy`` stream declares, from its header alone (nothing
+    allocated; ``fh`` is left at the data), so that a reader checks a declared size against the
+    bytes there are before NumPy allocates it.
+
+    Raises
+    ------
+    ValueError
+        A stream that is no ``.npy`` (NumPy's message).
+    """
+    import numpy as np  # here: the module is imported where no array is read
+
+    version = np.lib.format.read_magic(fh)
+    read_header = (
+        np.lib.format.read_array_header_1_0
+        if version == (1, 0)
+        else np.lib.format.read_array_header_2_0
+    )
+    shape, _, dtype = read_header(fh)
+    return shape, dtype

@@ -61,7 +61,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from quatmotion._atomic import atomic_output
 from quatmotion._deprecated import warn_renamed
-from quatmotion._format import FileFormat
+from quatmotion._format import FileFormat, npy_header
 from quatmotion._settings import Interval, Settings, StrOptions
 from quatmotion.collection import (
     BuildReport,
@@ -1013,13 +1013,7 @@ def _load_arrays(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
         for info in archive.infolist():
             check("file_bytes", info.file_size, path, f"member {info.filename}")
             with archive.open(info) as fh:
-                version = np.lib.format.read_magic(fh)
-                read_header = (
-                    np.lib.format.read_array_header_1_0
-                    if version == (1, 0)
-                    else np.lib.format.read_array_header_2_0
-                )
-                shape, _, dtype = read_header(fh)
+                shape, dtype = npy_header(fh)
             if (
                 dtype.hasobject
                 or int(np.prod(shape, dtype=object)) * dtype.itemsize > info.file_size

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from quatmotion._format import FileFormat
+from quatmotion._format import FileFormat, npy_header
 from quatmotion.errors import FormatError
 from quatmotion.limits import current, load_json
 from quatmotion.retrieval import features as feat
@@ -116,13 +116,7 @@ def read_array(data: Any, path: Path | None = None, what: str = "a feature array
     data = bytes(data)
     fh = io.BytesIO(data)
     try:
-        version = np.lib.format.read_magic(fh)
-        read_header = (
-            np.lib.format.read_array_header_1_0
-            if version == (1, 0)
-            else np.lib.format.read_array_header_2_0
-        )
-        shape, _, dtype = read_header(fh)
+        shape, dtype = npy_header(fh)
         if dtype.hasobject or dtype.kind not in "biufc":
             raise ValueError(f"an array of {dtype}")
         if int(np.prod(shape, dtype=object)) * dtype.itemsize != len(data) - fh.tell():
