@@ -253,8 +253,11 @@ def test_serve_dir_shows_the_build_in_the_page_and_fills_the_list_as_it_lands(
     with _serve(tmp_path / "serve.log", str(folder)) as base:
         page = browser.new_page(viewport={"width": 1280, "height": 800})
         page.goto(f"{base}/")
-        page.wait_for_selector("#build", state="attached", timeout=60_000)
-        assert page.locator("#build").inner_text().startswith("Building ")
+        # the banner's text comes with the page's first poll of /api/build (data-build)
+        page.wait_for_selector("html[data-build]", state="attached", timeout=60_000)
+        state = page.evaluate("document.documentElement.dataset.build")
+        shown = page.locator("#build").inner_text()
+        assert shown.startswith("Building " if state == "building" else "Built "), (state, shown)
         page.wait_for_selector("html[data-build=ready]", state="attached", timeout=600_000)
         page.wait_for_selector("#clips tbody tr:nth-child(3)", state="attached", timeout=60_000)
         assert "Built " in page.locator("#build").inner_text()
