@@ -467,6 +467,45 @@ def _world(
     return quat.normalize(quat.from_matrix(unscaled)), position
 
 
+def _transforms(rows: list, n: int, path: Path) -> tuple[NDArray, NDArray, NDArray]:
+    """Translations ``(T, n, 3)``, unit rotations (wxyz) ``(T, n, 4)`` and scales ``(T, n, 3)``
+    of ``rows`` (per frame, per node, :func:`_transform`'s triples), checked.
+
+    Raises
+    ------
+    FormatError
+        A value not finite, a scale that is zero or mirrors, a rotation of zero.
+    """
+    T = len(rows)
+    t, r, s = (
+        np.array([[node[part] for node in row] for row in rows], dtype=np.float64).reshape(
+            T, n, width
+        )
+        for part, width in ((0, 3), (1, 4), (2, 3))
+    )
+    if not all(np.all(np.isfinite(a)) for a in (t, r, s)):
+        raise FormatError("a node's transform is not finite", path)
+    if not np.all(np.prod(s, axis=-1) > 0):  # a mirror or a collapse is no rotation (fuzzed)
+        raise FormatError("a node's scale is zero or mirrors it (negative): not read", path)
+    largest = np.max(np.abs(r), axis=-1, keepdims=True)  # scaled first: a norm of huge
+    if not np.all(largest > 0):  # components overflows
+        raise FormatError("a node's rotation is zero, no rotation: not read", path)
+    r /= largest
+    r /= np.linalg.norm(r, axis=-1, keepdims=True)
+    return t, r, s
+
+
+def _end_sites(names: list[str], parents: NDArray, moving: NDArray) -> NDArray:
+    """Which joints are end sites: leaves named as ends whose translation never moves (never
+    the root)."""
+    leaves = np.ones(len(names), dtype=bool)
+    leaves[parents[1:]] = False
+    named = np.array([bool(_END_NAME.search(n)) for n in names])
+    is_site = leaves & ~moving & named
+    is_site[0] = False
+    return is_site
+
+
 def _build(
     rest: list,
     frames: list,
@@ -482,46 +521,23 @@ def _build(
 ) -> Motion:
     """The Motion of nodes' local transforms: ``rest`` per node, ``frames`` per frame per node
     (the root's ancestors first, ``n_chain`` of them, then the joints)."""
-    N = len(rest)
+    N, T, J = len(rest), len(frames), len(rest) - n_chain
     parents = [k - 1 for k in range(n_chain)]  # the ancestors: a chain
     parents += [(n_chain - 1) if p < 0 else n_chain + p for p in joint_parents]
-    t_rest = np.array([[r[0] for r in rest]], dtype=np.float64).reshape(1, N, 3)
-    r_rest = np.array([[r[1] for r in rest]], dtype=np.float64).reshape(1, N, 4)
-    s_rest = np.array([[r[2] for r in rest]], dtype=np.float64).reshape(1, N, 3)
-    T = len(frames)
-    t_anim = np.array([[f[0] for f in row] for row in frames], dtype=np.float64).reshape(T, N, 3)
-    r_anim = np.array([[f[1] for f in row] for row in frames], dtype=np.float64).reshape(T, N, 4)
-    s_anim = np.array([[f[2] for f in row] for row in frames], dtype=np.float64).reshape(T, N, 3)
-    for array in (t_rest, r_rest, s_rest, t_anim, r_anim, s_anim):
-        if not np.all(np.isfinite(array)):
-            raise FormatError("a node's transform is not finite", path)
-    for array in (s_rest, s_anim):  # a mirror or a collapse is no rotation (a fuzz finding)
-        if not np.all(np.prod(array, axis=-1) > 0):
-            raise FormatError("a node's scale is zero or mirrors it (negative): not read", path)
-    for array in (r_rest, r_anim):  # scaled first: a norm of huge components overflows
-        largest = np.max(np.abs(array), axis=-1, keepdims=True)
-        if not np.all(largest > 0):
-            raise FormatError("a node's rotation is zero, no rotation: not read", path)
-        array /= largest
-        array /= np.linalg.norm(array, axis=-1, keepdims=True)
     try:
-        rest_world, rest_position = _world(t_rest, r_rest, s_rest, parents)
-        animated_world, position = _world(t_anim, r_anim, s_anim, parents)
+        rest_world, rest_position = _world(*_transforms([rest], N, path), parents)
+        animated_world, position = _world(*_transforms(frames, N, path), parents)
     except ValueError:  # scipy: a matrix that is no rotation (fuzz findings)
         raise FormatError(
             "a node's world transform is no rotation (degenerate or mirrored): not read", path
         ) from None
-    joints = slice(n_chain, N)
-    rest_rotation = rest_world[0, joints]  # W_j, (J, 4)
-    rest_position = rest_position[0, joints] * scale
-    position = position[:, joints] * scale
-    J = N - n_chain
-    # G'_j = G_j W_j^-1: the world rotation relative to the rest pose's
-    world = quat.multiply(animated_world[:, joints], quat.conjugate(rest_rotation)[None])
+    rest_position = rest_position[0, n_chain:] * scale
+    position = position[:, n_chain:] * scale
+    # G'_j = G_j W_j^-1: the world rotation relative to the rest pose's W_j
+    world = quat.multiply(animated_world[:, n_chain:], quat.conjugate(rest_world[0, n_chain:]))
     jp = np.asarray(joint_parents, dtype=np.int64)
-    offsets = np.empty((J, 3))
-    offsets[0] = rest_position[0]
-    offsets[1:] = rest_position[1:] - rest_position[jp[1:]]
+    offsets = rest_position.copy()
+    offsets[1:] -= rest_position[jp[1:]]
     local = world.copy()
     local[:, 1:] = quat.multiply(quat.conjugate(world[:, jp[1:]]), world[:, 1:])
     moved = np.zeros((T, J, 3))
@@ -530,14 +546,10 @@ def _build(
     )
     drift = np.abs(moved[:, 1:] - offsets[None, 1:]).max(axis=(0, 2)) if T else np.zeros(J - 1)
     moving = np.concatenate(([False], drift > MOVING_TRANSLATION_CM))
-    leaves = np.ones(J, dtype=bool)
-    leaves[jp[1:]] = False
-    is_site = leaves & ~moving & np.array([bool(_END_NAME.search(n)) for n in names])
-    is_site[0] = False
-    keep = np.flatnonzero(~is_site)
+    is_site = _end_sites(names, jp, moving)
+    keep, sites = np.flatnonzero(~is_site), np.flatnonzero(is_site)
     renumber = -np.ones(J, dtype=np.int64)
     renumber[keep] = np.arange(len(keep))
-    sites = np.flatnonzero(is_site)
     kept_names = _unique([names[j] for j in keep])
     try:
         skeleton = Skeleton(
@@ -555,12 +567,9 @@ def _build(
             name=name,
             extras=extras,
         )
-    except ValueError as error:  # e.g. offsets that overflow once scaled (a fuzz finding)
-        raise FormatError(str(error), path) from None
-    translations = None
-    if moving.any():
-        translations = np.where(moving[None, keep, None], moved[:, keep], offsets[None, keep])
-    try:
+        translations = None
+        if moving.any():
+            translations = np.where(moving[None, keep, None], moved[:, keep], offsets[None, keep])
         return Motion(
             skeleton,
             fps,
@@ -569,5 +578,5 @@ def _build(
             translations,
             name=name,
         )
-    except ValueError as error:
+    except ValueError as error:  # e.g. offsets that overflow once scaled (a fuzz finding)
         raise FormatError(str(error), path) from None
