@@ -4,19 +4,17 @@ bytes."""
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
 
 import pytest
 
 from quatmotion.codec import Archive, CompressSettings
+from quatmotion.codec.writer import code, plan, scan
 from quatmotion.collection import ReadSettings
 from quatmotion.io import write_bvh
 from quatmotion.parallel import Runner
 from quatmotion.synthetic import KINDS, generate_clip
 
-# the module (``quatmotion.codec.compress`` is also the name of a function of the package)
-compress_module = importlib.import_module("quatmotion.codec.compress")
 N_CLIPS = 8
 SETTINGS = CompressSettings(read=ReadSettings(units="cm"), fit_sample=3)
 
@@ -44,13 +42,14 @@ def test_the_caller_reads_only_the_sample(clips, inline_bytes, monkeypatch, tmp_
     """With a local pool, every clip is scanned and coded in a worker: the caller reads the
     fitting sample only (at most ``fit_sample`` clips of each layout)."""
     read_here: list[str] = []
-    read_clip = compress_module.read_clip
+    read_clip = plan.read_clip
 
     def counting(source, read=None):
         read_here.append(source.name)
         return read_clip(source, read)
 
-    monkeypatch.setattr(compress_module, "read_clip", counting)
+    for step in (scan, plan, code):  # every step that reads a clip
+        monkeypatch.setattr(step, "read_clip", counting)
     out = tmp_path / "pool.qmz"
     report = Archive.build([clips], out, SETTINGS, runner=Runner.local(workers=2))
     assert len(report.added) == N_CLIPS
@@ -61,13 +60,13 @@ def test_the_caller_reads_only_the_sample(clips, inline_bytes, monkeypatch, tmp_
 
 def test_layouts_and_models_learned_on_a_bounded_sample(clips, monkeypatch) -> None:
     fitted: list[int] = []
-    prepare_library = compress_module.prepare_library
+    prepare_library = plan.prepare_library
 
     def spy(motions, *args, **kwargs):
         fitted.append(len(motions))
         return prepare_library(motions, *args, **kwargs)
 
-    monkeypatch.setattr(compress_module, "prepare_library", spy)
+    monkeypatch.setattr(plan, "prepare_library", spy)
     report = Archive.build([clips], None, SETTINGS, runner=Runner.inline())
     n_layouts = _layouts(report.details["data"])
     assert fitted and all(n <= SETTINGS.fit_sample * n_layouts for n in fitted)

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 
 from quatmotion import codec
-from quatmotion.codec.compress import _SkeletonTable
+from quatmotion.codec.writer.skeleton_table import SkeletonTable
 from quatmotion.motion import Motion, Skeleton
 from quatmotion.synthetic import cmu_skeleton, generate_clip
 
@@ -23,7 +23,7 @@ def _scaled(skeleton: Skeleton, factor: float) -> Skeleton:
 
 def test_distinct_skeletons_cost_no_comparisons_with_earlier_ones():
     base = cmu_skeleton()
-    table = _SkeletonTable()
+    table = SkeletonTable()
     skeletons = [_scaled(base, 1.0 + 0.001 * k) for k in range(200)]
     for k, sk in enumerate(skeletons):
         assert table.index(sk) == k
@@ -38,10 +38,10 @@ def test_distinct_skeletons_cost_no_comparisons_with_earlier_ones():
 
 def test_table_restored_from_an_archive_finds_its_skeletons():
     base = cmu_skeleton()
-    first = _SkeletonTable()
+    first = SkeletonTable()
     for k in range(5):
         first.index(_scaled(base, 1.0 + 0.01 * k))
-    again = _SkeletonTable(
+    again = SkeletonTable(
         list(first.records), list(first.texts), list(first.skeletons), list(first.objects)
     )
     assert again.index(_scaled(base, 1.03)) == 3

@@ -338,14 +338,13 @@ def test_a_second_writer_of_one_library_is_refused_while_the_first_writes(qmz, t
 
 def test_a_full_disk_ends_a_writer_with_one_line_naming_its_file(qmz, tmp_path, monkeypatch):
     import errno
-    import importlib
 
-    compress_module = importlib.import_module("quatmotion.codec.compress")
+    from quatmotion.codec.writer import write
 
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(compress_module, "write_container", full)
+    monkeypatch.setattr(write, "write_container", full)
     clip = qmz["best"].parent / "walk.bvh"
     out = tmp_path / "full.qmz"
     line = _one_error(_invoke("compress", clip, "-o", out, "--workers", "1"))

@@ -9,7 +9,7 @@ fastest of 3 batches each. Jobs:
 * ``index`` / ``index_chunked``: the per-clip job of ``quatmotion index build`` (read a BVH
   file, its motion features), one clip and :data:`CHUNK` clips per task.
 * ``codec_models_in_tasks``: the per-clip job of ``quatmotion compress``
-  (:func:`quatmotion.codec.compress.code_clip`: read the clip, encode, decode, repair) with
+  (:func:`quatmotion.codec.writer.code_clip`: read the clip, encode, decode, repair) with
   the shared models in every task, as 0.3.0 sent them.
 * ``codec_context`` / ``codec_context_chunked``: the same job with the models sent to each
   worker once as the batch's context (:meth:`quatmotion.parallel.Runner.map`, ``context=``;
@@ -33,7 +33,7 @@ from typing import Any
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench import provenance
 from quatmotion.bench.scale import _write_clips, codec_clip_jobs, retrieval_features
-from quatmotion.codec.compress import code_clip
+from quatmotion.codec.writer import code_clip
 from quatmotion.parallel import Runner, shutdown_pools
 
 REPEATS = 3

@@ -66,7 +66,7 @@ import numpy as np
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench import provenance
 from quatmotion.codec import CompressSettings
-from quatmotion.codec.compress import ClipTask, SharedModels, code_clip, plan_clip_tasks
+from quatmotion.codec.writer import ClipTask, SharedModels, code_clip, plan_clip_tasks
 from quatmotion.collection import ReadSettings, find_clips
 from quatmotion.parallel import (
     Runner,
@@ -103,7 +103,7 @@ def codec_clip_jobs(
 ) -> tuple[list[ClipTask], SharedModels]:
     """The per-clip tasks ``compress`` hands to :mod:`quatmotion.parallel` for the clips of
     ``paths`` with the default method, and their shared models (fitted on the sample):
-    :func:`~quatmotion.codec.compress.code_clip` over them, the models as the batch's context,
+    :func:`~quatmotion.codec.writer.code_clip` over them, the models as the batch's context,
     is the batch step on its own."""
     settings = CompressSettings(max_error=max_error, seed=seed)
     return plan_clip_tasks(paths, settings, runner=Runner.inline())

@@ -192,7 +192,7 @@ def compress(
     with exit code 1.
     """
     from quatmotion.codec import Archive, CompressSettings
-    from quatmotion.codec.compress import runner_of
+    from quatmotion.codec.writer import runner_of
     from quatmotion.collection import ReadSettings
 
     with user_errors(out):
@@ -396,7 +396,7 @@ def append(
 ) -> None:
     """Add clips to a .qmz file without re-encoding the clips already in it."""
     from quatmotion.codec import Archive
-    from quatmotion.codec.compress import runner_of
+    from quatmotion.codec.writer import runner_of
 
     with user_errors(library):
         require_file(library)

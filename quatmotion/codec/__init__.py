@@ -13,7 +13,7 @@ Layout (compression and decompression apart, format and math apart):
   :class:`CompressSettings` in, a ``.qmz`` and a :class:`~quatmotion.collection.BuildReport`
   out), :meth:`Archive.open` (a reader: ``.clips()`` references, ``.settings``, ``.format``),
   :meth:`Archive.add`;
-* compression: :mod:`~quatmotion.codec.compress` (the orchestrator, as named steps),
+* compression: :mod:`~quatmotion.codec.writer` (the orchestrator, a module per step),
   :mod:`~quatmotion.codec.settings`, :mod:`~quatmotion.codec.library` (a collection prepared
   for encoding), :mod:`~quatmotion.codec.repair` (per-frame corrections that make the bound
   hold);
@@ -29,8 +29,8 @@ wrappers of the above).
 ``docs/format.md`` specifies the file byte by byte.
 """
 
+from quatmotion.codec._old_names import CompressionResult, append, compress
 from quatmotion.codec.archive import DamagedClip, open_archive
-from quatmotion.codec.compress import CompressionResult, append, compress
 from quatmotion.codec.methods import METHODS
 from quatmotion.codec.qmz import Archive
 from quatmotion.codec.sampling import Sampler

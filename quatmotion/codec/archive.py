@@ -1,5 +1,5 @@
 """Reading ``.qmz`` files: lazy, random access to clips (decompression), apart from the
-writer: :class:`ArchiveReader` imports nothing of :mod:`~quatmotion.codec.compress`. Users call
+writer: :class:`ArchiveReader` imports nothing of :mod:`~quatmotion.codec.writer`. Users call
 it as :class:`quatmotion.codec.Archive` (:mod:`~quatmotion.codec.qmz`), which adds the file
 kind's ``build``/``add`` on top.
 

@@ -1,6 +1,6 @@
 """The ``.qmz`` file kind as users call it: :class:`Archive`, the reader
 (:class:`~quatmotion.codec.archive.ArchiveReader`: open, clips, read, sample) with the
-collection surface's ``build``/``add`` (:mod:`~quatmotion.codec.compress`, the writer) on top:
+collection surface's ``build``/``add`` (:mod:`~quatmotion.codec.writer`, the writer) on top:
 a thin facade above both, so the reader imports no writer and decoding stays importable
 without it.
 """
@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from quatmotion.codec.archive import ArchiveReader
-from quatmotion.codec.compress import add_to_library, build_library
+from quatmotion.codec.writer import add_to_library, build_library
 
 if TYPE_CHECKING:
     from quatmotion.codec.settings import CompressSettings
@@ -43,7 +43,7 @@ class Archive(ArchiveReader):
     ) -> BuildReport:
         """Compress clips (files, folders, motions, :class:`~quatmotion.collection.ClipSource`)
         into one ``.qmz`` library at ``out`` (atomically; None: bytes only, in
-        ``report.details["data"]``). See :func:`quatmotion.codec.compress.build_library`."""
+        ``report.details["data"]``). See :func:`quatmotion.codec.writer.build_library`."""
         return build_library(
             sources, out, settings, runner=runner, progress=progress, on_doubt=on_doubt
         )
@@ -61,7 +61,7 @@ class Archive(ArchiveReader):
         labels: Any = None,
     ) -> BuildReport:
         """Add clips to an existing ``.qmz`` file (rewritten atomically), the clips already in
-        it kept byte for byte (:func:`quatmotion.codec.compress.add_to_library`)."""
+        it kept byte for byte (:func:`quatmotion.codec.writer.add_to_library`)."""
         if labels is not None:
             raise ValueError("a .qmz library stores no labels (give them to the clip index)")
         return add_to_library(

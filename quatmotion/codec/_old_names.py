@@ -1,0 +1,139 @@
+"""The codec's names before 0.4.0 (docs/migration-0.4.md): :func:`compress` and :func:`append`,
+thin wrappers of :meth:`Archive.build <quatmotion.codec.Archive.build>` and
+:meth:`Archive.add <quatmotion.codec.Archive.add>` that return a :class:`CompressionResult`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from quatmotion.codec.metrics import ClipErrors
+from quatmotion.codec.settings import CompressSettings
+from quatmotion.codec.writer import add_to_library, build_library, runner_of
+from quatmotion.codec.writer.runner import OnDoubt, Progress
+from quatmotion.collection import BuildReport, ReadSettings
+from quatmotion.motion import Motion, Skeleton
+from quatmotion.parallel import Scheduler
+
+__all__ = ["CompressionResult", "append", "compress"]
+
+
+@dataclass
+class CompressionResult:
+    """What :func:`compress` made (the return before 0.4.0; :class:`BuildReport` now).
+
+    Attributes
+    ----------
+    data : bytes
+        The whole ``.qmz`` file.
+    path : Path or None
+        Where it was written.
+    method : str
+    clip_errors : list of ClipErrors
+        Per clip, as decoded from ``data``.
+    clip_bytes : list of int
+        Per clip, its chunk's payload bytes.
+    source_bytes : list of int
+        Per clip, its source file's size (0 if unknown).
+    raw_bytes : list of int
+        Per clip, ``4 * dofs * frames``.
+    seconds : float
+        Wall time of the whole compression.
+    quality : float
+        The method's quality knob as used.
+    """
+
+    data: bytes
+    path: Path | None
+    method: str
+    clip_errors: list[ClipErrors]
+    clip_bytes: list[int]
+    source_bytes: list[int]
+    raw_bytes: list[int]
+    seconds: float
+    quality: float
+    corrections: list[int] = field(default_factory=list)
+    failed: list[tuple[str, str]] = field(default_factory=list)
+    """Inputs left out (``on_error="skip"``): (file or clip, one-line reason)."""
+
+    @property
+    def size(self) -> int:
+        return len(self.data)
+
+    @classmethod
+    def from_report(cls, report: BuildReport) -> CompressionResult:
+        d = report.details
+        data = d["data"] if "data" in d else Path(report.path).read_bytes()
+        return cls(
+            data, report.path, d["method"], d["clip_errors"], d["clip_bytes"],
+            d["source_bytes"], d["raw_bytes"], d["seconds"], d["quality"], d["corrections"],
+            [(str(f.item), f.message) for f in report.failures],
+        )  # fmt: skip
+
+
+def compress(
+    clips: Sequence[Motion | str | Path],
+    out: str | Path | None = None,
+    *,
+    max_error: float | None = None,
+    ratio: float | None = None,
+    method: str = "best",
+    quality: float | None = None,
+    bound_on: str = "joints",
+    skeleton: Skeleton | str | Path | None = None,
+    units: str | float | None = None,
+    sources: Sequence[tuple[int, str]] | None = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+    workers: int | None = None,
+    scheduler: str | Scheduler | None = None,
+    on_error: str = "raise",
+    on_doubt: OnDoubt | None = None,
+) -> CompressionResult:
+    """The name before 0.4.0: :meth:`Archive.build` with a :class:`CompressSettings` made of
+    the keywords (``max_error`` and ``ratio`` both None: no bound, as before). ``skeleton`` may
+    only be a path now (an ASF file or a folder)."""
+    if isinstance(skeleton, Skeleton):
+        raise TypeError("skeleton must be the path of an ASF file or folder")
+    settings = CompressSettings(
+        max_error=max_error, ratio=ratio, method=method, quality=quality, bound_on=bound_on,
+        seed=seed, on_error=on_error,
+        read=ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton)),
+    )  # fmt: skip
+    report = build_library(
+        clips, out, settings, runner=runner_of(workers, scheduler), progress=progress,
+        on_doubt=on_doubt, source_sizes=sources,
+    )  # fmt: skip
+    return CompressionResult.from_report(report)
+
+
+def append(
+    path: str | Path,
+    clips: Sequence[Motion | str | Path],
+    *,
+    max_error: float | None = None,
+    quality: float | None = None,
+    skeleton: Skeleton | str | Path | None = None,
+    units: str | float | None = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+    workers: int | None = None,
+    scheduler: str | Scheduler | None = None,
+    on_doubt: OnDoubt | None = None,
+) -> CompressionResult:
+    """The name before 0.4.0: :meth:`Archive.add` with the keywords as settings."""
+    if isinstance(skeleton, Skeleton):
+        raise TypeError("skeleton must be the path of an ASF file or folder")
+    settings = CompressSettings(
+        max_error=max_error, quality=quality, seed=seed,
+        read=ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton)),
+    )  # fmt: skip
+    report = add_to_library(
+        path, clips, settings, runner=runner_of(workers, scheduler), progress=progress,
+        on_doubt=on_doubt,
+    )  # fmt: skip
+    if not report.added:
+        raise ValueError(f"{path}: already holds every clip given")
+    return CompressionResult.from_report(report)
