@@ -16,7 +16,7 @@ from fastapi.testclient import TestClient
 
 from quatmotion.io import write_asf, write_motion
 from quatmotion.server import CSRF_HEADER, UploadGate, create_app
-from quatmotion.server import app as app_module
+from quatmotion.server import uploads as uploads_module
 from quatmotion.synthetic import generate_clip
 
 BASE = "http://127.0.0.1"
@@ -176,7 +176,7 @@ def test_a_readers_unexpected_failure_is_still_a_400_naming_the_file(client, mon
     def broken(*_args, **_kwargs):
         raise KeyError("accessors")
 
-    monkeypatch.setattr(app_module, "parse_motion", broken)
+    monkeypatch.setattr(uploads_module, "parse_motion", broken)
     response = _post(client, "odd.glb", b"glTF")
     assert response.status_code == 400
     assert response.json()["detail"] == "odd.glb: cannot be read (KeyError: 'accessors')"
@@ -184,10 +184,10 @@ def test_a_readers_unexpected_failure_is_still_a_400_naming_the_file(client, mon
     def not_installed(*_args, **_kwargs):
         raise ImportError("reading FBX needs the ufbx package")
 
-    monkeypatch.setattr(app_module, "parse_motion", not_installed)
+    monkeypatch.setattr(uploads_module, "parse_motion", not_installed)
     missing = _post(client, "take.fbx", b"Kaydara FBX Binary")
     assert missing.status_code == 415 and "ufbx" in missing.json()["detail"]
-    monkeypatch.setattr(app_module, "parse_motion", lambda *a: [[]] * 10**12)
+    monkeypatch.setattr(uploads_module, "parse_motion", lambda *a: [[]] * 10**12)
     deep = _post(client, "huge.bvh", b"HIERARCHY")
     assert deep.status_code == 413 and "too large" in deep.json()["detail"]
 
@@ -214,14 +214,14 @@ def test_an_upload_over_the_memory_budget_is_413_before_its_body_is_read(motion_
 
 def test_uploads_are_one_at_a_time_per_client_and_a_few_at_once(app, walk_bvh, monkeypatch):
     entered, release = threading.Event(), threading.Event()
-    real_parse = app_module.parse_motion
+    real_parse = uploads_module.parse_motion
 
     def held(*args, **kwargs):
         entered.set()
         release.wait(30)
         return real_parse(*args, **kwargs)
 
-    monkeypatch.setattr(app_module, "parse_motion", held)
+    monkeypatch.setattr(uploads_module, "parse_motion", held)
     app.state.uploads = UploadGate(slots=2)
     first_client = TestClient(app, base_url=BASE, headers=GUARD, client=("127.0.0.2", 5000))
     outcome: dict[str, int] = {}

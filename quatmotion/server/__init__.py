@@ -3,8 +3,12 @@
 * :mod:`quatmotion.server.clips`: :class:`ClipCatalogue`, the clips of a ``.qmz`` library, a
   ``.qidx`` index and a pose index joined by name and addressed by id; decoding, originals,
   search and pose search.
-* :mod:`quatmotion.server.app`: :func:`create_app`, the FastAPI application (pages, the JSON
-  API under ``/api/``, its limits and safety rules); ``quatmotion serve`` runs it with uvicorn.
+* :mod:`quatmotion.server.app`: :func:`create_app`, the FastAPI application assembled from
+  :mod:`~quatmotion.server.routers` (pages and the JSON API under ``/api/``, one module per
+  area), :mod:`~quatmotion.server.middleware` (host check, CSRF guard, body limit, headers),
+  :mod:`~quatmotion.server.dependencies` (state, limits, upload reading),
+  :mod:`~quatmotion.server.schemas` (the API's models) and :mod:`~quatmotion.server.handlers`
+  (errors); ``quatmotion serve`` runs it with uvicorn.
 * :mod:`quatmotion.server.building`: :class:`LibraryBuild`, a library built in the background
   while the app already answers (``quatmotion serve DIR``), served file by file.
 * :mod:`quatmotion.server.uploads`: :class:`UploadGate`, how many uploads are taken at once
@@ -21,12 +25,12 @@ from typing import Any
 # Loaded on first use: ``quatmotion serve`` binds its port (``server.listen``) before the
 # application and the codec it decodes with are imported, so a busy port is said at once.
 _HOMES = {
-    "CSRF_HEADER": "app",
-    "DEFAULT_MAX_UPLOAD": "app",
-    "allowed_hosts_for": "app",
+    "CSRF_HEADER": "middleware",
+    "DEFAULT_MAX_UPLOAD": "dependencies",
+    "allowed_hosts_for": "middleware",
     "create_app": "app",
-    "is_loopback": "app",
-    "parse_size": "app",
+    "is_loopback": "middleware",
+    "parse_size": "dependencies",
     "LibraryBuild": "building",
     "ClipCatalogue": "clips",
     "UploadGate": "uploads",

@@ -1,4 +1,5 @@
-"""How many uploads the web app takes at once, and how much memory their parsing may use.
+"""How many uploads the web app takes at once, how much memory their parsing may use, and
+the parsing itself (:func:`parse_upload`: whatever the file holds, a 4xx, never a 500).
 
 Conventions
 -----------
@@ -22,17 +23,23 @@ Conventions
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 from collections.abc import Iterator
 from pathlib import PurePosixPath
 
 from starlette.exceptions import HTTPException
 
+from quatmotion.errors import FormatError
+from quatmotion.io import parse_motion
+from quatmotion.motion import Motion
+
 __all__ = [
     "DEFAULT_UPLOAD_MEMORY",
     "DEFAULT_UPLOAD_SLOTS",
     "PARSE_COST",
     "UploadGate",
+    "parse_upload",
 ]
 
 DEFAULT_UPLOAD_MEMORY = 2_000_000_000
@@ -49,6 +56,7 @@ _DEFAULT_COST = 40
 _FRAMING = 65_536  # multipart headers, boundaries and form fields, bytes at most
 _RETRY_AFTER_S = "2"
 _WAIT_S = 600.0  # longest wait for the budget before 503
+_log = logging.getLogger("quatmotion.server")
 
 
 def _busy(status: int, message: str) -> HTTPException:
@@ -139,3 +147,36 @@ class UploadGate:
         """Bytes of the budget held now."""
         with self._lock:
             return self._used
+
+
+def parse_upload(
+    data: bytes, name: str, asf_data: bytes | None = None, asf_name: str = "skeleton.asf"
+) -> Motion:
+    """An uploaded motion file parsed (:func:`quatmotion.io.parse_motion`), every error of
+    the file an ``HTTPException`` with a 4xx and one line: the reader's message (400), a
+    file too deep or too large for the parser (413), a kind of file whose optional reader is
+    not installed (415), any other failure of the reader on these bytes (400, naming the
+    error's kind). Nothing the file holds makes a 500."""
+    try:
+        return parse_motion(data, name, asf_data, asf_name)
+    except FormatError as error:  # a limit of quatmotion.limits included; names its file
+        raise HTTPException(400, _one_line(error, "" if error.path else name)) from None
+    except ValueError as error:
+        raise HTTPException(400, _one_line(error, name)) from None
+    except (MemoryError, RecursionError) as error:
+        raise HTTPException(
+            413, f"{name}: too large or too deeply nested to parse ({type(error).__name__})"
+        ) from None
+    except ImportError as error:  # an optional reader not installed here: the server's lack
+        raise HTTPException(415, f"{name}: this server cannot read it ({error})") from None
+    except Exception as error:  # a reader's fault on odd bytes is still the file's answer
+        _log.warning("upload %s: the reader failed", name, exc_info=True)
+        raise HTTPException(
+            400, f"{name}: cannot be read ({type(error).__name__}: {_one_line(error, '')})"
+        ) from None
+
+
+def _one_line(error: BaseException, name: str) -> str:
+    lines = str(error).strip().splitlines()
+    text = lines[0] if lines else type(error).__name__
+    return text if not name or text.startswith(name) else f"{name}: {text}"
