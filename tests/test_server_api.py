@@ -18,8 +18,10 @@ from quatmotion import codec
 from quatmotion.errors import FormatError
 from quatmotion.io import read_motion, write_asf, write_motion
 from quatmotion.motion import forward_kinematics
+from quatmotion.retrieval.search import DEFAULT_K
 from quatmotion.server import CSRF_HEADER, allowed_hosts_for, create_app, is_loopback, parse_size
 from quatmotion.server import clips as clips_module
+from quatmotion.server.dependencies import MAX_TOP
 from quatmotion.synthetic import generate_clip
 from quatmotion.viz import frame_data
 
@@ -398,9 +400,32 @@ def test_openapi_documents_every_api_route(client):
         "/api/poses",
     ):
         assert path in paths, path
-    upload = paths["/api/search/upload"]["post"]["requestBody"]["content"]
-    assert "file" in upload["multipart/form-data"]["schema"]["properties"]
+    upload = paths["/api/search/upload"]["post"]
+    ref = upload["requestBody"]["content"]["multipart/form-data"]["schema"]["$ref"]
+    form = spec["components"]["schemas"][ref.rsplit("/", 1)[1]]
+    assert form["required"] == ["file"] and {"asf", "method", "top"} <= set(form["properties"])
+    assert [p["name"] for p in upload["parameters"]] == [CSRF_HEADER]
     assert all(p.startswith("/api/") for p in paths)
+    # a search's number of results: one range and one default, made from the code's constants
+    query_top = next(p for p in paths["/api/search"]["get"]["parameters"] if p["name"] == "top")
+    for schema in (form["properties"]["top"], query_top["schema"]):
+        assert (schema["minimum"], schema["maximum"]) == (1, MAX_TOP)
+        assert schema["default"] == DEFAULT_K
+    pose_k = next(p for p in paths["/api/poses"]["get"]["parameters"] if p["name"] == "k")
+    assert pose_k["schema"]["maximum"] == MAX_TOP
+
+
+def test_a_number_of_results_out_of_range_is_400_naming_it(client):
+    walk = {"clip": "walk_0"}
+    for top in (0, MAX_TOP + 1, "many"):
+        response = client.get("/api/search", params={**walk, "top": top})
+        assert response.status_code == 400 and response.json()["detail"].startswith("top:")
+    data = b"HIERARCHY"
+    upload = client.post(
+        "/api/search/upload", files={"file": ("w.bvh", data)}, data={"top": str(MAX_TOP + 1)}
+    )
+    assert upload.status_code == 400, upload.text
+    assert upload.json()["detail"].startswith("the 'top' field of the form:")
 
 
 # ------------------------------------------------------------------------------ factory, CLI

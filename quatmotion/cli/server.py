@@ -14,7 +14,7 @@ import contextlib
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -39,46 +39,56 @@ if TYPE_CHECKING:
     from quatmotion.server.building import LibraryBuild
 
 
+FolderArgument = Annotated[
+    Path | None,
+    typer.Argument(
+        help="A folder of clips to serve: indexed, compressed and pose-indexed into a "
+        "temporary folder while the server already answers (the page shows the progress). "
+        "Without it and without files: the demo's generated library.",
+        show_default=False,
+    ),
+]
+LibraryOption = Annotated[
+    Path | None, typer.Option(help="A .qmz library (quatmotion compress): browse, play.")
+]
+IndexOption = Annotated[
+    Path | None, typer.Option(help="A .qidx index (quatmotion index build): search, labels.")
+]
+PosesOption = Annotated[
+    Path | None, typer.Option(help="A pose index (quatmotion pose index): pose search.")
+]
+LabelsOption = Annotated[
+    Path | None, typer.Option(help=f"With a folder: {LABELS_HELP}", show_default=False)
+]
+LabelFoldersOption = Annotated[bool, typer.Option(help=f"With a folder: {LABEL_FOLDERS_HELP}")]
+PortOption = Annotated[int, typer.Option(help="TCP port, 1 to 65535; 0: a free one.")]
+HostOption = Annotated[
+    str, typer.Option(help="Address to bind; other than the loopback, with a warning.")
+]
+MaxUploadOption = Annotated[
+    str, typer.Option(help="Largest upload (request body): e.g. 50MB, 500kB, 2MiB.")
+]
+UploadMemoryOption = Annotated[
+    str,
+    typer.Option(
+        help="Memory the parsing of uploads may use at once (an upload costs some 40 times "
+        "its size); a larger upload is refused (413), others wait their turn."
+    ),
+]
+
+
 @app.command()
 def serve(
-    folder: Annotated[
-        Path | None,
-        typer.Argument(
-            help="A folder of clips to serve: indexed, compressed and pose-indexed into a "
-            "temporary folder while the server already answers (the page shows the progress). "
-            "Without it and without files: the demo's generated library.",
-            show_default=False,
-        ),
-    ] = None,
-    library: Annotated[
-        Path | None, typer.Option(help="A .qmz library (quatmotion compress): browse, play.")
-    ] = None,
-    index: Annotated[
-        Path | None, typer.Option(help="A .qidx index (quatmotion index build): search, labels.")
-    ] = None,
-    poses: Annotated[
-        Path | None, typer.Option(help="A pose index (quatmotion pose index): pose search.")
-    ] = None,
-    labels: Annotated[
-        Path | None, typer.Option(help=f"With a folder: {LABELS_HELP}", show_default=False)
-    ] = None,
-    label_folders: Annotated[
-        bool, typer.Option(help=f"With a folder: {LABEL_FOLDERS_HELP}")
-    ] = False,
-    port: Annotated[int, typer.Option(help="TCP port, 1 to 65535; 0: a free one.")] = 8000,
-    host: Annotated[
-        str, typer.Option(help="Address to bind; other than the loopback, with a warning.")
-    ] = "127.0.0.1",
-    max_upload: Annotated[
-        str, typer.Option(help="Largest upload (request body): e.g. 50MB, 500kB, 2MiB.")
-    ] = "50MB",
-    upload_memory: Annotated[
-        str,
-        typer.Option(
-            help="Memory the parsing of uploads may use at once (an upload costs some 40 times "
-            "its size); a larger upload is refused (413), others wait their turn."
-        ),
-    ] = "2GB",
+    folder: FolderArgument = None,
+    library: LibraryOption = None,
+    index: IndexOption = None,
+    poses: PosesOption = None,
+    labels: LabelsOption = None,
+    label_folders: LabelFoldersOption = False,
+    port: PortOption = 8000,
+    host: HostOption = "127.0.0.1",
+    max_upload: MaxUploadOption = "50MB",
+    upload_memory: UploadMemoryOption = "2GB",
     joint_map: JointMapOption = None,
 ) -> None:
     """Serve a local web app to browse, play, compare and search a motion library."""
@@ -86,55 +96,23 @@ def serve(
 
     with contextlib.ExitStack() as stack, user_errors():
         given = [p for p in (library, index, poses) if p is not None]
-        if folder is not None and given:
-            raise CliInputError("give a folder of clips, or --library/--index/--poses, not both")
-        if joint_map is not None and folder is None:
-            raise CliInputError(
-                "--joint-map applies to a folder of clips (an index stores its own)"
-            )
-        if poses is not None and library is None and index is None:
-            raise CliInputError("--poses needs --library or --index beside it")
-        if given and (labels is not None or label_folders):
-            raise CliInputError(
-                "--labels and --label-folders label the clips of a folder; label an index "
-                "with quatmotion index label"
-            )
+        _check_sources(folder, library, index, poses, labels, label_folders, joint_map)
         at_least("--port", port, 0, 65535)
-        for path in given:
-            require_file(path)
-        if folder is not None and not folder.is_dir():
-            raise CliInputError(f"{folder}: not a folder (give files with --library, --index)")
-        if folder is not None:
-            from quatmotion.io import MOTION_SUFFIXES, find_motion_files
-
-            if not find_motion_files([folder]):
-                raise CliInputError(
-                    f"{folder}: no motion files ({', '.join(MOTION_SUFFIXES)}) in it or below"
-                )
         label_map = labels_option(labels)
         stack.enter_context(listen.sigterm_exits())  # SIGTERM, too, removes the temporary folder
         sock = stack.enter_context(listen.bind(host, port))  # first: a busy port fails at once
         # the web app and the codec it decodes with (seconds of imports), once the port is ours
-        from quatmotion.server import (
-            UploadGate,
-            allowed_hosts_for,
-            create_app,
-            is_loopback,
-            parse_size,
-        )
+        from quatmotion.server import UploadGate, allowed_hosts_for, create_app, parse_size
 
         upload_limit = _size("--max-upload", max_upload, parse_size)
         uploads = UploadGate(memory=_size("--upload-memory", upload_memory, parse_size))
         build = None
         if not given:
-            work = Path(
-                stack.enter_context(
-                    # A build stopped mid-file is waited for (LibraryBuild.stop), up to a limit.
-                    tempfile.TemporaryDirectory(
-                        prefix="quatmotion-serve-", ignore_cleanup_errors=True
-                    )
-                )
+            # A build stopped mid-file is waited for (LibraryBuild.stop), up to a limit.
+            temporary = tempfile.TemporaryDirectory(
+                prefix="quatmotion-serve-", ignore_cleanup_errors=True
             )
+            work = Path(stack.enter_context(temporary))
             build = _background_build(
                 work, folder, label_map, label_folders, labels, joint_map_entries(joint_map)
             )
@@ -146,25 +124,67 @@ def serve(
             build=build,
             uploads=uploads,
         )
-        if not is_loopback(host):
-            error_console.print(
-                f"warning: --host {host} makes the app reachable from other machines; it has no "
-                "login and serves the library and its search to anyone who can connect",
-                markup=False,
-                highlight=False,
-                soft_wrap=True,
+        _announce(host, listen.url_of(sock), application, build)
+        listen.serve_on(application, sock)  # the app starts the build once it answers
+
+
+def _check_sources(
+    folder: Path | None,
+    library: Path | None,
+    index: Path | None,
+    poses: Path | None,
+    labels: Path | None,
+    label_folders: bool,
+    joint_map: object,
+) -> None:
+    """One ``error:`` line for options that do not go together or files that are not there."""
+    given = [p for p in (library, index, poses) if p is not None]
+    if folder is not None and given:
+        raise CliInputError("give a folder of clips, or --library/--index/--poses, not both")
+    if joint_map is not None and folder is None:
+        raise CliInputError("--joint-map applies to a folder of clips (an index stores its own)")
+    if poses is not None and library is None and index is None:
+        raise CliInputError("--poses needs --library or --index beside it")
+    if given and (labels is not None or label_folders):
+        raise CliInputError(
+            "--labels and --label-folders label the clips of a folder; label an index "
+            "with quatmotion index label"
+        )
+    for path in given:
+        require_file(path)
+    if folder is not None and not folder.is_dir():
+        raise CliInputError(f"{folder}: not a folder (give files with --library, --index)")
+    if folder is not None:
+        from quatmotion.io import MOTION_SUFFIXES, find_motion_files
+
+        if not find_motion_files([folder]):
+            raise CliInputError(
+                f"{folder}: no motion files ({', '.join(MOTION_SUFFIXES)}) in it or below"
             )
-        if build is None:
-            what = f"{len(application.state.catalogue)} clips"
-        else:
-            what = f"{build.source}, being built (the page shows the progress)"
-        console.print(
-            f"quatmotion serve: {what} at {listen.url_of(sock)} (API docs at /docs; Ctrl+C stops)",
+
+
+def _announce(host: str, url: str, application: Any, build: LibraryBuild | None) -> None:
+    """The warning of a server reachable from other machines, then where it answers."""
+    from quatmotion.server import is_loopback
+
+    if not is_loopback(host):
+        error_console.print(
+            f"warning: --host {host} makes the app reachable from other machines; it has no "
+            "login and serves the library and its search to anyone who can connect",
             markup=False,
             highlight=False,
             soft_wrap=True,
         )
-        listen.serve_on(application, sock)  # the app starts the build once it answers
+    if build is None:
+        what = f"{len(application.state.catalogue)} clips"
+    else:
+        what = f"{build.source}, being built (the page shows the progress)"
+    console.print(
+        f"quatmotion serve: {what} at {url} (API docs at /docs; Ctrl+C stops)",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
 
 
 def _size(option: str, text: str, parse) -> int:  # parse: quatmotion.server.parse_size

@@ -24,6 +24,7 @@ from quatmotion.retrieval.index_file import ClipRow, IndexFile, match_row
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, QueryFeatures
 
 __all__ = [
+    "DEFAULT_K",
     "SearchResult",
     "default_method",
     "method_keys",
@@ -32,6 +33,10 @@ __all__ = [
     "search",
     "search_within",
 ]
+
+DEFAULT_K = 20
+"""Clips a search answers with when the caller names no number (``search``, ``search_within``
+and the web app's search)."""
 
 
 @dataclass(frozen=True)
@@ -168,7 +173,7 @@ def search(
     query: Motion | str,
     *,
     method: str | None = None,
-    k: int = 20,
+    k: int = DEFAULT_K,
     sha256: str | None = None,
     path: str | Path | None = None,
 ) -> list[SearchResult]:
@@ -223,7 +228,7 @@ def search_within(
     index: IndexFile,
     query: Motion | str,
     *,
-    k: int = 20,
+    k: int = DEFAULT_K,
     sha256: str | None = None,
     path: str | Path | None = None,
 ) -> list[SearchResult]:

@@ -48,7 +48,7 @@ from quatmotion.motion import Motion
 from quatmotion.pose.library import PoseLibrary
 from quatmotion.retrieval.index import ClipIndex, ClipRow
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS
-from quatmotion.retrieval.search import method_keys, query_row, search
+from quatmotion.retrieval.search import DEFAULT_K, method_keys, query_row, search
 from quatmotion.viz import frame_data, view_data
 
 __all__ = [
@@ -564,7 +564,7 @@ class ClipCatalogue:
         query: str | Motion,
         *,
         method: str | None = None,
-        top: int = 20,
+        top: int = DEFAULT_K,
         sha256: str | None = None,
     ) -> tuple[str, list[SearchHit], str | None]:
         """Rank the indexed clips by likeness to ``query``: a clip id, or a motion (an upload,

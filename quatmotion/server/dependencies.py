@@ -10,23 +10,28 @@ Conventions
   module global, so tests build apps side by side.
 * A clip id is checked against :data:`CLIP_ID` before a route sees it (:data:`ClipId` in a
   path, :data:`QueryClipId` in a query); no request value ever becomes a path.
-* An upload's multipart form is read in memory (:func:`read_form`, never spooled to disk) with
-  few parts, each form field short.
+* A route taking an upload is an :class:`UploadRoute`: its client admitted before the body is
+  read, its multipart form read in memory (never spooled to disk) with few parts, each form
+  field short; the form's fields are the endpoint's parameters, so FastAPI checks them and
+  states them in the API's schema.
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Coroutine, Sequence
 from pathlib import PurePosixPath
 from typing import Annotated, Any
 
-from fastapi import Depends, FastAPI, HTTPException, Query, Request
+from fastapi import Depends, FastAPI, Header, HTTPException, Query, Request, Response
 from fastapi import Path as PathParam
+from fastapi.routing import APIRoute
+from starlette.datastructures import FormData
 from starlette.formparsers import MultiPartException, MultiPartParser
 
 from quatmotion.server.building import LibraryBuild
 from quatmotion.server.clips import ClipCatalogue
+from quatmotion.server.middleware import CSRF_HEADER
 from quatmotion.server.uploads import UploadGate
 
 __all__ = [
@@ -37,11 +42,12 @@ __all__ = [
     "Catalogue",
     "ClipId",
     "MaxUpload",
+    "TOP_RANGE",
     "QueryClipId",
+    "UploadRoute",
     "Uploads",
-    "form_int",
     "parse_size",
-    "read_form",
+    "require_csrf_header",
     "served_catalogue",
     "upload_name",
 ]
@@ -51,6 +57,11 @@ DEFAULT_MAX_UPLOAD = 50_000_000
 
 MAX_TOP = 200
 """Most results a search or a pose search answers with."""
+
+TOP_RANGE: dict[str, Any] = {"ge": 1, "le": MAX_TOP}
+"""The range of a search's number of results, as the one place the routes read it from
+(``Query(**TOP_RANGE)``, ``Form(**TOP_RANGE)``); FastAPI checks it (400) and states it in
+the API's schema."""
 
 CLIP_ID = r"^[A-Za-z0-9_.~-]{1,120}$"
 """What a clip id is (made from its name by the catalogue, :mod:`quatmotion.server.clips`)."""
@@ -121,39 +132,65 @@ QueryClipId = Annotated[str, Query(pattern=CLIP_ID, description="A clip id.")]
 
 
 # ---------------------------------------------------------------------------- an upload's form
+def require_csrf_header(
+    _value: Annotated[
+        str,
+        Header(
+            alias=CSRF_HEADER,
+            description="Any value: the guard against cross-site request forgery.",
+            examples=["1"],
+        ),
+    ],
+) -> None:
+    """The header a POST carries (checked by :class:`~quatmotion.server.middleware.CsrfGuard`
+    before the body is read; declared here so that the API's schema states it)."""
+
+
 class _InMemoryMultiPartParser(MultiPartParser):
     # Starlette spools file parts over 1 MB to a temporary file; an upload here stays in
     # memory (the body limit bounds it), so nothing of it is ever written to disk.
     spool_max_size = sys.maxsize
 
 
-async def read_form(request: Request) -> Any:
-    """The multipart form of ``request``, every part in memory (400 when malformed)."""
-    content_type = request.headers.get("content-type", "")
-    if not content_type.lower().startswith("multipart/form-data"):
-        raise HTTPException(
-            400, "expected a multipart/form-data upload with a 'file' field (.amc or .bvh)"
+class _InMemoryFormRequest(Request):
+    """A request whose multipart form is read in memory, with few parts and short fields."""
+
+    def form(self, **_limits: Any) -> Any:  # FastAPI awaits it before the endpoint runs
+        return self._in_memory_form()
+
+    async def _in_memory_form(self) -> FormData:
+        content_type = self.headers.get("content-type", "")
+        if not content_type.lower().startswith("multipart/form-data"):
+            raise HTTPException(
+                400, "expected a multipart/form-data upload with a 'file' field (.amc or .bvh)"
+            )
+        parser = _InMemoryMultiPartParser(
+            self.headers, self.stream(), max_files=2, max_fields=8, max_part_size=4096
         )
-    parser = _InMemoryMultiPartParser(
-        request.headers, request.stream(), max_files=2, max_fields=8, max_part_size=4096
-    )
-    try:
-        return await parser.parse()
-    except MultiPartException as error:
-        raise HTTPException(400, f"malformed upload: {error.message}") from None
+        try:
+            return await parser.parse()
+        except MultiPartException as error:
+            raise HTTPException(400, f"malformed upload: {error.message}") from None
 
 
-def form_int(value: object, name: str, default: int, low: int, high: int) -> int:
-    """A form field's integer (``default`` when absent), 400 unless in ``low..high``."""
-    if value is None or value == "":
-        return default
-    try:
-        number = int(str(value))
-    except ValueError:
-        raise HTTPException(400, f"{name} must be an integer, got {str(value)[:40]!r}") from None
-    if not low <= number <= high:
-        raise HTTPException(400, f"{name} must lie in {low}..{high}, got {number}")
-    return number
+class UploadRoute(APIRoute):
+    """A route taking an upload (module conventions): the client admitted by the app's
+    :class:`~quatmotion.server.uploads.UploadGate` (429, 503) and a declared body no reading
+    of which fits the parsing budget refused (413) before the body is read; its multipart
+    form read in memory; the slot held until the answer."""
+
+    def get_route_handler(self) -> Callable[[Request], Coroutine[Any, Any, Response]]:
+        handler = super().get_route_handler()
+
+        async def admitted(request: Request) -> Response:
+            gate: UploadGate = request.app.state.uploads
+            with gate.admitted(request.client.host if request.client else ""):
+                declared = request.headers.get("content-length", "")
+                if declared.isdigit():
+                    gate.check(gate.least_cost(int(declared)), "an upload of this size")
+                return await handler(_InMemoryFormRequest(request.scope, request.receive))
+
+        return admitted
 
 
 def upload_name(filename: str | None, suffixes: Sequence[str]) -> str:

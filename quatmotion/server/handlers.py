@@ -25,10 +25,14 @@ def error_response(status: int, message: object) -> JSONResponse:
 
 
 async def invalid(_request: Request, error: RequestValidationError) -> JSONResponse:
-    """400 naming the first invalid field (``clip_id: String should match pattern...``)."""
+    """400 naming the first invalid field (``clip_id: String should match pattern...``, ``the
+    'file' field of the form: Field required``)."""
     first = error.errors()[0] if error.errors() else {}
-    where = ".".join(str(p) for p in first.get("loc", ()) if p not in ("path", "query"))
-    return error_response(400, f"{where}: {first.get('msg', 'invalid request')}")
+    where = [str(p) for p in first.get("loc", ())]
+    if where[:1] == ["body"]:
+        where = [f"the '{'.'.join(where[1:])}' field of the form"]
+    text = ".".join(p for p in where if p not in ("path", "query", "header"))
+    return error_response(400, f"{text}: {first.get('msg', 'invalid request')}")
 
 
 async def missing(request: Request, error: Exception) -> JSONResponse:

@@ -6,7 +6,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Query
 
-from quatmotion.server.dependencies import MAX_TOP, Catalogue, QueryClipId
+from quatmotion.server.dependencies import TOP_RANGE, Catalogue, QueryClipId
 from quatmotion.server.schemas import PoseHitModel, PoseResponse
 
 __all__ = ["router"]
@@ -19,7 +19,7 @@ def pose_search(
     clip: QueryClipId,
     catalogue: Catalogue,
     frame: Annotated[int, Query(ge=0, description="Frame of the clip, from 0.")],
-    k: Annotated[int, Query(ge=1, le=MAX_TOP, description="Poses wanted.")] = 10,
+    k: Annotated[int, Query(**TOP_RANGE, description="Poses wanted.")] = 10,
     other_clips: Annotated[bool, Query(description="Leave out the clip's own poses.")] = False,
 ) -> PoseResponse:
     """The poses nearest to a frame of a clip, under the pose index's learned distance."""

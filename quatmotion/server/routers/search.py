@@ -8,22 +8,21 @@ import hashlib
 import time
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi import APIRouter, Depends, File, Form, HTTPException, Query, UploadFile
 from starlette.concurrency import run_in_threadpool
-from starlette.datastructures import UploadFile
 
 from quatmotion.io import MOTION_SUFFIXES
+from quatmotion.retrieval.search import DEFAULT_K
 from quatmotion.server.clips import ClipCatalogue
 from quatmotion.server.dependencies import (
-    MAX_TOP,
+    TOP_RANGE,
     Catalogue,
     QueryClipId,
+    UploadRoute,
     Uploads,
-    form_int,
-    read_form,
+    require_csrf_header,
     upload_name,
 )
-from quatmotion.server.middleware import CSRF_HEADER
 from quatmotion.server.schemas import SearchHitModel, SearchResponse
 from quatmotion.server.uploads import UploadGate, parse_upload
 from quatmotion.viz import frame_data
@@ -32,50 +31,19 @@ __all__ = ["router"]
 
 router = APIRouter()
 
-_UPLOAD_BODY = {
-    "parameters": [
-        {
-            "name": CSRF_HEADER,
-            "in": "header",
-            "required": True,
-            "schema": {"type": "string", "default": "1"},
-            "description": "Any value: the guard against cross-site request forgery.",
-        }
-    ],
-    "requestBody": {
-        "required": True,
-        "content": {
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["file"],
-                    "properties": {
-                        "file": {
-                            "type": "string",
-                            "format": "binary",
-                            "description": "The query clip: .amc, .bvh, .glb or .gltf.",
-                        },
-                        "asf": {
-                            "type": "string",
-                            "format": "binary",
-                            "description": "The ASF skeleton of an .amc query (required then).",
-                        },
-                        "method": {"type": "string", "description": "Search method."},
-                        "top": {"type": "integer", "minimum": 1, "maximum": MAX_TOP},
-                    },
-                }
-            }
-        },
-    },
-}
+upload_router = APIRouter(route_class=UploadRoute)
+
+_METHOD = "Search method (one the index has features for; default: its first)."
+_TOP = "Results wanted."
+_SUFFIXES = ", ".join(MOTION_SUFFIXES)
 
 
 @router.get("/api/search", response_model=SearchResponse, tags=["search"])
 def search_clip(
     clip: QueryClipId,
     catalogue: Catalogue,
-    method: Annotated[str | None, Query(max_length=64)] = None,
-    top: Annotated[int, Query(ge=1, le=MAX_TOP)] = 20,
+    method: Annotated[str | None, Query(max_length=64, description=_METHOD)] = None,
+    top: Annotated[int, Query(**TOP_RANGE, description=_TOP)] = DEFAULT_K,
 ) -> SearchResponse:
     """Rank the indexed clips by likeness to an indexed clip (left out of its results)."""
     started = time.perf_counter()
@@ -90,47 +58,45 @@ def search_clip(
     )
 
 
-@router.post(
+@upload_router.post(
     "/api/search/upload",
     response_model=SearchResponse,
     tags=["search"],
-    openapi_extra=_UPLOAD_BODY,
+    dependencies=[Depends(require_csrf_header)],
 )
-async def search_upload(request: Request, catalogue: Catalogue, gate: Uploads) -> SearchResponse:
-    """Rank the indexed clips by likeness to an uploaded clip (multipart form: ``file``,
-    an .amc, .bvh, .glb or .gltf; ``asf``, the skeleton an .amc needs; ``method``; ``top``).
-    The upload is parsed in memory and not kept; a file the parser rejects gets 400 with its
-    message. Requests need the header ``X-Quatmotion-Request`` (403 without). One upload at a
-    time per client (429), a few at once overall (503), parsed under a memory budget (413 for
-    a file that alone needs more)."""
-    with gate.admitted(request.client.host if request.client else ""):
-        declared = request.headers.get("content-length", "")
-        if declared.isdigit():  # a body no reading of which fits the budget: refused unread
-            gate.check(gate.least_cost(int(declared)), "an upload of this size")
-        form = await read_form(request)
-        upload = form.get("file")
-        if not isinstance(upload, UploadFile):
-            raise HTTPException(400, "the form needs a 'file' field holding a motion file")
-        asf = form.get("asf")
-        if asf is not None and not isinstance(asf, UploadFile):
-            raise HTTPException(400, "the 'asf' field must be a file (the ASF skeleton)")
-        method = form.get("method") or None
-        top = form_int(form.get("top"), "top", 20, 1, MAX_TOP)
-        name = upload_name(upload.filename, MOTION_SUFFIXES)
-        asf_name = upload_name(asf.filename, (".asf",)) if asf is not None else "skeleton.asf"
-        data = await upload.read()
-        asf_data = await asf.read() if asf is not None else None
-        await form.close()
-        if name.lower().endswith(".amc") and asf_data is None:
-            raise HTTPException(
-                400,
-                f"{name}: an AMC holds no skeleton; upload its ASF file too (form field 'asf')",
-            )
-        cost = gate.cost(name, len(data)) + gate.cost(asf_name, len(asf_data or b""))
-        gate.check(cost, name)
-        return await run_in_threadpool(
-            _search_upload, catalogue, gate, cost, data, name, asf_data, asf_name, method, top
+async def search_upload(
+    catalogue: Catalogue,
+    gate: Uploads,
+    file: Annotated[UploadFile, File(description="The query clip: " + _SUFFIXES + ".")],
+    asf: Annotated[
+        UploadFile | None, File(description="The ASF skeleton of an .amc query (required then).")
+    ] = None,
+    method: Annotated[str | None, Form(max_length=64, description=_METHOD)] = None,
+    top: Annotated[int, Form(**TOP_RANGE, description=_TOP)] = DEFAULT_K,
+) -> SearchResponse:
+    """Rank the indexed clips by likeness to an uploaded clip (multipart form: ``file``;
+    ``asf``, the skeleton an .amc needs; ``method``; ``top``). The upload is parsed in memory
+    and not kept; a file the parser rejects gets 400 with its message. Requests need the
+    header ``X-Quatmotion-Request`` (403 without). One upload at a time per client (429), a
+    few at once overall (503), parsed under a memory budget (413 for a file that alone needs
+    more)."""
+    name = upload_name(file.filename, MOTION_SUFFIXES)
+    asf_name = upload_name(asf.filename, (".asf",)) if asf is not None else "skeleton.asf"
+    data = await file.read()
+    await file.close()  # the form's copy freed before parsing: the bytes are held once
+    asf_data = await asf.read() if asf is not None else None
+    if name.lower().endswith(".amc") and asf_data is None:
+        raise HTTPException(
+            400, f"{name}: an AMC holds no skeleton; upload its ASF file too (form field 'asf')"
         )
+    cost = gate.cost(name, len(data)) + gate.cost(asf_name, len(asf_data or b""))
+    gate.check(cost, name)
+    return await run_in_threadpool(
+        _search_upload, catalogue, gate, cost, data, name, asf_data, asf_name, method, top
+    )
+
+
+router.include_router(upload_router)
 
 
 def _search_upload(
