@@ -175,13 +175,14 @@ def _index_judge_entry(
     near: np.ndarray,
 ) -> dict[str, Any]:
     """What ``quatmotion pose search --transitions`` ranks by: the transition judge a library
-    learns (:func:`quatmotion.pose.library._learn_transitions`, on the training clips, its own
-    labels and seed), read back from the arrays the library stores, scored on the test pairs."""
-    from quatmotion.pose.library import _learn_transitions, transition_judge
+    learns (:func:`quatmotion.pose.library.transitions.learn_transitions`, on the training
+    clips, its own labels and seed), read back from the arrays the library stores, scored on
+    the test pairs."""
+    from quatmotion.pose.library import learn_transitions, transition_judge
 
     try:
         t0 = time.perf_counter()
-        arrays, judged = _learn_transitions(
+        arrays, judged = learn_transitions(
             [clips[i].pose_clip for i in train], n_pairs=n_pairs, n_unlabeled=n_unlabeled,
             seed=seed, say=lambda _m: None,
         )  # fmt: skip

@@ -20,10 +20,14 @@ labels
     Transition labels (Kovar's point-cloud distance) and retrieval labels (k-means, DTW phase).
 evaluate
     Transition precision (Eq. 36-37) and retrieval precision@s.
+transition
+    ``TransitionClassifier``: the probability a transition from one pose to another plays badly.
+blend_labels
+    Transition labels of played, blended and judged transitions.
 index
-    ``HNSWIndex`` (hnswlib) and ``PoseLibrary`` (a saved, searchable library).
-cli
-    The ``quatmotion pose`` Typer sub-app (``index``, ``search``).
+    ``HNSWIndex`` (hnswlib): approximate nearest neighbours of projected poses.
+library
+    ``PoseLibrary`` (a saved, searchable library; a package: settings, build, file, queries).
 
 Names are loaded on first use, so ``import quatmotion.pose`` stays cheap.
 """
