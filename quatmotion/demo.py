@@ -30,7 +30,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +40,9 @@ from rich.table import Table
 from quatmotion._atomic import atomic_write_text
 from quatmotion.motion import Motion, angular_displacements, forward_kinematics, standing_height
 from quatmotion.viz import pyplot, save_figure
+
+if TYPE_CHECKING:
+    from quatmotion.collection import BuildReport
 
 __all__ = [
     "BuiltLibrary",
@@ -305,7 +308,7 @@ def _compression(
     clips: list[tuple[Motion, str]], out_dir: Path, seed: int, quick: bool, console: Console
 ) -> list[dict[str, Any]]:
     """Compress the clips (and one real clip if the data are there) at a 1 cm bound."""
-    from quatmotion.codec import compress
+    from quatmotion.codec import Archive, CompressSettings
     from quatmotion.codec.metrics import collection_errors
     from quatmotion.datasets import data_root
     from quatmotion.io import bvh_text
@@ -326,21 +329,23 @@ def _compression(
     for method, group, source in jobs:
         name = f"{len(group)} generated" if group is motions else group[0].name
         out = out_dir / f"{'generated' if group is motions else group[0].name}_{method}.qmz"
-        result = compress(group, out, max_error=1.0, method=method, seed=seed)
-        errors = collection_errors(result.clip_errors)
+        settings = CompressSettings(max_error=1.0, method=method, seed=seed)
+        details = Archive.build(group, out, settings).details
+        errors = collection_errors(details["clip_errors"])
+        size = out.stat().st_size
         row = {
             "clips": name,
             "method": method,
-            "bytes": result.size,
-            "ratio_text": source / result.size,
-            "ratio_raw": sum(result.raw_bytes) / result.size,
+            "bytes": size,
+            "ratio_text": source / size,
+            "ratio_raw": sum(details["raw_bytes"]) / size,
             "arms_cm": errors.arms,
             "max_joint_cm": errors.max_joint,
             "file": str(out),
         }
         rows.append(row)
         table.add_row(
-            name, method, f"{result.size:,}", f"{row['ratio_text']:.0f}",
+            name, method, f"{size:,}", f"{row['ratio_text']:.0f}",
             f"{row['ratio_raw']:.0f}", f"{errors.arms:.3f}", f"{errors.max_joint:.3f}",
         )  # fmt: skip
     console.print(table)
@@ -535,30 +540,66 @@ def build_library(
     ValueError
         No clip could be read (naming the sources).
     """
-    from quatmotion import codec
-    from quatmotion.collection import ReadSettings
-    from quatmotion.io import find_motion_files
-    from quatmotion.retrieval.index import ClipIndex, IndexSettings
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     report = progress or (lambda _step, _done, _total: None)
     stage = on_stage or (lambda _library, _index, _poses: None)
+    files, labels = _clip_files(folder, sources, seed, labels, report)
+    index, indexed = _index_step(folder, files, labels, label_folders, joint_map, workers, report)
+    failed = {str(f.item): f.message for f in indexed.failures}
+    if indexed.added:
+        stage(None, index, None)
+    library, good = _library_step(folder, files, seed, workers, report, failed)
+    if not good:
+        where = ", ".join(str(s) for s in sources) or "the generated library"
+        raise ValueError(f"{where}: no clip could be read ({next(iter(failed.values()), '')})")
+    stage(library, index if indexed.added else None, None)
+    pose_path = None
+    if poses:
+        pose_path = _pose_step(folder, good, seed, joint_map, workers, report, failed)
+        stage(library, index if indexed.added else None, pose_path)
+    failures = [f"{k}: {v}" for k, v in failed.items()]
+    return BuiltLibrary(files, library, index, pose_path, failures, list(indexed.unmatched_labels))
+
+
+def _clip_files(
+    folder: Path,
+    sources: Sequence[str | Path],
+    seed: int,
+    labels: Mapping[str, str] | None,
+    report: BuildProgress,
+) -> tuple[list[Path], Mapping[str, str] | None]:
+    """The clip files of ``sources``, or the demo's generated library written to
+    ``folder/clips`` (labelled by kind, ``labels`` first)."""
+    from quatmotion.io import find_motion_files
+
     if sources:
-        files = find_motion_files(sources)
-    else:
-        from quatmotion.synthetic import generate_library
+        return find_motion_files(sources), labels
+    from quatmotion.synthetic import generate_library
 
-        generated = generate_library(2, seed=seed)
-        report("clips", 0, len(generated))
-        written = write_clips(generated, folder / "clips")
-        report("clips", len(generated), len(generated))
-        files = list(written)
-        labels = {str(p): label for p, label in written.items()} | dict(labels or {})
-    failed: dict[str, str] = {}
+    generated = generate_library(2, seed=seed)
+    report("clips", 0, len(generated))
+    written = write_clips(generated, folder / "clips")
+    report("clips", len(generated), len(generated))
+    return list(written), {str(p): label for p, label in written.items()} | dict(labels or {})
 
-    def step(prefix: str) -> BuildProgress:
-        return lambda name, done, total: report(f"{prefix}: {name}", done, total)
+
+def _step(report: BuildProgress, prefix: str) -> BuildProgress:
+    return lambda name, done, total: report(f"{prefix}: {name}", done, total)
+
+
+def _index_step(
+    folder: Path,
+    files: list[Path],
+    labels: Mapping[str, str] | None,
+    label_folders: bool,
+    joint_map: Sequence[str],
+    workers: int | None,
+    report: BuildProgress,
+) -> tuple[Path, BuildReport]:
+    """The clip index (``folder/library.qidx``) and its build report."""
+    from quatmotion.collection import ReadSettings
+    from quatmotion.retrieval.index import ClipIndex, IndexSettings
 
     index = folder / "library.qidx"
     indexed = ClipIndex.build(
@@ -573,53 +614,61 @@ def build_library(
         workers=workers,
         progress=lambda done, total: report("index", done, total),
     )
-    failed.update({str(f.item): f.message for f in indexed.failures})
-    if indexed.added:
-        stage(None, index, None)
+    return index, indexed
+
+
+def _library_step(
+    folder: Path,
+    files: list[Path],
+    seed: int,
+    workers: int | None,
+    report: BuildProgress,
+    failed: dict[str, str],
+) -> tuple[Path, list[Path]]:
+    """The ``.qmz`` library of every clip, those the index refused too (still played and
+    compared), at the default bound: its path and the files it holds (the others noted in
+    ``failed``)."""
+    from quatmotion.codec import Archive, CompressSettings
+    from quatmotion.codec.writer import runner_of
+
     library = folder / "library.qmz"
-    try:  # every clip, those the index refused too (still played and compared)
-        result = codec.compress(
-            files,
-            library,
-            max_error=codec.DEFAULT_MAX_ERROR_CM,
-            seed=seed,
-            workers=workers,
-            on_error="skip",
-            progress=step("compress"),
+    settings = CompressSettings(seed=seed, on_error="skip")
+    try:
+        built = Archive.build(
+            files, library, settings, runner=runner_of(workers), progress=_step(report, "compress")
         )
     except ValueError:  # nothing to compress: every clip failed
-        result = None
-    refused = dict(result.failed) if result is not None else {}
+        return library, []
+    refused = {str(f.item): f.message for f in built.failures}
     failed.update(refused)
     bad = {str(Path(name)) for name in refused}  # named by path, or by stem
-    good = [f for f in files if result is not None and str(f) not in bad and f.stem not in bad]
-    if not good:
-        where = ", ".join(str(s) for s in sources) or "the generated library"
-        raise ValueError(f"{where}: no clip could be read ({next(iter(failed.values()), '')})")
-    stage(library, index if indexed.added else None, None)
-    pose_path = None
-    if poses:
-        import functools
+    return library, [f for f in files if str(f) not in bad and f.stem not in bad]
 
-        from quatmotion.pose.library import PoseLibrary, load_pose_clip
 
-        pose_library, pose_failures = PoseLibrary.build_streamed(
-            good,
-            functools.partial(load_pose_clip, fps=30.0, height=170.0, joint_map=tuple(joint_map)),
-            seed=seed,
-            workers=workers,
-            progress=step("poses"),
-        )
-        for failure in pose_failures:
-            failed.setdefault(str(failure.item), failure.message)
-        pose_path = folder / "poses.idx"
-        pose_library.save(pose_path)
-        stage(library, index if indexed.added else None, pose_path)
-    return BuiltLibrary(
+def _pose_step(
+    folder: Path,
+    files: list[Path],
+    seed: int,
+    joint_map: Sequence[str],
+    workers: int | None,
+    report: BuildProgress,
+    failed: dict[str, str],
+) -> Path:
+    """The pose index of ``files`` (``folder/poses.idx``); the clips it refused noted in
+    ``failed``."""
+    import functools
+
+    from quatmotion.pose.library import PoseLibrary, load_pose_clip
+
+    pose_library, pose_failures = PoseLibrary.build_streamed(
         files,
-        library,
-        index,
-        pose_path,
-        [f"{k}: {v}" for k, v in failed.items()],
-        list(indexed.unmatched_labels),
+        functools.partial(load_pose_clip, fps=30.0, height=170.0, joint_map=tuple(joint_map)),
+        seed=seed,
+        workers=workers,
+        progress=_step(report, "poses"),
     )
+    for failure in pose_failures:
+        failed.setdefault(str(failure.item), failure.message)
+    pose_path = folder / "poses.idx"
+    pose_library.save(pose_path)
+    return pose_path

@@ -210,7 +210,9 @@ def motion_library(tmp_path_factory) -> dict[str, Path]:
     settings = IndexSettings(kinds=("motion",))
     report = ClipIndex.build([clips], root / "lib.qidx", settings, labels=labels, workers=1)
     assert len(report.added) == 7 and not report.failures, report
-    codec.compress([clips / f"{n}.bvh" for n in names], root / "lib.qmz", max_error=1.0)
+    codec.Archive.build(
+        [clips / f"{n}.bvh" for n in names], root / "lib.qmz", codec.CompressSettings(max_error=1.0)
+    )
     prepared = [
         PoseClip.from_motion(read_motion(f), fps=30, height=170, name=str(f))
         for f in sorted(clips.glob("*.bvh"))

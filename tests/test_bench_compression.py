@@ -9,7 +9,6 @@ import dataclasses
 import pytest
 
 from quatmotion.bench import compression as bench
-from quatmotion.codec import compress
 from quatmotion.codec.methods import sparse
 from quatmotion.codec.metrics import collection_errors
 from quatmotion.synthetic import cmu_skeleton, generate_clip
@@ -54,8 +53,9 @@ def test_cached_dictionaries_give_the_uncached_bytes_and_learn_once_per_layout(c
     monkeypatch.setitem(bench.METHODS, "qssd", sparse.SparseMethod("qssd", max_iter=2))
 
     def run(quality):
-        r = compress(clips, max_error=5.0, method="qssd", quality=quality, scheduler="inline")
-        return r.data, collection_errors(r.clip_errors)
+        settings = dict(max_error=5.0, method="qssd", quality=quality)
+        details = bench.compress_in_memory(clips, None, "inline", **settings).details
+        return details["data"], collection_errors(details["clip_errors"])
 
     uncached = []
     for quality in (1.0, 0.7, 1.0):
@@ -87,14 +87,14 @@ def test_quality_search_finds_the_fixed_steps_answer_in_fewer_encodes(clips):
     def arms_of(k):
         encodes.append(k)
         # naive without a bound: the knob is the quantiser step, so the ARMS follows it
-        r = compress(
+        r = bench.compress_in_memory(
             clips,
+            sources,
+            "inline",
             method="naive",
             quality=8.0 * bench.METHODS["naive"].default_quality * bench.QUALITY_STEP**k,
-            sources=sources,
-            scheduler="inline",
         )
-        return collection_errors(r.clip_errors).arms
+        return collection_errors(r.details["clip_errors"]).arms
 
     measured = {k: arms_of(k) for k in range(bench.QUALITY_STEPS)}
     encodes.clear()

@@ -10,6 +10,7 @@ from quatmotion import codec
 from quatmotion.collection import ClipRef
 from quatmotion.errors import ClipNameError
 from quatmotion.io.names import match_clip
+from quatmotion.parallel import Runner
 from quatmotion.retrieval.index import ClipIndex, ClipRecord
 from quatmotion.synthetic import generate_clip
 
@@ -44,7 +45,11 @@ def test_no_match_names_close_ones_and_several_are_an_error_listing_them():
 
 def test_a_qmz_reads_a_clip_by_its_file_name():
     clips = [generate_clip("walk", 1, n_frames=30), generate_clip("run", 2, n_frames=30)]
-    with codec.Archive.open(codec.compress(clips, max_error=2.0, workers=1).data) as archive:
+    with codec.Archive.open(
+        codec.Archive.build(
+            clips, None, codec.CompressSettings(max_error=2.0), runner=Runner.inline()
+        ).details["data"]
+    ) as archive:
         assert archive.read(f"{clips[1].name}.bvh").name == clips[1].name
         assert archive.index_of(f"{clips[0].name}.amc") == 0
         with pytest.raises(KeyError, match="close names"):

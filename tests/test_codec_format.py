@@ -29,7 +29,9 @@ def clips(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def library(clips):
-    return codec.compress(clips[:2], max_error=2.0).data
+    return codec.Archive.build(clips[:2], None, codec.CompressSettings(max_error=2.0)).details[
+        "data"
+    ]
 
 
 def _read_everything(data: bytes) -> None:
@@ -90,7 +92,7 @@ def test_append_keeps_old_clips_and_adds_the_new(clips, library, tmp_path):
     path = tmp_path / "lib.qmz"
     path.write_bytes(library)
     before = [codec.Archive.open(path).read(i) for i in range(2)]
-    codec.append(path, [clips[2]], max_error=2.0)
+    codec.Archive.add(path, [clips[2]], codec.CompressSettings(max_error=2.0))
     with codec.Archive.open(path) as archive:
         assert archive.names() == [c.name for c in clips]
         for i in range(2):
@@ -105,15 +107,21 @@ def test_append_keeps_old_clips_and_adds_the_new(clips, library, tmp_path):
     # file's models, whatever else is in memory)
     again = tmp_path / "again.qmz"
     again.write_bytes(library)
-    codec.append(again, [clips[2]], max_error=2.0)
+    codec.Archive.add(again, [clips[2]], codec.CompressSettings(max_error=2.0))
     assert again.read_bytes() == path.read_bytes()
-    with pytest.raises(ValueError, match="already holds"):
-        codec.append(path, [clips[2]], max_error=2.0)
+    # a clip the file holds already is skipped, and the file left as it was
+    report = codec.Archive.add(path, [clips[2]], codec.CompressSettings(max_error=2.0))
+    assert not report.added and [r.name for r in report.skipped] == [clips[2].name]
+    assert path.read_bytes() == again.read_bytes()
 
 
 def test_same_input_and_seed_same_bytes(clips):
-    a = codec.compress(clips[:2], max_error=2.0, seed=7).data
-    b = codec.compress(clips[:2], max_error=2.0, seed=7).data
+    a = codec.Archive.build(clips[:2], None, codec.CompressSettings(max_error=2.0, seed=7)).details[
+        "data"
+    ]
+    b = codec.Archive.build(clips[:2], None, codec.CompressSettings(max_error=2.0, seed=7)).details[
+        "data"
+    ]
     assert a == b
 
 
@@ -126,7 +134,7 @@ def test_nan_input_is_a_clear_error_and_no_file(tmp_path):
     )
     out = tmp_path / "out.qmz"
     with pytest.raises(FormatError, match="nan.bvh"):
-        codec.compress([bad], out, max_error=1.0)
+        codec.Archive.build([bad], out, codec.CompressSettings(max_error=1.0))
     assert not out.exists()
     assert [p.name for p in tmp_path.iterdir()] == ["nan.bvh"]
 
@@ -140,7 +148,7 @@ def test_unstorable_skeleton_is_a_clear_error_and_no_file(clips, tmp_path):
     motion = Motion(odd, clips[0].fps, clips[0].root_translation, clips[0].rotations, name="odd")
     out = tmp_path / "out.qmz"
     with pytest.raises(ValueError, match="cannot be stored"):
-        codec.compress([motion], out, max_error=1.0)
+        codec.Archive.build([motion], out, codec.CompressSettings(max_error=1.0))
     assert not out.exists()
 
 
@@ -156,6 +164,10 @@ def test_a_bvh_skeleton_is_stored_as_its_hierarchy_whether_its_unit_was_given_or
     write_bvh(generate_clip("walk", 3, n_frames=20), path)
     for motion, kind in ((read_bvh(path), RECORD_BVH_GUESSED), (read_bvh(path, 1.0), RECORD_BVH)):
         assert skeleton_record(motion.skeleton)[0] == kind
-        with codec.Archive.open(codec.compress([motion], max_error=1.0).data) as archive:
+        with codec.Archive.open(
+            codec.Archive.build([motion], None, codec.CompressSettings(max_error=1.0)).details[
+                "data"
+            ]
+        ) as archive:
             back = archive.read(0).skeleton
         assert dict(back.extras) == dict(motion.skeleton.extras)

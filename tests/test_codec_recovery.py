@@ -35,9 +35,9 @@ def library(tmp_path_factory) -> tuple[bytes, list]:
         clip = generate_clip(("walk", "run")[k % 2], 10 + k, n_frames=40).renamed(f"clip{k}")
         clips.append(dataclasses.replace(clip, skeleton=other) if k >= 3 else clip)
     path = tmp_path_factory.mktemp("qmz") / "x.qmz"
-    codec.compress(clips, path, max_error=1.0)
+    codec.Archive.build(clips, path, codec.CompressSettings(max_error=1.0))
     data = path.read_bytes()
-    with codec.open_archive(data) as archive:
+    with codec.Archive.open(data) as archive:
         assert len(archive.header.layouts) == 2
         decoded = [archive.read_rotations(k) for k in range(N_CLIPS)]
     return data, decoded
@@ -78,9 +78,9 @@ def test_flipped_byte_in_a_clip_chunk_loses_that_clip_only(library, k, tmp_path)
     path.write_bytes(damaged)
     # Without recovery: the damaged clip fails naming the file and the chunk's byte offset.
     pattern = r"damaged\.qmz: checksum mismatch .* byte \d+"
-    with codec.open_archive(path) as archive, pytest.raises(FormatError, match=pattern):
+    with codec.Archive.open(path) as archive, pytest.raises(FormatError, match=pattern):
         archive.read(k)
-    with codec.open_archive(path, recover=True) as archive:
+    with codec.Archive.open(path, recover=True) as archive:
         _check_recovered(archive, decoded, {k})
         assert "checksum mismatch" in archive.damaged[0].reason
 
@@ -91,8 +91,8 @@ def test_flipped_chunk_length_resynchronises(library):
     length_byte = ref.offset - 1  # the last byte of the length varint (framing damaged)
     damaged = _flip(data, length_byte)
     with pytest.raises(FormatError, match="byte"):
-        codec.open_archive(damaged)
-    with codec.open_archive(damaged, recover=True) as archive:
+        codec.Archive.open(damaged)
+    with codec.Archive.open(damaged, recover=True) as archive:
         _check_recovered(archive, decoded, {1})
 
 
@@ -101,8 +101,8 @@ def test_flipped_tag_byte_of_a_clip_chunk(library):
     ref = _clip_chunk(data, 3)
     damaged = _flip(data, ref.offset - len(ref.header_bytes))
     with pytest.raises(FormatError, match="unknown chunk tag .* at byte"):
-        codec.open_archive(damaged)
-    with codec.open_archive(damaged, recover=True) as archive:
+        codec.Archive.open(damaged)
+    with codec.Archive.open(damaged, recover=True) as archive:
         _check_recovered(archive, decoded, {3})
 
 
@@ -111,8 +111,8 @@ def test_truncated_in_the_last_chunk_keeps_the_whole_clips(library):
     ref = _clip_chunk(data, N_CLIPS - 1)
     cut = data[: ref.offset + ref.length // 2]
     with pytest.raises(FormatError, match=r"<bytes>: truncated.* byte \d+"):
-        codec.open_archive(cut)
-    with codec.open_archive(cut, recover=True) as archive:
+        codec.Archive.open(cut)
+    with codec.Archive.open(cut, recover=True) as archive:
         _check_recovered(archive, decoded, {N_CLIPS - 1})
         assert "truncated" in archive.damaged[0].reason
 
@@ -121,7 +121,7 @@ def test_truncated_inside_a_layout_chunk_loses_the_clips_needing_it(library):
     data, decoded = library
     layouts = [c for c in _chunks(data) if c.tag == b"L"]
     cut = data[: layouts[1].offset + 3]
-    with codec.open_archive(cut, recover=True) as archive:
+    with codec.Archive.open(cut, recover=True) as archive:
         # Layout 0 is whole but every clip chunk comes after the cut.
         _check_recovered(archive, decoded, set(range(N_CLIPS)))
         assert all("truncated" in d.reason for d in archive.damaged)
@@ -131,10 +131,10 @@ def test_flipped_byte_in_a_layout_chunk_loses_the_clips_of_that_layout(library):
     data, decoded = library
     ref = [c for c in _chunks(data) if c.tag == b"L"][1]
     damaged = _flip(data, ref.offset + ref.length // 3)
-    with codec.open_archive(damaged, recover=True) as archive:
+    with codec.Archive.open(damaged, recover=True) as archive:
         _check_recovered(archive, decoded, {3, 4})
     ref = [c for c in _chunks(data) if c.tag == b"S"][0]
-    with codec.open_archive(_flip(data, ref.offset + 1), recover=True) as archive:
+    with codec.Archive.open(_flip(data, ref.offset + 1), recover=True) as archive:
         _check_recovered(archive, decoded, set(range(N_CLIPS)))  # the one skeleton record
         assert all("skeleton record 0" in d.reason for d in archive.damaged)
 
@@ -143,12 +143,12 @@ def test_a_damaged_header_is_refused_even_when_recovering(library):
     data, _ = library
     header = _chunks(data)[0]
     with pytest.raises(FormatError, match="header is damaged"):
-        codec.open_archive(_flip(data, header.offset + 2), recover=True)
+        codec.Archive.open(_flip(data, header.offset + 2), recover=True)
 
 
 def test_whole_file_has_nothing_damaged(library):
     data, decoded = library
-    with codec.open_archive(data, recover=True) as archive:
+    with codec.Archive.open(data, recover=True) as archive:
         _check_recovered(archive, decoded, set())
 
 

@@ -10,6 +10,7 @@ from quatmotion import codec
 from quatmotion.codec.methods import METHODS, SparseMethod
 from quatmotion.codec.metrics import VIRTUAL_VERTEX_CM, frame_errors
 from quatmotion.codec.skeletons import same_skeleton
+from quatmotion.codec.writer import build_library
 from quatmotion.datasets import data_root
 from quatmotion.io import parse_asf, parse_bvh, read_motion, write_bvh
 from quatmotion.io.asf_amc import asf_text
@@ -46,16 +47,20 @@ def generated():
 
 @pytest.mark.parametrize("method", ["best", "spline", "naive"])
 def test_generated_clips_meet_the_bound_exactly_described(generated, method):
-    result = codec.compress(generated, max_error=1.0, method=method)
-    with codec.Archive.open(result.data) as archive:
+    result = codec.Archive.build(
+        generated, None, codec.CompressSettings(max_error=1.0, method=method)
+    )
+    with codec.Archive.open(result.details["data"]) as archive:
         assert archive.names() == [m.name for m in generated]
         for original in generated:
             decoded = archive.read(original.name)
             _assert_exact_metadata(original, decoded)
             _assert_bound(original, decoded, 1.0)
     # the declared errors are what a decoder measures
-    for entry, original in zip(codec.Archive.open(result.data).entries, generated, strict=True):
-        decoded = codec.Archive.open(result.data).read(entry.name)
+    for entry, original in zip(
+        codec.Archive.open(result.details["data"]).entries, generated, strict=True
+    ):
+        decoded = codec.Archive.open(result.details["data"]).read(entry.name)
         err = frame_errors(forward_kinematics(original), decoded)
         assert entry.max_error == pytest.approx(err.max(), rel=1e-5, abs=1e-6)
 
@@ -63,15 +68,17 @@ def test_generated_clips_meet_the_bound_exactly_described(generated, method):
 @pytest.mark.parametrize("learner", ["qssd", "ksvd"])
 def test_sparse_codecs_meet_the_bound_after_repair(generated, learner, monkeypatch, tmp_path):
     monkeypatch.setitem(METHODS, learner, SparseMethod(learner, max_iter=2))
-    result = codec.compress(generated, max_error=2.0, method=learner)
-    with codec.Archive.open(result.data) as archive:
+    result = codec.Archive.build(
+        generated, None, codec.CompressSettings(max_error=2.0, method=learner)
+    )
+    with codec.Archive.open(result.details["data"]) as archive:
         for original in generated:
             _assert_bound(original, archive.read(original.name), 2.0)
     # appending codes the new clip on the dictionary stored in the file
     path = tmp_path / f"{learner}.qmz"
-    codec.compress(generated[:1], path, max_error=2.0, method=learner)
+    codec.Archive.build(generated[:1], path, codec.CompressSettings(max_error=2.0, method=learner))
     first = codec.Archive.open(path).read(0)
-    codec.append(path, generated[1:], max_error=2.0)
+    codec.Archive.add(path, generated[1:], codec.CompressSettings(max_error=2.0))
     with codec.Archive.open(path) as archive:
         assert archive.names() == [m.name for m in generated]
         np.testing.assert_array_equal(archive.read(0).rotations, first.rotations)
@@ -80,8 +87,10 @@ def test_sparse_codecs_meet_the_bound_after_repair(generated, learner, monkeypat
 
 def test_tight_vertex_bound(generated):
     clip = generated[0].slice(0, 40)
-    result = codec.compress([clip], max_error=0.05, bound_on="vertices")
-    decoded = codec.Archive.open(result.data).read(0)
+    result = codec.Archive.build(
+        [clip], None, codec.CompressSettings(max_error=0.05, bound_on="vertices")
+    )
+    decoded = codec.Archive.open(result.details["data"]).read(0)
     _assert_bound(clip, decoded, 0.05, vertices=True)
     assert VIRTUAL_VERTEX_CM == 3.0
 
@@ -91,11 +100,15 @@ def test_ratio_mode_reaches_the_size(generated, tmp_path):
     write_bvh(generated[0], path)  # a BVH skeleton record is small, so high ratios are reachable
     clips = [read_motion(path)]
     sizes = [(path.stat().st_size, "bvh")]
-    result = codec.compress(clips, ratio=40.0, sources=sizes)
-    assert result.size <= sizes[0][0] / 40.0
-    finer = codec.compress(clips, ratio=10.0, sources=sizes)
-    assert result.size < finer.size <= sizes[0][0] / 10.0
-    assert finer.clip_errors[0].arms < result.clip_errors[0].arms
+    coarse, finer = (
+        build_library(
+            clips, None, codec.CompressSettings(max_error=None, ratio=ratio), source_sizes=sizes
+        ).details
+        for ratio in (40.0, 10.0)
+    )
+    assert len(coarse["data"]) <= sizes[0][0] / 40.0
+    assert len(coarse["data"]) < len(finer["data"]) <= sizes[0][0] / 10.0
+    assert finer["clip_errors"][0].arms < coarse["clip_errors"][0].arms
 
 
 @pytest.mark.needs_data
@@ -103,8 +116,8 @@ def test_ratio_mode_reaches_the_size(generated, tmp_path):
 def test_real_clip_round_trip(name, tmp_path):
     clip = read_motion(REAL[name])
     clip = clip.slice(0, min(clip.n_frames, 120 if name != "cmu_amc" else clip.n_frames))
-    result = codec.compress([clip], max_error=2.0)
-    decoded = codec.Archive.open(result.data).read(0)
+    result = codec.Archive.build([clip], None, codec.CompressSettings(max_error=2.0))
+    decoded = codec.Archive.open(result.details["data"]).read(0)
     _assert_exact_metadata(clip, decoded)
     _assert_bound(clip, decoded, 2.0)
     # a decoded clip writes to its format and the reader reads it back
@@ -136,5 +149,7 @@ def test_repair_meets_the_bound_when_lever_arms_understate(generated, monkeypatc
 
     monkeypatch.setattr(library, "measure_weights", understated)
     clip = generated[1]
-    result = codec.compress([clip], max_error=1.0, method="spline")
-    _assert_bound(clip, codec.Archive.open(result.data).read(0), 1.0)
+    result = codec.Archive.build(
+        [clip], None, codec.CompressSettings(max_error=1.0, method="spline")
+    )
+    _assert_bound(clip, codec.Archive.open(result.details["data"]).read(0), 1.0)

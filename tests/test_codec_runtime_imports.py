@@ -12,6 +12,7 @@ from quatmotion import codec
 from quatmotion.synthetic import generate_clip
 
 HEAVY = (
+    "quatmotion.codec.writer",
     "quatmotion.codec.methods.naive",
     "quatmotion.codec.methods.sparse",
     "quatmotion.sparse",
@@ -28,7 +29,11 @@ HEAVY = (
 def test_reading_a_best_file_loads_no_compressor_parts(tmp_path):
     clip = generate_clip("walk", 5, n_frames=60)
     path = tmp_path / "one.qmz"
-    path.write_bytes(codec.compress([clip], max_error=1.0, method="best").data)
+    path.write_bytes(
+        codec.Archive.build(
+            [clip], None, codec.CompressSettings(max_error=1.0, method="best")
+        ).details["data"]
+    )
     script = f"""
 import json, sys
 from quatmotion.codec import Archive

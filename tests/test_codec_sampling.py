@@ -20,7 +20,11 @@ def clips():
 
 @pytest.fixture(scope="module", params=["best", "spline", "naive"])
 def archive(request, clips):
-    return codec.open(codec.compress(clips, max_error=1.0, method=request.param).data)
+    return codec.Archive.open(
+        codec.Archive.build(
+            clips, None, codec.CompressSettings(max_error=1.0, method=request.param)
+        ).details["data"]
+    )
 
 
 def _nlerp(a, b, f):
@@ -159,7 +163,11 @@ def test_corrections_are_exact_at_frames(clips, monkeypatch):
         return weights * 1e-6, lever * 1e-9
 
     monkeypatch.setattr(library, "measure_weights", understated)
-    archive = codec.open(codec.compress([clips[1]], max_error=1.0, method="spline").data)
+    archive = codec.Archive.open(
+        codec.Archive.build(
+            [clips[1]], None, codec.CompressSettings(max_error=1.0, method="spline")
+        ).details["data"]
+    )
     assert len(archive.clip_parts(0).corrections) > 0
     entry = archive.entries[0]
     root, rot = archive.read_rotations(0)

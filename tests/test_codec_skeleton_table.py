@@ -74,8 +74,8 @@ def test_distinct_skeletons_stay_distinct_and_equal_ones_share(tmp_path):
         dataclasses.replace(_clip(5, base, "e"), skeleton=no_sites),
     ]
     path = tmp_path / "x.qmz"
-    codec.compress(clips, path, max_error=1.0)
-    with codec.open_archive(path) as archive:
+    codec.Archive.build(clips, path, codec.CompressSettings(max_error=1.0))
+    with codec.Archive.open(path) as archive:
         entries = {c.name: c for c in archive.entries}
         # a and c: equal skeletons (distinct objects) share one entry; b, d, e have their own.
         assert entries["a"].skeleton == entries["c"].skeleton

@@ -16,6 +16,7 @@ from quatmotion.cli import app
 from quatmotion.collection import ReadSettings
 from quatmotion.errors import FormatError, FormatWarning
 from quatmotion.motion import forward_kinematics
+from quatmotion.parallel import Runner
 from quatmotion.synthetic import cmu_skeleton, generate_clip
 
 # A humanoid in centimetres: (name, parent, offset, end-site offset). Its stature chain, from an
@@ -198,7 +199,9 @@ def test_utf8_joint_names_survive_the_web_app(tmp_path):
     from quatmotion.server import create_app
 
     path = _write(tmp_path, "utf8.bvh", _bvh(names=UTF8_NAMES, frames=40))
-    codec.compress([path], tmp_path / "x.qmz", max_error=1.0, workers=1)
+    codec.Archive.build(
+        [path], tmp_path / "x.qmz", codec.CompressSettings(max_error=1.0), runner=Runner.inline()
+    )
     with TestClient(create_app(tmp_path / "x.qmz"), base_url="http://127.0.0.1") as client:
         listed = client.get("/api/clips").json()["clips"]
         (clip_id,) = [c["id"] for c in listed if "utf8" in c["name"]]

@@ -5,13 +5,17 @@ package calls one of them."""
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import quatmotion
+from quatmotion import codec
 from quatmotion.io import write_motion
+from quatmotion.parallel import Runner
 from quatmotion.pose.library import PoseLibrary
 from quatmotion.retrieval import ClipIndex, IndexSettings
 from quatmotion.retrieval.build import build_index
@@ -51,10 +55,71 @@ def test_build_index_warns_and_indexes_as_clip_index_build(tmp_path):
         assert [r.as_dict() for r in a.rows()] == [r.as_dict() for r in b.rows()]
 
 
+def _clips(folder: Path) -> list[Path]:
+    for seed, kind in enumerate(["walk", "squat", "run"]):
+        write_motion(generate_clip(kind, seed, n_frames=40, fps=30.0), folder / f"{kind}.bvh")
+    return sorted(folder.glob("*.bvh"))
+
+
+def test_codec_compress_warns_and_writes_what_archive_build_writes(tmp_path):
+    files = _clips(tmp_path)
+    with pytest.warns(DeprecationWarning, match="codec.Archive.build"):
+        old = codec.compress(files, tmp_path / "old.qmz", max_error=2.0, seed=3, workers=1)
+    settings = codec.CompressSettings(max_error=2.0, seed=3)
+    new = codec.Archive.build(files, tmp_path / "new.qmz", settings, runner=Runner.inline())
+    assert (tmp_path / "old.qmz").read_bytes() == (tmp_path / "new.qmz").read_bytes()
+    assert old.size == (tmp_path / "new.qmz").stat().st_size
+    assert old.clip_errors == new.details["clip_errors"]
+
+
+def test_codec_append_warns_adds_as_archive_add_and_refuses_nothing_new(tmp_path):
+    first, *rest = _clips(tmp_path)
+    for name in ("old.qmz", "new.qmz"):
+        codec.Archive.build([first], tmp_path / name, runner=Runner.inline())
+    with pytest.warns(DeprecationWarning, match="codec.Archive.add"):
+        old = codec.append(tmp_path / "old.qmz", rest, max_error=1.0, workers=1)
+    report = codec.Archive.add(tmp_path / "new.qmz", rest, runner=Runner.inline())
+    assert (tmp_path / "old.qmz").read_bytes() == (tmp_path / "new.qmz").read_bytes()
+    assert len(old.clip_errors) == len(report.added) == 2
+    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match="already holds"):
+        codec.append(tmp_path / "old.qmz", rest, workers=1)
+
+
+@pytest.mark.parametrize("name", ["open", "open_archive"])
+def test_codec_open_warns_and_opens_as_archive_open(tmp_path, name):
+    data = codec.Archive.build(_clips(tmp_path)[:1], None, runner=Runner.inline()).details["data"]
+    with pytest.warns(DeprecationWarning, match="codec.Archive.open"):
+        old = getattr(codec, name)(data)
+    with old, codec.Archive.open(data) as new:
+        assert old.names() == new.names()
+        np.testing.assert_array_equal(old.read(0).rotations, new.read(0).rotations)
+
+
+def test_importing_the_codec_loads_no_writer():
+    script = (
+        "import sys, quatmotion.codec\n"
+        "print(sorted(m for m in sys.modules if m.startswith('quatmotion.codec.')))"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    loaded = out.stdout.strip()
+    assert "quatmotion.codec.writer" not in loaded and "_old_names" not in loaded, loaded
+
+
 # -- no module of the package uses an old name ---------------------------------------------
-_OLD_METHODS = {("PoseLibrary", "load"), ("ClipIndex", "create")}
+_OLD_METHODS = {
+    ("PoseLibrary", "load"),
+    ("ClipIndex", "create"),
+    *(("codec", name) for name in ("compress", "append", "open", "open_archive")),
+}
 _OLD_FUNCTIONS = {"build_index"}
-_DEFINED_IN = {"retrieval/build.py", "retrieval/__init__.py"}  # the aliases themselves
+_OLD_IMPORTS = {("quatmotion.codec", n) for n in ("compress", "append", "open", "open_archive")}
+_DEFINED_IN = {  # the aliases themselves
+    "retrieval/build.py",
+    "retrieval/__init__.py",
+    "codec/__init__.py",
+    "codec/_old_names.py",
+}
 
 
 def _old_names_used(path: Path) -> list[str]:
@@ -71,7 +136,7 @@ def _old_names_used(path: Path) -> list[str]:
             found += [
                 f"import of {a.name} (line {node.lineno})"
                 for a in node.names
-                if a.name in _OLD_FUNCTIONS
+                if a.name in _OLD_FUNCTIONS or (node.module, a.name) in _OLD_IMPORTS
             ]
     return found
 

@@ -380,13 +380,14 @@ def test_dask_and_the_local_pool_write_the_same_qmz_bytes(
         for seed, kind in enumerate(["walk", "kick", "squat"])
     ]
     files = {}
-    for name, where in (
-        ("inline", {"scheduler": "inline"}),
-        ("pool", {"workers": 2}),
-        ("dask", {"scheduler": dask_cluster}),
+    for name, runner in (
+        ("inline", Runner.inline()),
+        ("pool", Runner.local(workers=2)),
+        ("dask", Runner.dask(dask_cluster)),
     ):
-        result = codec.compress(clips, tmp_path / f"{name}.qmz", max_error=1.0, **where)
-        assert max(e.max_joint for e in result.clip_errors) <= 1.0
+        settings = codec.CompressSettings(max_error=1.0)
+        result = codec.Archive.build(clips, tmp_path / f"{name}.qmz", settings, runner=runner)
+        assert max(e.max_joint for e in result.details["clip_errors"]) <= 1.0
         files[name] = (tmp_path / f"{name}.qmz").read_bytes()
     assert files["pool"] == files["inline"] == files["dask"]
 

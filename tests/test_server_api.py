@@ -522,7 +522,7 @@ def test_clips_of_one_stem_in_two_folders_stay_two_rows_joined_on_their_content(
     assert len(report.added) == 3 and not report.failures, report
     display = {"s1/take_001": "s1/take_001", "s2/take_001": "s2/take_001", "s1/kick_0": "kick_0"}
     motions = [dataclasses.replace(read_motion(p), name=display[n]) for n, p in paths.items()]
-    codec.compress(motions, tmp_path / "c.qmz", max_error=1.0)
+    codec.Archive.build(motions, tmp_path / "c.qmz", codec.CompressSettings(max_error=1.0))
     prepared = [
         PoseClip.from_motion(read_motion(p), fps=30, height=170, name=str(p))
         for p in paths.values()

@@ -83,7 +83,7 @@ def real_library(real_clips, tmp_path_factory) -> dict[str, Path]:
 
     root = tmp_path_factory.mktemp("real")
     paths = list(real_clips.values())
-    codec.compress(paths, root / "real.qmz", max_error=1.0)
+    codec.Archive.build(paths, root / "real.qmz", codec.CompressSettings(max_error=1.0))
     settings = IndexSettings(kinds=("motion",))
     report = ClipIndex.build(paths, root / "real.qidx", settings, workers=1)
     assert len(report.added) == len(paths) and not report.failures, report

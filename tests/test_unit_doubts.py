@@ -17,6 +17,7 @@ from quatmotion import codec, io
 from quatmotion.collection import ReadSettings
 from quatmotion.datasets import data_root
 from quatmotion.motion import forward_kinematics
+from quatmotion.parallel import Runner
 from quatmotion.retrieval import ClipIndex, IndexSettings
 from quatmotion.synthetic import cmu_skeleton, generate_clip
 
@@ -62,14 +63,24 @@ def test_compress_reads_in_the_unit_given_and_hears_the_doubts(tmp_path, studio_
     path = tmp_path / "studio.bvh"
     io.write_bvh(studio, path)
     heard = []
-    codec.compress([path], max_error=1.0, workers=1, on_doubt=lambda *doubt: heard.append(doubt))
+    codec.Archive.build(
+        [path],
+        None,
+        codec.CompressSettings(max_error=1.0),
+        runner=Runner.inline(),
+        on_doubt=lambda *doubt: heard.append(doubt),
+    )
     assert [(source, doubt.kind) for source, doubt in heard] == [(str(path), "unit")]
     heard.clear()
-    result = codec.compress(
-        [path], max_error=1.0, units="cm", workers=1, on_doubt=lambda *doubt: heard.append(doubt)
+    result = codec.Archive.build(
+        [path],
+        None,
+        codec.CompressSettings(max_error=1.0, read=ReadSettings(units="cm")),
+        runner=Runner.inline(),
+        on_doubt=lambda *doubt: heard.append(doubt),
     )  # a unit given is checked too (issue 29): still no human, and no unit likelier
     assert [(doubt.kind, doubt.likely_unit) for _, doubt in heard] == [("unit", None)]
-    with codec.Archive.open(result.data) as archive:
+    with codec.Archive.open(result.details["data"]) as archive:
         decoded = archive.read(0)
     assert decoded.skeleton.extras["bvh_scale"] == 1.0
     true = forward_kinematics(truth).all_positions()

@@ -99,7 +99,9 @@ def test_view_page_plays_offline_and_shows_the_comparison(browser, compare_page,
 
 def _decoded(motion: Motion) -> Motion:
     """``motion`` through the codec at 1 cm, as ``view --compare-decoded`` shows it."""
-    with codec.Archive.open(codec.compress([motion], max_error=1.0).data) as archive:
+    with codec.Archive.open(
+        codec.Archive.build([motion], None, codec.CompressSettings(max_error=1.0)).details["data"]
+    ) as archive:
         return archive.read(0)
 
 

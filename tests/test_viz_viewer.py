@@ -229,7 +229,7 @@ def test_view_reads_qmz_clips_and_decoded_copies(tmp_path):
 
     clip = generate_clip("kick", 2, n_frames=80)
     library = tmp_path / "lib.qmz"
-    codec.compress([clip], library, max_error=1.0)
+    codec.Archive.build([clip], library, codec.CompressSettings(max_error=1.0))
     bvh = tmp_path / "kick.bvh"
     write_motion(clip, bvh)
     runner = CliRunner()

@@ -46,10 +46,12 @@ from typing import Any
 import numpy as np
 
 from quatmotion._atomic import atomic_write_json
-from quatmotion.codec import Archive, compress
+from quatmotion.codec import Archive, CompressSettings
 from quatmotion.codec.methods import METHODS, SparseMethod
 from quatmotion.codec.methods.sparse import cached_fit_seconds, clear_fit_cache
 from quatmotion.codec.metrics import collection_errors
+from quatmotion.codec.writer import build_library, runner_of
+from quatmotion.collection import BuildReport
 from quatmotion.datasets import catalogue, data_root
 from quatmotion.io import read_motion
 from quatmotion.motion import forward_kinematics
@@ -83,11 +85,26 @@ def _load(paths):
     return [read_motion(p) for p in paths], [p.stat().st_size for p in paths]
 
 
-def _row(result, source_bytes: int, decode_runs: int) -> dict[str, Any]:
-    errors = collection_errors(result.clip_errors)
+def compress_in_memory(motions, sources, scheduler=None, **settings: Any) -> BuildReport:
+    """The clips given in memory compressed to bytes (``report.details["data"]``) with
+    :class:`CompressSettings` of ``settings`` (no bound unless one is given), their sources'
+    sizes and formats (``sources``) stored for the ratios."""
+    return build_library(
+        motions,
+        None,
+        CompressSettings(**{"max_error": None, **settings}),
+        runner=runner_of(None, scheduler),
+        source_sizes=sources,
+    )
+
+
+def _row(result: BuildReport, source_bytes: int, decode_runs: int) -> dict[str, Any]:
+    details = result.details
+    size = len(details["data"])
+    errors = collection_errors(details["clip_errors"])
     frames = errors.frames
     to_rotations, to_positions = [], []
-    with Archive.open(result.data) as archive:
+    with Archive.open(details["data"]) as archive:
         for _ in range(decode_runs):
             t = time.perf_counter()
             for i in range(len(archive)):
@@ -98,20 +115,20 @@ def _row(result, source_bytes: int, decode_runs: int) -> dict[str, Any]:
                 forward_kinematics(archive.read(i))
             to_positions.append(time.perf_counter() - t)
     return {
-        "bytes": result.size,
-        "ratio_text": source_bytes / result.size,
-        "ratio_raw": sum(result.raw_bytes) / result.size,
+        "bytes": size,
+        "ratio_text": source_bytes / size,
+        "ratio_raw": sum(details["raw_bytes"]) / size,
         "arms_cm": errors.arms,
         "distortion_rate": errors.distortion_rate,
         "max_joint_cm": errors.max_joint,
         "max_virtual_vertex_cm": errors.max_virtual_vertex,
-        "compress_ms_per_frame": 1e3 * result.seconds / frames,
+        "compress_ms_per_frame": 1e3 * details["seconds"] / frames,
         "decompress_us_per_frame_rotations": 1e6 * statistics.median(to_rotations) / frames,
         "decompress_us_per_frame_positions": 1e6 * statistics.median(to_positions) / frames,
-        "corrected_values": int(sum(result.corrections)),
-        "quality": result.quality,
+        "corrected_values": int(sum(details["corrections"])),
+        "quality": details["quality"],
         "frames": frames,
-        "clips": len(result.clip_errors),
+        "clips": len(details["clip_errors"]),
     }
 
 
@@ -174,16 +191,16 @@ def _lossy_point(motions, sources, method, arms_target, seed, decode_runs, sched
     results: dict[int, tuple] = {}
 
     def arms_of(k: int) -> float:
-        result = compress(
+        result = compress_in_memory(
             motions,
+            sources,
+            scheduler,
             max_error=5.0,
             method=method,
             quality=q0 * QUALITY_STEP**k,
             seed=seed,
-            sources=sources,
-            scheduler=scheduler,
         )
-        results[k] = (result, collection_errors(result.clip_errors))
+        results[k] = (result, collection_errors(result.details["clip_errors"]))
         return results[k][1].arms
 
     # The sparse codecs' coarse (1 in 8 frames) model floors their ARMS: two steps only.
@@ -287,13 +304,8 @@ def _dataset_entry(name: str, quick: bool, seed: int, out: pathlib.Path, schedul
         curve = []
         if method in ("best", "spline"):
             for bound in bounds:
-                r = compress(
-                    motions,
-                    max_error=bound,
-                    method=method,
-                    seed=seed,
-                    sources=sources,
-                    scheduler=scheduler,
+                r = compress_in_memory(
+                    motions, sources, scheduler, max_error=bound, method=method, seed=seed
                 )
                 row = _row(r, source, 1)
                 row["bound_cm"] = bound
@@ -302,13 +314,8 @@ def _dataset_entry(name: str, quick: bool, seed: int, out: pathlib.Path, schedul
             # the sparse codecs reuse the dictionaries their lossy point learned
             q0 = METHODS[method].default_quality
             for factor in (4.0, 1.0) if quick else (4.0, 2.0, 1.0, 0.5, 0.25):
-                r = compress(
-                    motions,
-                    method=method,
-                    quality=q0 * factor,
-                    seed=seed,
-                    sources=sources,
-                    scheduler=scheduler,
+                r = compress_in_memory(
+                    motions, sources, scheduler, method=method, quality=q0 * factor, seed=seed
                 )
                 row = _row(r, source, 1)
                 row["quality"] = q0 * factor
@@ -324,13 +331,8 @@ def _dataset_entry(name: str, quick: bool, seed: int, out: pathlib.Path, schedul
         ):
             bounded[label] = {
                 method: _row(
-                    compress(
-                        motions,
-                        method=method,
-                        seed=seed,
-                        sources=sources,
-                        scheduler=scheduler,
-                        **kwargs,
+                    compress_in_memory(
+                        motions, sources, scheduler, method=method, seed=seed, **kwargs
                     ),
                     source,
                     1,
@@ -352,13 +354,8 @@ def _size_curves(name: str, quick: bool, seed: int, scheduler) -> dict[str, list
     for method in ("best", "spline", "naive"):
         pts = []
         for n in counts:
-            r = compress(
-                motions[:n],
-                max_error=5.0,
-                method=method,
-                seed=seed,
-                sources=sources[:n],
-                scheduler=scheduler,
+            r = compress_in_memory(
+                motions[:n], sources[:n], scheduler, max_error=5.0, method=method, seed=seed
             )
             pts.append(_row(r, sum(sizes[:n]), 1))
         curves[method] = pts

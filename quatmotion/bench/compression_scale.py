@@ -3,7 +3,7 @@
 ``run(out, quick, seed)`` generates libraries of 300, 1,000 and 3,000 short clips (quick: 100,
 300 and 1,000), each clip on a skeleton of its own (the procedural CMU-like figure at a stature
 drawn per clip, so every bone length differs), writes them as BVH files to a temporary folder
-and runs ``quatmotion.codec.compress`` on the folder at the default 1 cm bound, each size in a
+and runs ``quatmotion.codec.Archive.build`` on the folder at the default 1 cm bound, each size in a
 fresh subprocess. Per size it reports:
 
 * ``seconds`` and ``seconds_per_clip``: the whole call (reading, the skeleton and layout pass,
@@ -59,7 +59,7 @@ def measure(folder: str, out: str) -> dict[str, Any]:
     import resource
     import time
 
-    from quatmotion.codec import compress, open_archive
+    from quatmotion.codec import Archive, CompressSettings
 
     marks: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -70,9 +70,9 @@ def measure(folder: str, out: str) -> dict[str, Any]:
         if step not in ("read", "prepare"):
             marks.setdefault("encode", now)
 
-    result = compress([folder], out, max_error=1.0, progress=progress)
+    Archive.build([folder], out, CompressSettings(max_error=1.0), progress=progress)
     seconds = time.perf_counter() - t0
-    with open_archive(out) as archive:
+    with Archive.open(out) as archive:
         n_skeletons = len(archive.header.skeletons)
         n_clips = len(archive)
     return {
@@ -81,7 +81,7 @@ def measure(folder: str, out: str) -> dict[str, Any]:
         "seconds": seconds,
         "prepare_seconds": marks.get("encode", seconds),
         "first_progress_seconds": marks.get("first", seconds),
-        "file_bytes": result.size,
+        "file_bytes": pathlib.Path(out).stat().st_size,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }
 

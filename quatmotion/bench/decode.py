@@ -44,7 +44,8 @@ import numpy as np
 from quatmotion import quat
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench._provenance import provenance
-from quatmotion.codec import compress, open_archive
+from quatmotion.codec import Archive, CompressSettings
+from quatmotion.collection import BuildReport
 from quatmotion.datasets import data_root
 from quatmotion.motion import Motion, forward_kinematics
 
@@ -158,7 +159,8 @@ def _warm_up() -> None:
     from quatmotion.synthetic import generate_clip
 
     clip = generate_clip("walk", 0, n_frames=40)
-    with open_archive(compress([clip], max_error=2.0, method=METHOD).data) as a:
+    built = Archive.build([clip], None, CompressSettings(max_error=2.0, method=METHOD))
+    with Archive.open(built.details["data"]) as a:
         a.read_rotations(0)
         forward_kinematics(a.read(0))
         a.sample(0, [0.01, 0.1])
@@ -172,7 +174,7 @@ def _warm_up() -> None:
 
 def decode_figures(data: bytes, repeats: int = 3, seed: int = 0) -> dict[str, Any]:
     """Decode and sample timings of one archive's bytes (see the module docstring)."""
-    with open_archive(data) as fresh:
+    with Archive.open(data) as fresh:
         frames = sum(c.n_frames for c in fresh.entries)
 
         def rotations(archive=fresh):
@@ -180,7 +182,7 @@ def decode_figures(data: bytes, repeats: int = 3, seed: int = 0) -> dict[str, An
                 archive.read_rotations(i)
 
         fresh_cpu, fresh_wall = _timed(rotations, 1)
-    with open_archive(data) as archive:
+    with Archive.open(data) as archive:
 
         def rotations_warm():
             rotations(archive)
@@ -194,7 +196,7 @@ def decode_figures(data: bytes, repeats: int = 3, seed: int = 0) -> dict[str, An
         pos_cpu, pos_wall = _timed(positions, repeats)
     rng = np.random.default_rng(seed)
     first, by_index, by_name, bound, batch = [], [], [], [], []
-    with open_archive(data) as archive:
+    with Archive.open(data) as archive:
         for k in range(len(archive.header.layouts)):
             archive.layout(k)
         names = archive.names()
@@ -237,7 +239,7 @@ def error_figures(data: bytes, motions: list[Motion]) -> dict[str, float]:
     """The largest error the file declares and the largest joint or end-site error measured
     by :func:`independent_positions`, centimetres."""
     measured = 0.0
-    with open_archive(data) as archive:
+    with Archive.open(data) as archive:
         declared = max(float(e.max_error) for e in archive.entries)
         for i, motion in enumerate(motions):
             d = np.linalg.norm(
@@ -247,25 +249,26 @@ def error_figures(data: bytes, motions: list[Motion]) -> dict[str, float]:
     return {"max_error_declared_cm": declared, "max_error_independent_cm": measured}
 
 
-def size_figures(result, motions: list[Motion], source_bytes: int) -> dict[str, Any]:
-    """Sizes of a compression result in ratios, bytes per frame, bits per joint per frame and
-    kB/s."""
+def size_figures(result: BuildReport, motions: list[Motion], source_bytes: int) -> dict[str, Any]:
+    """Sizes of a build made in memory (``details["data"]``) in ratios, bytes per frame, bits
+    per joint per frame and kB/s."""
+    size, errors = len(result.details["data"]), result.details["clip_errors"]
     joint_frames = sum(m.n_frames * m.skeleton.n_joints for m in motions)
     seconds = sum(m.n_frames / m.fps for m in motions)
     acl_raw = 4 * ACL_FLOATS_PER_BONE * joint_frames
     out = {
-        "bytes": result.size,
-        "bytes_per_frame": result.size / sum(m.n_frames for m in motions),
-        "ratio_raw_float32": sum(result.raw_bytes) / result.size,
-        "ratio_10_floats_per_bone": acl_raw / result.size,
-        "bits_per_joint_frame": 8 * result.size / joint_frames,
-        "kB_per_second": result.size / 1000 / seconds,
+        "bytes": size,
+        "bytes_per_frame": size / sum(m.n_frames for m in motions),
+        "ratio_raw_float32": sum(result.details["raw_bytes"]) / size,
+        "ratio_10_floats_per_bone": acl_raw / size,
+        "bits_per_joint_frame": 8 * size / joint_frames,
+        "kB_per_second": size / 1000 / seconds,
         "fps": sorted({float(m.fps) for m in motions}),
-        "max_joint_cm": float(max(e.max_joint for e in result.clip_errors)),
-        "max_virtual_vertex_cm": float(max(e.max_virtual_vertex for e in result.clip_errors)),
+        "max_joint_cm": float(max(e.max_joint for e in errors)),
+        "max_virtual_vertex_cm": float(max(e.max_virtual_vertex for e in errors)),
     }
     if source_bytes:
-        out["ratio_text"] = source_bytes / result.size
+        out["ratio_text"] = source_bytes / size
     return out
 
 
@@ -297,7 +300,7 @@ def _dataset_paths(root: pathlib.Path, name: str, quick: bool) -> list[pathlib.P
 
 
 def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
-    from quatmotion.bench.compression import _load
+    from quatmotion.bench.compression import _load, compress_in_memory
 
     out = pathlib.Path(out)
     root = data_root()
@@ -318,10 +321,10 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
         entry: dict[str, Any] = {"clips": len(motions), "files": [p.name for p in paths]}
         for bound in BOUNDS:
             sources = [(s, p.suffix.lower().lstrip(".")) for s, p in zip(sizes, paths, strict=True)]
-            r = compress(motions, max_error=bound, method=METHOD, seed=seed, sources=sources)
+            r = compress_in_memory(motions, sources, max_error=bound, method=METHOD, seed=seed)
             row = size_figures(r, motions, sum(sizes))
-            row.update(error_figures(r.data, motions))
-            row.update(decode_figures(r.data, repeats, seed))
+            row.update(error_figures(r.details["data"], motions))
+            row.update(decode_figures(r.details["data"], repeats, seed))
             entry[f"{bound:g}cm"] = row
             result["datasets"][name] = entry
             atomic_write_json(out, result)

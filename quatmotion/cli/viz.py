@@ -52,9 +52,8 @@ def _decoded(motion: Motion) -> Motion:
     decoded."""
     from quatmotion import codec
 
-    with codec.Archive.open(
-        codec.compress([motion], max_error=codec.DEFAULT_MAX_ERROR_CM).data
-    ) as archive:
+    built = codec.Archive.build([motion], None, codec.CompressSettings())
+    with codec.Archive.open(built.details["data"]) as archive:
         decoded = archive.read(0)
     return dataclasses.replace(decoded, name=f"{motion.name} (decoded)")
 

@@ -24,19 +24,31 @@ Layout (compression and decompression apart, format and math apart):
   :mod:`~quatmotion.codec.sampling` (poses at any time; :class:`Sampler`, one clip bound).
 
 ``compress``, ``append``, ``open`` and ``open_archive`` are the names before 0.4.0 (thin
-wrappers of the above).
+wrappers of the above that warn; :mod:`~quatmotion.codec._old_names`, loaded when one is first
+asked for, so that ``import quatmotion.codec`` loads the decoder and no compressor).
 
 ``docs/format.md`` specifies the file byte by byte.
 """
 
-from quatmotion.codec._old_names import CompressionResult, append, compress
-from quatmotion.codec.archive import DamagedClip, open_archive
+from typing import Any
+
+from quatmotion.codec.archive import DamagedClip
 from quatmotion.codec.methods import METHODS
 from quatmotion.codec.qmz import Archive
 from quatmotion.codec.sampling import Sampler
 from quatmotion.codec.settings import DEFAULT_MAX_ERROR_CM, CompressSettings
 
-open = open_archive  # noqa: A001 (before 0.4.0; Archive.open now)
+_OLD_NAMES = ("CompressionResult", "append", "compress", "open", "open_archive")
+
+
+def __getattr__(name: str) -> Any:
+    """The names before 0.4.0, from :mod:`~quatmotion.codec._old_names` when first asked for."""
+    if name in _OLD_NAMES:
+        from quatmotion.codec import _old_names
+
+        return getattr(_old_names, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "DEFAULT_MAX_ERROR_CM",

@@ -1,6 +1,11 @@
-"""The codec's names before 0.4.0 (docs/migration-0.4.md): :func:`compress` and :func:`append`,
-thin wrappers of :meth:`Archive.build <quatmotion.codec.Archive.build>` and
-:meth:`Archive.add <quatmotion.codec.Archive.add>` that return a :class:`CompressionResult`.
+"""The codec's names before 0.4.0 (docs/migration-0.4.md), each warning with a
+DeprecationWarning that names its replacement: :func:`compress` and :func:`append`, thin
+wrappers of :meth:`Archive.build <quatmotion.codec.Archive.build>` and
+:meth:`Archive.add <quatmotion.codec.Archive.add>` that return a :class:`CompressionResult`;
+:func:`open` and :func:`open_archive`, :meth:`Archive.open <quatmotion.codec.Archive.open>`.
+
+``quatmotion.codec`` loads this module when one of these names is first asked for: importing
+the codec loads no compressor.
 """
 
 from __future__ import annotations
@@ -9,7 +14,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from quatmotion._deprecated import warn_renamed
 from quatmotion.codec.metrics import ClipErrors
+from quatmotion.codec.qmz import Archive
 from quatmotion.codec.settings import CompressSettings
 from quatmotion.codec.writer import add_to_library, build_library, runner_of
 from quatmotion.codec.writer.runner import OnDoubt, Progress
@@ -17,7 +24,7 @@ from quatmotion.collection import BuildReport, ReadSettings
 from quatmotion.motion import Motion, Skeleton
 from quatmotion.parallel import Scheduler
 
-__all__ = ["CompressionResult", "append", "compress"]
+__all__ = ["CompressionResult", "append", "compress", "open", "open_archive"]
 
 
 @dataclass
@@ -95,6 +102,7 @@ def compress(
     """The name before 0.4.0: :meth:`Archive.build` with a :class:`CompressSettings` made of
     the keywords (``max_error`` and ``ratio`` both None: no bound, as before). ``skeleton`` may
     only be a path now (an ASF file or a folder)."""
+    warn_renamed("codec.compress", "codec.Archive.build with CompressSettings")
     if isinstance(skeleton, Skeleton):
         raise TypeError("skeleton must be the path of an ASF file or folder")
     settings = CompressSettings(
@@ -124,6 +132,7 @@ def append(
     on_doubt: OnDoubt | None = None,
 ) -> CompressionResult:
     """The name before 0.4.0: :meth:`Archive.add` with the keywords as settings."""
+    warn_renamed("codec.append", "codec.Archive.add with CompressSettings")
     if isinstance(skeleton, Skeleton):
         raise TypeError("skeleton must be the path of an ASF file or folder")
     settings = CompressSettings(
@@ -137,3 +146,15 @@ def append(
     if not report.added:
         raise ValueError(f"{path}: already holds every clip given")
     return CompressionResult.from_report(report)
+
+
+def open(source: str | Path | bytes, *, recover: bool = False) -> Archive:  # noqa: A001
+    """The name before 0.4.0: :meth:`Archive.open`."""
+    warn_renamed("codec.open", "codec.Archive.open")
+    return Archive.open(source, recover=recover)
+
+
+def open_archive(source: str | Path | bytes, *, recover: bool = False) -> Archive:
+    """The name before 0.4.0: :meth:`Archive.open`."""
+    warn_renamed("codec.open_archive", "codec.Archive.open")
+    return Archive.open(source, recover=recover)

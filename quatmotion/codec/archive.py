@@ -57,7 +57,7 @@ from quatmotion.motion import Motion, Skeleton
 if TYPE_CHECKING:
     from quatmotion.codec.settings import CompressSettings
 
-__all__ = ["ArchiveReader", "ClipParts", "DamagedClip", "DecodedChannels", "open_archive"]
+__all__ = ["ArchiveReader", "ClipParts", "DamagedClip", "DecodedChannels"]
 
 
 @dataclass(frozen=True)
@@ -588,8 +588,3 @@ def _known() -> set[str]:
     from quatmotion.codec.methods import METHODS
 
     return set(METHODS)
-
-
-def open_archive(source: str | Path | bytes, *, recover: bool = False) -> ArchiveReader:
-    """:meth:`quatmotion.codec.Archive.open` (the name before 0.4.0)."""
-    return ArchiveReader(source, recover=recover)

@@ -2,7 +2,8 @@
 (:class:`~quatmotion.codec.archive.ArchiveReader`: open, clips, read, sample) with the
 collection surface's ``build``/``add`` (:mod:`~quatmotion.codec.writer`, the writer) on top:
 a thin facade above both, so the reader imports no writer and decoding stays importable
-without it.
+without it (the writer is imported by :meth:`Archive.build` and :meth:`Archive.add`, when a
+file is written: ``import quatmotion.codec`` loads no compressor).
 """
 
 from __future__ import annotations
@@ -12,7 +13,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from quatmotion.codec.archive import ArchiveReader
-from quatmotion.codec.writer import add_to_library, build_library
 
 if TYPE_CHECKING:
     from quatmotion.codec.settings import CompressSettings
@@ -44,6 +44,8 @@ class Archive(ArchiveReader):
         """Compress clips (files, folders, motions, :class:`~quatmotion.collection.ClipSource`)
         into one ``.qmz`` library at ``out`` (atomically; None: bytes only, in
         ``report.details["data"]``). See :func:`quatmotion.codec.writer.build_library`."""
+        from quatmotion.codec.writer import build_library
+
         return build_library(
             sources, out, settings, runner=runner, progress=progress, on_doubt=on_doubt
         )
@@ -64,6 +66,8 @@ class Archive(ArchiveReader):
         it kept byte for byte (:func:`quatmotion.codec.writer.add_to_library`)."""
         if labels is not None:
             raise ValueError("a .qmz library stores no labels (give them to the clip index)")
+        from quatmotion.codec.writer import add_to_library
+
         return add_to_library(
             path, sources, settings, runner=runner, progress=progress, on_doubt=on_doubt
         )

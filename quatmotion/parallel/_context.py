@@ -8,7 +8,7 @@ from a process that runs no threads.
 
 Why not the main script: a spawned or fork-server worker re-runs the parent's main script
 (as ``__mp_main__``) before it unpickles anything, so that functions and classes defined there
-can be found. A script that calls ``codec.compress`` at its top level, without an
+can be found. A script that calls ``codec.Archive.build`` at its top level, without an
 ``if __name__ == "__main__":`` guard, then calls it again in every worker, which dies trying to
 start a pool of its own: the README's example failed exactly so. The jobs of quatmotion are
 module-level functions of its own modules, and their items are its own objects: a worker finds
