@@ -56,6 +56,7 @@ KERNEL_MODULES: tuple[str, ...] = (
     "quatmotion.codec.channels",
     "quatmotion.codec.entropy",
     "quatmotion.codec._decode_kernels",
+    "quatmotion.runtime._kernels",
     "quatmotion.codec.spline",
     "quatmotion.codec.methods.spline",
     "quatmotion.retrieval._kernels",

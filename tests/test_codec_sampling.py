@@ -174,6 +174,36 @@ def test_corrections_are_exact_at_frames(clips, monkeypatch):
     s_root, s_rot = archive.sample(0, np.arange(entry.n_frames) / entry.fps)
     assert quat.angle(s_rot, rot).max() < 1e-9
     assert np.abs(s_root - root).max() < 1e-9
+    _assert_one_arithmetic(archive)  # the corrections added where the channels add them
+
+
+def _channels_path(archive, i):
+    d = archive.read_channels(i)
+    return d.channels[:, :3], channel_rotations(
+        d.channels, d.skeleton, d.layout.layout, d.layout.reference
+    )
+
+
+def _assert_one_arithmetic(archive):
+    """``read_rotations`` (one compiled call from the coefficient rows), the channels'
+    rotations (what the encoder measures its bound on) and poses sampled at the frames are
+    the same bits."""
+    for i, entry in enumerate(archive.entries):
+        root, rot = archive.read_rotations(i)
+        c_root, c_rot = _channels_path(archive, i)
+        assert np.array_equal(root, c_root) and np.array_equal(rot, c_rot)
+        sampler = archive.sampler(i)
+        frames = np.arange(entry.n_frames, dtype=np.float64)
+        s_root, s_rot = sampler.poses_at(frames)
+        assert np.array_equal(s_root, root) and np.array_equal(s_rot, rot)
+        for f in (0, entry.n_frames // 3, entry.n_frames - 1):
+            if f / entry.fps * entry.fps == f:  # a time that is exactly the frame
+                r, q = sampler.pose(f / entry.fps)
+                assert np.array_equal(r, root[f]) and np.array_equal(q, rot[f])
+
+
+def test_one_arithmetic_from_rows_to_rotations(archive):
+    _assert_one_arithmetic(archive)
 
 
 def test_bench_resampling_keeps_the_shared_frames(clips):

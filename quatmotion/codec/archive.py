@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from quatmotion._format import FileFormat
 from quatmotion.codec.binary import Reader, inflate
-from quatmotion.codec.channels import channel_rotations, from_channels
+from quatmotion.codec.channels import _kernel_tables, channel_rotations, from_channels
 from quatmotion.codec.container import (
     QMZ_FORMAT,
     ChunkRef,
@@ -53,6 +53,7 @@ from quatmotion.errors import FormatError
 from quatmotion.io.names import match_clip
 from quatmotion.limits import check, load_json
 from quatmotion.motion import Motion, Skeleton
+from quatmotion.runtime import kernels
 
 if TYPE_CHECKING:
     from quatmotion.codec.settings import CompressSettings
@@ -551,9 +552,42 @@ class ArchiveReader:
     def read_rotations(self, clip: int | str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """A clip's root translation ``(T, 3)`` cm and local rotations ``(T, J, 4)``: the
         decoded arrays without the validation a :class:`Motion` adds (the fast path)."""
-        d = self.read_channels(clip)
-        rotations = channel_rotations(d.channels, d.skeleton, d.layout.layout, d.layout.reference)
-        return d.channels[:, :3], rotations
+        parts = self.clip_parts(clip)
+        layout = parts.layout.layout
+        # the columns the rotations read: the root's translation, then every rotation channel
+        m = int(layout.starts[-1] + layout.counts[-1]) if len(layout.starts) else 3
+        if not hasattr(self.method, "decode_coefficients"):
+            d = self.read_channels(parts.index)
+            rotations = channel_rotations(
+                d.channels, d.skeleton, d.layout.layout, d.layout.reference
+            )
+            return d.channels[:, :3], rotations
+        try:
+            _, tables, P, cols, scale = self.method.decode_coefficients(
+                parts.model, parts.payload, parts.context
+            )
+        except FormatError as error:
+            raise self.method_error(parts, error) from None
+        if len(cols) < m or cols[m - 1] != m - 1:  # not the first active ones (sorted, unique)
+            raise FormatError(f"clip {parts.entry.name!r}: rotation channels not coded", self._name)
+        # one compiled call from the coefficient rows to rotations
+        fix = parts.corrections
+        lever = correction_lever(parts.layout)
+        dof_axes, pre = _kernel_tables(parts.skeleton, layout)
+        T = parts.entry.n_frames
+        root = np.empty((T, 3))
+        rotations = np.empty((T, len(layout.kinds), 4))
+        finite = kernels().clip_rotations(
+            tables.packed(), tables.knots, P, np.ascontiguousarray(scale), m, fix.frames,
+            fix.channels, fix.values * fix.quantum / lever[fix.channels], layout.kinds,
+            layout.starts, layout.counts, dof_axes, pre, np.ascontiguousarray(
+                parts.layout.reference), root, rotations,
+        )  # fmt: skip
+        if not finite:
+            raise FormatError(
+                f"clip {parts.entry.name!r}: decoded channels are invalid", self._name
+            )
+        return root, rotations
 
     def read(self, clip: int | str) -> Motion:
         """A clip as a :class:`Motion` (skeleton, fps, frames and name exactly as stored)."""

@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from quatmotion import quat
 from quatmotion.io._text import decompose_channels
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
-from quatmotion.quat.jit import multiply
+from quatmotion.runtime import kernels
 
 __all__ = [
     "KIND_EULER",
@@ -302,156 +302,6 @@ def to_channels(
     return X, at_rest
 
 
-@numba.njit(inline="always", cache=True)
-def _sincos(x):  # pragma: no cover - compiled
-    """``(sin x, cos x)`` to within an ulp of libm's, about twice as fast: ``x`` reduced by
-    the nearest multiple of pi/2 (three-part Cody-Waite), then Taylor polynomials of degree
-    17 and 16 on ``[-pi/4, pi/4]`` (truncation below 1e-19)."""
-    k = np.floor(x * 0.6366197723675814 + 0.5)
-    r = ((x - k * 1.5707963267341256) - k * 6.077100506506192e-11) - k * 2.0222662487959506e-21
-    z = r * r
-    s = r + r * z * (
-        -1.6666666666666666e-01
-        + z
-        * (
-            8.3333333333333332e-03
-            + z
-            * (
-                -1.9841269841269841e-04
-                + z
-                * (
-                    2.7557319223985893e-06
-                    + z
-                    * (
-                        -2.5052108385441720e-08
-                        + z
-                        * (
-                            1.6059043836821613e-10
-                            + z * (-7.6471637318198164e-13 + z * 2.8114572543455206e-15)
-                        )
-                    )
-                )
-            )
-        )
-    )
-    c = 1.0 + z * (
-        -0.5
-        + z
-        * (
-            4.1666666666666664e-02
-            + z
-            * (
-                -1.3888888888888889e-03
-                + z
-                * (
-                    2.4801587301587302e-05
-                    + z
-                    * (
-                        -2.7557319223985888e-07
-                        + z
-                        * (
-                            2.0876756987868100e-09
-                            + z * (-1.1470745597729725e-11 + z * 4.7794773323873853e-14)
-                        )
-                    )
-                )
-            )
-        )
-    )
-    # the quadrant by selects, not returns, so that a loop over frames stays one branchless
-    # body (the same values: (s, c), (c, -s), (-s, -c), (-c, s) for quadrants 0..3)
-    q = np.int64(k) & 3
-    sin = c if q & 1 else s
-    cos = s if q & 1 else c
-    sin = -sin if q & 2 else sin
-    cos = -cos if (q + 1) & 2 else cos
-    return sin, cos
-
-
-@numba.njit(inline="always", cache=True)
-def rotation_row(X, t, j, kinds, starts, counts, dof_axes, pre, ref):  # pragma: no cover
-    """Joint ``j``'s local rotation from row ``t`` of channels ``X``, a ``(w, x, y, z)`` tuple
-    (the tables indexed by ``j``: :func:`_kernel_tables`' and the layout's)."""
-    kind = kinds[j]
-    a = starts[j]
-    w, x, y, z = 1.0, 0.0, 0.0, 0.0
-    if kind == 2 or kind == 3:
-        b = a + 1 if kind == 3 else a
-        vx, vy, vz = 0.5 * X[t, b], 0.5 * X[t, b + 1], 0.5 * X[t, b + 2]
-        ang = np.sqrt(vx * vx + vy * vy + vz * vz)
-        sn, ew = _sincos(ang)
-        s = sn / ang if ang > 1e-12 else 1.0
-        ex, ey, ez = vx * s, vy * s, vz * s
-        w, x, y, z = multiply(ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3], ew, ex, ey, ez)
-        if kind == 3:
-            sh, ch = _sincos(0.5 * X[t, a])
-            w, x, y, z = multiply(ch, 0.0, sh, 0.0, w, x, y, z)
-    elif kind == 1:
-        # rotation about the axes C e_i in turn (C M C^-1 without forming C)
-        intrinsic = pre[j, 3, 0] > 0.5
-        for i in range(counts[j]):
-            ax = dof_axes[j, i]
-            sh, ew = _sincos(0.5 * X[t, a + i])
-            ex, ey, ez = sh * pre[j, ax, 0], sh * pre[j, ax, 1], sh * pre[j, ax, 2]
-            if intrinsic:  # q <- q e
-                w, x, y, z = multiply(w, x, y, z, ew, ex, ey, ez)
-            else:  # extrinsic: q <- e q
-                w, x, y, z = multiply(ew, ex, ey, ez, w, x, y, z)
-    return w, x, y, z
-
-
-@numba.njit(cache=True)
-def _rotations_kernel(X, kinds, starts, counts, dof_axes, pre, ref):  # pragma: no cover
-    """:func:`rotation_row` of every frame and joint, joint by joint: the kind's branch taken
-    once per joint and each loop over frames one body (the same arithmetic as
-    :func:`rotation_row`, so the same bits; 1.38 -> 0.87 µs a frame on HDM05's 31 joints)."""
-    T = X.shape[0]
-    J = kinds.shape[0]
-    out = np.empty((T, J, 4))
-    for j in range(J):
-        kind = kinds[j]
-        a = starts[j]
-        if kind == 1:
-            intrinsic = pre[j, 3, 0] > 0.5
-            for t in range(T):
-                w, x, y, z = 1.0, 0.0, 0.0, 0.0
-                for i in range(counts[j]):
-                    ax = dof_axes[j, i]
-                    sh, ew = _sincos(0.5 * X[t, a + i])
-                    ex, ey, ez = sh * pre[j, ax, 0], sh * pre[j, ax, 1], sh * pre[j, ax, 2]
-                    if intrinsic:  # q <- q e
-                        w, x, y, z = multiply(w, x, y, z, ew, ex, ey, ez)
-                    else:  # extrinsic: q <- e q
-                        w, x, y, z = multiply(ew, ex, ey, ez, w, x, y, z)
-                out[t, j, 0] = w
-                out[t, j, 1] = x
-                out[t, j, 2] = y
-                out[t, j, 3] = z
-        elif kind == 2 or kind == 3:
-            b = a + 1 if kind == 3 else a
-            r0, r1, r2, r3 = ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3]
-            for t in range(T):
-                vx, vy, vz = 0.5 * X[t, b], 0.5 * X[t, b + 1], 0.5 * X[t, b + 2]
-                ang = np.sqrt(vx * vx + vy * vy + vz * vz)
-                sn, ew = _sincos(ang)
-                s = sn / ang if ang > 1e-12 else 1.0
-                w, x, y, z = multiply(r0, r1, r2, r3, ew, vx * s, vy * s, vz * s)
-                if kind == 3:
-                    sh, ch = _sincos(0.5 * X[t, a])
-                    w, x, y, z = multiply(ch, 0.0, sh, 0.0, w, x, y, z)
-                out[t, j, 0] = w
-                out[t, j, 1] = x
-                out[t, j, 2] = y
-                out[t, j, 3] = z
-        else:
-            for t in range(T):
-                out[t, j, 0] = 1.0
-                out[t, j, 1] = 0.0
-                out[t, j, 2] = 0.0
-                out[t, j, 3] = 0.0
-    return out
-
-
 def _kernel_tables(skeleton: Skeleton, layout: ChannelLayout):
     """Dof axes ``(J, 3)`` and pre-rotated unit axes ``pre[j, i] = C_j e_i`` with
     ``pre[j, 3, 0]`` flagging intrinsic composition, cached on the skeleton object."""
@@ -481,7 +331,7 @@ def channel_rotations(
     """Local joint rotations ``(T, J, 4)`` of channels ``X`` ``(T, C)`` (one compiled pass)."""
     X = np.ascontiguousarray(X, dtype=np.float64)
     dof_axes, pre = _kernel_tables(skeleton, layout)
-    return _rotations_kernel(
+    return kernels().rotations_of_channels(
         X, layout.kinds, layout.starts, layout.counts, dof_axes, pre, np.ascontiguousarray(ref)
     )
 

@@ -14,8 +14,10 @@ Conventions
   two segments, the loop's wrap) and for every other method, the pose is the normalised lerp
   (shorter arc) of the two decoded frames' rotations and the lerp of their root translations.
 * A :class:`Sampler` is one clip bound for sampling (:meth:`Archive.sampler`): its joints and
-  mode chosen once and its tables packed into two arrays, so one pose per call is a check of
-  the time and one compiled call of three arguments, written into buffers allocated once.
+  mode chosen once and its tables packed into one array (scratch rows and the output
+  included), so one pose per call is one compiled call of two arguments that allocates
+  nothing; a batch is decoded a block of poses at a time (each joint's rotations one loop
+  over the block: :mod:`quatmotion.runtime._kernels`).
 * A clip's spline coefficients are decoded on its first sample (its residuals are one
   adaptive range-coded stream, so no part decodes alone), no frame evaluated, and kept by the
   archive for later samples; each pose evaluates the spline where it is sampled, and a joint
@@ -29,11 +31,11 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion.codec._decode_kernels import PACK_HEAD, pose_packed, poses_packed, sample_poses
 from quatmotion.codec.channels import _kernel_tables
 from quatmotion.codec.repair import correction_lever
 from quatmotion.codec.spline import segment_tables
 from quatmotion.errors import FormatError
+from quatmotion.runtime import kernels
 
 __all__ = ["ClipSampler", "MODES", "Sampler", "sampler_for"]
 
@@ -74,14 +76,7 @@ class ClipSampler:
                 corr = np.zeros((0, 0))
         except FormatError as error:
             raise archive.method_error(parts, error) from None
-        segs = np.empty((len(tables.first), 6), dtype=np.int64)
-        segs[:, 0] = tables.first
-        segs[:, 1] = tables.length
-        segs[:, 2] = tables.rows
-        segs[:, 3] = tables.spline
-        segs[:, 4] = tables.knot_start[:-1]
-        segs[:, 5] = tables.knot_start[1:]
-        self._segs = segs
+        self._segs = tables.packed()
         self._knots = np.ascontiguousarray(tables.knots)
         self._P = np.ascontiguousarray(P)
         self._cols = np.asarray(cols, dtype=np.int64)
@@ -91,6 +86,7 @@ class ClipSampler:
         self._all = np.arange(parts.skeleton.n_joints, dtype=np.int64)
         self._selections: dict[bytes, tuple] = {}
         self._bound: Sampler | None = None
+        self._samplers: dict[tuple, Sampler] = {}
         L = layout
         self._rotation = tuple(
             np.ascontiguousarray(x)
@@ -164,26 +160,28 @@ class ClipSampler:
         self._selections[key] = cached
         return cached
 
-    def bound(self) -> Sampler:
-        """The :class:`Sampler` of every joint, clamped (made once)."""
-        if self._bound is None:
-            self._bound = Sampler(self, None, "clamp")
-        return self._bound
+    def bound(self, sel: NDArray[np.int64] | None = None, mode: str = "clamp") -> Sampler:
+        """The :class:`Sampler` of joints ``sel`` (all by default) in ``mode`` (made once)."""
+        if sel is None and mode == "clamp":
+            if self._bound is None:
+                self._bound = Sampler(self, None, "clamp")
+            return self._bound
+        key = (mode, None if sel is None else sel.tobytes())
+        sampler = self._samplers.get(key)
+        if sampler is None:
+            if len(self._samplers) > 32:
+                self._samplers.clear()
+            sampler = self._samplers[key] = Sampler(self, sel, mode)
+        return sampler
 
     def sample(self, times, joints=None, *, mode: str = "clamp"):
         """See :meth:`quatmotion.codec.archive.Archive.sample`."""
         if joints is None and type(times) is float and mode == "clamp" and math.isfinite(times):
             root, rot = self.bound().pose(times)  # the one-pose path
             return root.copy(), rot.copy()
-        sel = self._all if joints is None else self._joints(joints)
+        sel = None if joints is None else self._joints(joints)
         u, scalar = self._positions(times, mode)
-        P, cols, scale, sel = self._tables(sel)
-        root = np.empty((len(u), 3))
-        rot = np.empty((len(u), len(sel), 4))
-        sample_poses(
-            u, mode == "loop", self._segs, self._knots, P, cols, scale, self._corr, sel,
-            *self._rotation, root, rot,
-        )  # fmt: skip
+        root, rot = self.bound(sel, mode).poses_at(u)
         if scalar:
             return root[0], rot[0]
         return root, rot
@@ -218,18 +216,31 @@ class Sampler:
         kinds, starts, counts, dof_axes, pre, ref = clip._rotation
         corr = clip._corr
         segs, knots = clip._segs, clip._knots
-        J, k = len(kinds), len(sel)
-        head = np.zeros(PACK_HEAD, dtype=np.int64)
-        head[:9] = (len(segs), len(cols), len(P), J, corr.shape[0], corr.shape[1], k,
-                    len(knots), mode == "loop")  # fmt: skip
+        J, k, C = len(kinds), len(sel), clip._layout.n_channels
+        compiled = kernels()
+        head = np.zeros(compiled.PACK_HEAD, dtype=np.int64)
         ints = (head, segs, cols, sel, kinds, starts, counts, dof_axes)
-        floats = (np.array([clip.fps]), knots, P, scale, corr, pre, ref)
-        self._I = np.concatenate([np.ravel(a).astype(np.int64) for a in ints])
-        at = sum(np.size(a) for a in floats)
-        self._F = np.concatenate([np.ravel(a).astype(np.float64) for a in floats] +
-                                 [np.zeros(3 + 4 * k + 1)])  # fmt: skip
-        self._root = self._F[at : at + 3]
-        self._rot = self._F[at + 3 : at + 3 + 4 * k].reshape(k, 4)
+        n_ints = sum(np.size(a) for a in ints)
+        head[:10] = (len(segs), len(cols), len(P), J, corr.shape[0], C, k, len(knots),
+                     mode == "loop", n_ints)  # fmt: skip
+        floats = (
+            np.array([clip.fps]),
+            knots,
+            P,
+            scale,
+            corr,
+            pre,
+            ref,
+            np.zeros(2 * C + 9 * J + 3 + 4 * k),
+        )
+        self._B = np.empty(n_ints + sum(np.size(a) for a in floats))
+        self._B[:n_ints].view(np.int64)[:] = np.concatenate([np.ravel(a) for a in ints])
+        self._B[n_ints:] = np.concatenate([np.ravel(a) for a in floats])
+        out = len(self._B) - 3 - 4 * k
+        self._root = self._B[out : out + 3]
+        self._rot = self._B[out + 3 :].reshape(k, 4)
+        self._pose = compiled.pose
+        self._poses = compiled.poses
         self._clip = clip
         self.joints = sel
         self.fps = clip.fps
@@ -245,10 +256,8 @@ class Sampler:
         ValueError
             A time that is not a finite number.
         """
-        t = float(t)
-        if not math.isfinite(t):
+        if not self._pose(float(t), self._B):
             raise ValueError("times: every time must be finite (seconds)")
-        pose_packed(t, self._I, self._F)
         return self._root, self._rot
 
     def poses(self, times) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -256,9 +265,13 @@ class Sampler:
         seconds (new arrays)."""
         u, _ = self._clip._positions(np.atleast_1d(np.asarray(times, dtype=np.float64)),
                                      self.mode)  # fmt: skip
+        return self.poses_at(u)
+
+    def poses_at(self, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`poses` at frame positions ``u`` already clamped or wrapped."""
         root = np.empty((len(u), 3))
         rot = np.empty((len(u), len(self.joints), 4))
-        poses_packed(u, self._I, self._F, root, rot)
+        self._poses(u, self._B, root, rot)
         return root, rot
 
 

@@ -103,6 +103,18 @@ class SegmentTables:
     knot_start: NDArray[np.int64]
     n_rows: int
 
+    def packed(self) -> NDArray[np.int64]:
+        """The table side by side, ``(S, 6)``: each segment's first frame, frames, first row,
+        whether it is a spline, and its knots' span (the runtime's ``segs``)."""
+        segs = np.empty((len(self.first), 6), dtype=np.int64)
+        segs[:, 0] = self.first
+        segs[:, 1] = self.length
+        segs[:, 2] = self.rows
+        segs[:, 3] = self.spline
+        segs[:, 4] = self.knot_start[:-1]
+        segs[:, 5] = self.knot_start[1:]
+        return segs
+
 
 def segment_tables(
     n_frames: int, breaks, spacing: float, inserted: dict[int, tuple[int, ...]] | None = None

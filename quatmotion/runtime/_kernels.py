@@ -1,0 +1,613 @@
+"""Compiled loops of the decoding runtime: coefficient rows to rotations, whole clips and poses.
+
+Loaded on the first decode (:func:`quatmotion.runtime.kernels`: importing it loads Numba);
+kernels trust their input: the Python side (:class:`quatmotion.codec.sampling.Sampler`,
+:meth:`quatmotion.codec.archive.ArchiveReader.read_rotations`) validates and lays arrays out
+once.
+
+Conventions
+-----------
+* A clip's segments are a table ``segs`` ``(S, 6)``: first frame, frames, first coefficient
+  row, whether it is a spline, and the span of its clamped cubic knot vector in ``knots``
+  (:class:`quatmotion.codec.spline.SegmentTables` side by side). ``P`` ``(n, c)`` holds every
+  segment's coefficient rows of the ``c`` channels ``cols`` in weighted units; a channel is
+  ``P`` evaluated, divided by ``scale``.
+* The de Boor steps are those of :func:`quatmotion.codec.spline._evaluate_channels` (the
+  weights computed once per position and shared by every channel), so a position at a frame
+  gives that frame's decoded channels to the bit, whichever kernel evaluates it.
+* Rotations from channels (:func:`rotation_row`, :func:`_joint_block`): one arithmetic,
+  written once per kind, so a pose sampled at a frame time equals the whole clip's frame to
+  the bit, and vectorised loops (over frames) give the bits of the scalar ones (no fast-math:
+  no contraction, no reassociation).
+* Kinds: 0 fixed (identity), 1 Euler (one rotation about a pre-rotated axis per dof, composed
+  intrinsic or extrinsic; no sine-cosine pair for an absent dof), 2 rotation vector about the
+  reference, 3 the root (a heading about Y, then a rotation vector).
+* Whole clips are decoded in blocks of :data:`BLOCK` frames: channels evaluated row by row
+  (each row's weights shared by its channels), transposed, then each joint's rotations in one
+  loop over the block's frames.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from quatmotion.quat.jit import multiply
+
+__all__ = [
+    "BLOCK",
+    "clip_rotations",
+    "pose",
+    "poses",
+    "rotation_row",
+    "rotations_of_channels",
+    "sincos",
+]
+
+BLOCK = 64
+"""Frames (or poses) decoded together: a block's channels stay in the first-level cache."""
+
+
+@numba.njit(inline="always", cache=True)
+def sincos(x):  # pragma: no cover - compiled
+    """``(sin x, cos x)`` to within an ulp of libm's, about twice as fast: ``x`` reduced by
+    the nearest multiple of pi/2 (three-part Cody-Waite), then Taylor polynomials of degree
+    17 and 16 on ``[-pi/4, pi/4]`` (truncation below 1e-19)."""
+    k = np.floor(x * 0.6366197723675814 + 0.5)
+    r = ((x - k * 1.5707963267341256) - k * 6.077100506506192e-11) - k * 2.0222662487959506e-21
+    z = r * r
+    s = r + r * z * (
+        -1.6666666666666666e-01
+        + z
+        * (
+            8.3333333333333332e-03
+            + z
+            * (
+                -1.9841269841269841e-04
+                + z
+                * (
+                    2.7557319223985893e-06
+                    + z
+                    * (
+                        -2.5052108385441720e-08
+                        + z
+                        * (
+                            1.6059043836821613e-10
+                            + z * (-7.6471637318198164e-13 + z * 2.8114572543455206e-15)
+                        )
+                    )
+                )
+            )
+        )
+    )
+    c = 1.0 + z * (
+        -0.5
+        + z
+        * (
+            4.1666666666666664e-02
+            + z
+            * (
+                -1.3888888888888889e-03
+                + z
+                * (
+                    2.4801587301587302e-05
+                    + z
+                    * (
+                        -2.7557319223985888e-07
+                        + z
+                        * (
+                            2.0876756987868100e-09
+                            + z * (-1.1470745597729725e-11 + z * 4.7794773323873853e-14)
+                        )
+                    )
+                )
+            )
+        )
+    )
+    # the quadrant by exact products, not selects: a select of two floats is a branch in
+    # scalar x86 code, mispredicted half the time on a pose's angles (the same values:
+    # (s, c), (c, -s), (-s, -c), (-c, s) for quadrants 0..3; x 1.0 and + 0.0 are exact)
+    q = np.int64(k) & 3
+    odd = float(q & 1)
+    even = 1.0 - odd
+    sin = (s * even + c * odd) * (1.0 - float(q & 2))
+    cos = (c * even + s * odd) * (1.0 - float((q + 1) & 2))
+    return sin, cos
+
+
+@numba.njit(inline="always", cache=True)
+def _rotvec(r0, r1, r2, r3, v0, v1, v2):  # pragma: no cover - compiled
+    """``ref exp(v / 2)``: the rotation vector ``v`` (radians) about the reference."""
+    vx, vy, vz = 0.5 * v0, 0.5 * v1, 0.5 * v2
+    ang = np.sqrt(vx * vx + vy * vy + vz * vz)
+    sn, ew = sincos(ang)
+    s = sn / ang if ang > 1e-12 else 1.0
+    return multiply(r0, r1, r2, r3, ew, vx * s, vy * s, vz * s)
+
+
+@numba.njit(inline="always", cache=True)
+def _heading(h, w, x, y, z):  # pragma: no cover - compiled
+    """``Y(h) q``: the heading ``h`` about the vertical, then ``q``."""
+    sh, ch = sincos(0.5 * h)
+    return multiply(ch, 0.0, sh, 0.0, w, x, y, z)
+
+
+@numba.njit(inline="always", cache=True)
+def _dof(j, ax, angle, intrinsic, w, x, y, z, pre):  # pragma: no cover - compiled
+    """``q`` composed with the rotation by ``angle`` about joint ``j``'s axis ``ax``
+    (``C e_ax``: :func:`quatmotion.codec.channels._kernel_tables`' ``pre``)."""
+    sh, ew = sincos(0.5 * angle)
+    ex, ey, ez = sh * pre[j, ax, 0], sh * pre[j, ax, 1], sh * pre[j, ax, 2]
+    if intrinsic:  # q <- q e
+        return multiply(w, x, y, z, ew, ex, ey, ez)
+    return multiply(ew, ex, ey, ez, w, x, y, z)  # extrinsic: q <- e q
+
+
+@numba.njit(inline="always", cache=True)
+def rotation_row(X, t, j, kinds, starts, counts, dof_axes, pre, ref):  # pragma: no cover
+    """Joint ``j``'s local rotation from row ``t`` of channels ``X``, a ``(w, x, y, z)``
+    tuple (the arithmetic of :func:`_joint_block`, one frame)."""
+    kind = kinds[j]
+    a = starts[j]
+    w, x, y, z = 1.0, 0.0, 0.0, 0.0
+    if kind == 2:
+        w, x, y, z = _rotvec(ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3],
+                             X[t, a], X[t, a + 1], X[t, a + 2])  # fmt: skip
+    elif kind == 3:
+        w, x, y, z = _rotvec(ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3],
+                             X[t, a + 1], X[t, a + 2], X[t, a + 3])  # fmt: skip
+        w, x, y, z = _heading(X[t, a], w, x, y, z)
+    elif kind == 1:
+        intrinsic = pre[j, 3, 0] > 0.5
+        for i in range(counts[j]):
+            w, x, y, z = _dof(j, dof_axes[j, i], X[t, a + i], intrinsic, w, x, y, z, pre)
+    return w, x, y, z
+
+
+@numba.njit(inline="always", cache=True)
+def _joint_block(Xc, n, j, kinds, starts, counts, dof_axes, pre, ref, Q):  # pragma: no cover
+    """Joint ``j``'s rotations of the first ``n`` columns of channel-major ``Xc`` ``(C, B)``
+    into ``Q`` ``(4, B)``: the kind's branch once, then one loop over the columns (the
+    arithmetic of :func:`rotation_row`)."""
+    kind = kinds[j]
+    a = starts[j]
+    if kind == 2 or kind == 3:
+        b = a + 1 if kind == 3 else a
+        r0, r1, r2, r3 = ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3]
+        for t in range(n):
+            w, x, y, z = _rotvec(r0, r1, r2, r3, Xc[b, t], Xc[b + 1, t], Xc[b + 2, t])
+            Q[0, t] = w
+            Q[1, t] = x
+            Q[2, t] = y
+            Q[3, t] = z
+        if kind == 3:
+            for t in range(n):
+                w, x, y, z = _heading(Xc[a, t], Q[0, t], Q[1, t], Q[2, t], Q[3, t])
+                Q[0, t] = w
+                Q[1, t] = x
+                Q[2, t] = y
+                Q[3, t] = z
+        return
+    for t in range(n):
+        Q[0, t] = 1.0
+        Q[1, t] = 0.0
+        Q[2, t] = 0.0
+        Q[3, t] = 0.0
+    if kind == 1:
+        intrinsic = pre[j, 3, 0] > 0.5
+        for i in range(counts[j]):
+            ax = dof_axes[j, i]
+            for t in range(n):
+                w, x, y, z = _dof(j, ax, Xc[a + i, t], intrinsic,
+                                  Q[0, t], Q[1, t], Q[2, t], Q[3, t], pre)  # fmt: skip
+                Q[0, t] = w
+                Q[1, t] = x
+                Q[2, t] = y
+                Q[3, t] = z
+
+
+@numba.njit(inline="always", cache=True)
+def _pose_rotations(X, sel, kinds, starts, counts, dof_axes, pre, ref, A, SN, CS, rot):  # noqa: E501  # pragma: no cover
+    """The rotations of joints ``sel`` from one row of channels ``X`` ``(1, C)`` into ``rot``
+    ``(k, 4)``, the arithmetic of :func:`rotation_row` in three passes: every angle whose
+    sine and cosine a joint needs into ``A``, their sines and cosines in one loop (``SN``,
+    ``CS``: independent, so they overlap, where joint by joint each waits on the last),
+    then the products."""
+    n = 0
+    for jj in range(sel.shape[0]):
+        j = sel[jj]
+        kind = kinds[j]
+        a = starts[j]
+        if kind == 1:
+            for i in range(counts[j]):
+                A[n] = 0.5 * X[0, a + i]
+                n += 1
+        elif kind == 2 or kind == 3:
+            b = a + 1 if kind == 3 else a
+            vx, vy, vz = 0.5 * X[0, b], 0.5 * X[0, b + 1], 0.5 * X[0, b + 2]
+            A[n] = np.sqrt(vx * vx + vy * vy + vz * vz)
+            n += 1
+            if kind == 3:
+                A[n] = 0.5 * X[0, a]
+                n += 1
+    for i in range(n):
+        SN[i], CS[i] = sincos(A[i])
+    n = 0
+    for jj in range(sel.shape[0]):
+        j = sel[jj]
+        kind = kinds[j]
+        a = starts[j]
+        w, x, y, z = 1.0, 0.0, 0.0, 0.0
+        if kind == 1:
+            intrinsic = pre[j, 3, 0] > 0.5
+            for i in range(counts[j]):
+                ax = dof_axes[j, i]
+                sh, ew = SN[n], CS[n]
+                n += 1
+                ex, ey, ez = sh * pre[j, ax, 0], sh * pre[j, ax, 1], sh * pre[j, ax, 2]
+                if intrinsic:  # q <- q e
+                    w, x, y, z = multiply(w, x, y, z, ew, ex, ey, ez)
+                else:  # extrinsic: q <- e q
+                    w, x, y, z = multiply(ew, ex, ey, ez, w, x, y, z)
+        elif kind == 2 or kind == 3:
+            b = a + 1 if kind == 3 else a
+            vx, vy, vz = 0.5 * X[0, b], 0.5 * X[0, b + 1], 0.5 * X[0, b + 2]
+            ang = A[n]
+            sn, ew = SN[n], CS[n]
+            n += 1
+            s = sn / ang if ang > 1e-12 else 1.0
+            w, x, y, z = multiply(ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3], ew, vx * s, vy * s,
+                                  vz * s)  # fmt: skip
+            if kind == 3:
+                sh, ch = SN[n], CS[n]
+                n += 1
+                w, x, y, z = multiply(ch, 0.0, sh, 0.0, w, x, y, z)
+        rot[jj, 0] = w
+        rot[jj, 1] = x
+        rot[jj, 2] = y
+        rot[jj, 3] = z
+
+
+@numba.njit(cache=True)
+def rotations_of_channels(X, kinds, starts, counts, dof_axes, pre, ref):  # pragma: no cover
+    """Local rotations ``(T, J, 4)`` of channels ``X`` ``(T, C)``, block by block."""
+    T = X.shape[0]
+    J = kinds.shape[0]
+    C = X.shape[1]
+    out = np.empty((T, J, 4))
+    Xc = np.empty((C, BLOCK))
+    Q = np.empty((4, BLOCK))
+    for f0 in range(0, T, BLOCK):
+        n = min(BLOCK, T - f0)
+        for t in range(n):
+            for c in range(C):
+                Xc[c, t] = X[f0 + t, c]
+        for j in range(J):
+            _joint_block(Xc, n, j, kinds, starts, counts, dof_axes, pre, ref, Q)
+            for t in range(n):
+                out[f0 + t, j, 0] = Q[0, t]
+                out[f0 + t, j, 1] = Q[1, t]
+                out[f0 + t, j, 2] = Q[2, t]
+                out[f0 + t, j, 3] = Q[3, t]
+    return out
+
+
+@numba.njit(inline="always", cache=True)
+def _segment_of(segs, i):  # pragma: no cover - compiled
+    """The segment holding frame ``i``: the last ``s`` with ``segs[s, 0] <= i``."""
+    lo, hi = 0, segs.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if segs[mid, 0] <= i:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+@numba.njit(inline="always", cache=True)
+def _alpha(knots, i, width, x):  # pragma: no cover - compiled
+    den = knots[i + width] - knots[i]
+    return (x - knots[i]) / den if den > 0.0 else 0.0
+
+
+@numba.njit(inline="always", cache=True)
+def _interval(knots, t0, n, xv):  # pragma: no cover - compiled
+    """The last ``i`` in ``[3, n - 1]`` with ``t[i] <= xv``, as _evaluate_channels walks to it."""
+    lo = 3
+    hi = n - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if xv >= knots[t0 + mid]:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+@numba.njit(inline="always", cache=True)
+def _weights(x, s, segs, knots):  # pragma: no cover - compiled
+    """The first coefficient row and the six de Boor weights (the loop (r, q) = (1, 3),
+    (1, 2), (1, 1), (2, 3), (2, 2), (3, 3) of :func:`quatmotion.codec.spline.
+    _evaluate_channels`, as scalars) at frame position ``x`` of spline segment ``s``."""
+    t0 = segs[s, 4]
+    xv = x - segs[s, 0]
+    iv = t0 + _interval(knots, t0, segs[s, 5] - t0 - 4, xv)
+    return (
+        segs[s, 2] + iv - t0 - 3,
+        _alpha(knots, iv, 3, xv),
+        _alpha(knots, iv - 1, 3, xv),
+        _alpha(knots, iv - 2, 3, xv),
+        _alpha(knots, iv, 2, xv),
+        _alpha(knots, iv - 1, 2, xv),
+        _alpha(knots, iv, 1, xv),
+    )
+
+
+@numba.njit(inline="always", cache=True)
+def _deboor(P, b, c, a0, a1, a2, a3, a4, a5):  # pragma: no cover - compiled
+    """Column ``c`` of the cubic spline with rows ``P[b : b + 4]`` and weights ``a0 .. a5``."""
+    d0, d1, d2, d3 = P[b, c], P[b + 1, c], P[b + 2, c], P[b + 3, c]
+    d3 = (1.0 - a0) * d2 + a0 * d3
+    d2 = (1.0 - a1) * d1 + a1 * d2
+    d1 = (1.0 - a2) * d0 + a2 * d1
+    d3 = (1.0 - a3) * d2 + a3 * d3
+    d2 = (1.0 - a4) * d1 + a4 * d2
+    return (1.0 - a5) * d2 + a5 * d3
+
+
+@numba.njit(inline="always", cache=True)
+def _spline_row(x, s, segs, knots, P, scale, m, X, t):  # pragma: no cover - compiled
+    """The first ``m`` columns of ``P`` at frame position ``x`` of spline segment ``s``,
+    divided by ``scale``, into ``X[t, :m]``."""
+    b, a0, a1, a2, a3, a4, a5 = _weights(x, s, segs, knots)
+    for c in range(m):
+        X[t, c] = _deboor(P, b, c, a0, a1, a2, a3, a4, a5) / scale[c]
+
+
+@numba.njit(cache=True)
+def clip_rotations(segs, knots, P, scale, m, fix_frames, fix_channels, fix_values, kinds,
+                   starts, counts, dof_axes, pre, ref, root, rot):  # pragma: no cover  # fmt: skip
+    """A whole clip from its coefficient rows to root translation ``root`` ``(T, 3)`` and
+    local rotations ``rot`` ``(T, J, 4)``, in one call: whether every channel is finite.
+
+    ``P``'s first ``m`` columns are channels ``0 .. m - 1`` (the root's translation and every
+    rotation channel: the columns the rotations read); ``fix_*`` the clip's corrections in
+    frame order (frame, channel, value added), as :meth:`quatmotion.codec.repair.Corrections.apply`
+    adds them.
+    """
+    T = root.shape[0]
+    J = kinds.shape[0]
+    Xr = np.empty((BLOCK, m))
+    Xc = np.empty((m, BLOCK))
+    Q = np.empty((4, BLOCK))
+    finite = True
+    s = 0
+    k = 0
+    nfix = fix_frames.shape[0]
+    for f0 in range(0, T, BLOCK):
+        n = min(BLOCK, T - f0)
+        for t in range(n):
+            f = f0 + t
+            while segs[s, 0] + segs[s, 1] <= f:
+                s += 1
+            if segs[s, 3] != 0:
+                _spline_row(float(f), s, segs, knots, P, scale, m, Xr, t)
+            else:
+                r = segs[s, 2] + f - segs[s, 0]
+                for c in range(m):
+                    Xr[t, c] = P[r, c] / scale[c]
+            while k < nfix and fix_frames[k] == f:
+                if fix_channels[k] < m:
+                    Xr[t, fix_channels[k]] += fix_values[k]
+                k += 1
+        for t in range(n):
+            for c in range(m):
+                v = Xr[t, c]
+                finite &= v - v == 0.0
+                Xc[c, t] = v
+        for t in range(n):
+            root[f0 + t, 0] = Xr[t, 0]
+            root[f0 + t, 1] = Xr[t, 1]
+            root[f0 + t, 2] = Xr[t, 2]
+        for j in range(J):
+            _joint_block(Xc, n, j, kinds, starts, counts, dof_axes, pre, ref, Q)
+            for t in range(n):
+                rot[f0 + t, j, 0] = Q[0, t]
+                rot[f0 + t, j, 1] = Q[1, t]
+                rot[f0 + t, j, 2] = Q[2, t]
+                rot[f0 + t, j, 3] = Q[3, t]
+    return finite
+
+
+PACK_HEAD = 16
+"""Integers before the tables in a packed clip (:func:`_unpack`)."""
+
+
+@numba.njit(inline="always", cache=True)
+def _unpack(B):  # pragma: no cover - compiled
+    """The tables of a packed clip, views of one float64 buffer ``B`` whose first ``I[9]``
+    slots are int64 ``I``: a head (segments ``S``, channels ``c``, rows ``n``, joints ``J``,
+    correction rows, layout channels ``C``, selected joints ``k``, knots, loop flag, ``I``'s
+    length), then ``segs``, ``cols``, ``sel``, ``kinds``, ``starts``, ``counts``,
+    ``dof_axes``; the floats after ``I``: ``fps``, ``knots``, ``P``, ``scale``, ``corr``,
+    ``pre``, ``ref``, two scratch rows ``X`` and ``Y`` ``(C,)``, scratch angles, sines and
+    cosines ``(3 J,)`` each, then one pose's output (``root`` (3,), ``rot`` (k, 4))."""
+    I = B[:PACK_HEAD].view(np.int64)
+    S, c, n, J, nc, C, k, nk, ni = I[0], I[1], I[2], I[3], I[4], I[5], I[6], I[7], I[9]
+    I = B[:ni].view(np.int64)
+    o = PACK_HEAD
+    segs = I[o : o + 6 * S].reshape((S, 6))
+    o += 6 * S
+    cols = I[o : o + c]
+    o += c
+    sel = I[o : o + k]
+    o += k
+    kinds = I[o : o + J]
+    o += J
+    starts = I[o : o + J]
+    o += J
+    counts = I[o : o + J]
+    o += J
+    dof_axes = I[o : o + 3 * J].reshape((J, 3))
+    f = ni + 1
+    knots = B[f : f + nk]
+    f += nk
+    P = B[f : f + n * c].reshape((n, c))
+    f += n * c
+    scale = B[f : f + c]
+    f += c
+    corr = B[f : f + nc * C].reshape((nc, C))
+    f += nc * C
+    pre = B[f : f + 12 * J].reshape((J, 4, 3))
+    f += 12 * J
+    ref = B[f : f + 4 * J].reshape((J, 4))
+    f += 4 * J
+    X = B[f : f + C].reshape((1, C))
+    f += C
+    Y = B[f : f + C].reshape((1, C))
+    f += C
+    A = B[f : f + 9 * J]
+    f += 9 * J
+    root = B[f : f + 3]
+    f += 3
+    rot = B[f : f + 4 * k].reshape((k, 4))
+    return segs, cols, sel, kinds, starts, counts, dof_axes, B[ni], knots, P, scale, corr, \
+        pre, ref, X, Y, A, root, rot  # fmt: skip
+
+
+@numba.njit(inline="always", cache=True)
+def _frame(i, segs, knots, P, cols, scale, corr, X):  # pragma: no cover - compiled
+    """The decoded channels ``cols`` of frame ``i`` (corrections added) into ``X[0]``."""
+    s = _segment_of(segs, i)
+    if segs[s, 3] != 0:
+        b, a0, a1, a2, a3, a4, a5 = _weights(float(i), s, segs, knots)
+        for c in range(cols.shape[0]):
+            X[0, cols[c]] = _deboor(P, b, c, a0, a1, a2, a3, a4, a5) / scale[c]
+    else:
+        r = segs[s, 2] + i - segs[s, 0]
+        for c in range(cols.shape[0]):
+            X[0, cols[c]] = P[r, c] / scale[c]
+    if corr.shape[0] > 0:
+        for c in range(cols.shape[0]):
+            X[0, cols[c]] += corr[i, cols[c]]
+
+
+@numba.njit(inline="always", cache=True)
+def _spline_at(x, segs, knots, P, cols, scale, corr, X, t):  # pragma: no cover - compiled
+    """The channels ``cols`` at frame position ``x`` into column ``t`` of channel-major ``X``
+    ``(C, B)`` where a spline spans ``x`` (corrections lerped between frames): whether one
+    does."""
+    T = segs[segs.shape[0] - 1, 0] + segs[segs.shape[0] - 1, 1]
+    i0 = min(int(np.floor(x)), T - 1)
+    s = _segment_of(segs, i0)
+    if segs[s, 3] == 0 or x > segs[s, 0] + segs[s, 1] - 1:
+        return False
+    b, a0, a1, a2, a3, a4, a5 = _weights(x, s, segs, knots)
+    for c in range(cols.shape[0]):
+        X[cols[c], t] = _deboor(P, b, c, a0, a1, a2, a3, a4, a5) / scale[c]
+    if corr.shape[0] > 0:
+        f = x - i0
+        i1 = min(i0 + 1, T - 1)
+        for c in range(cols.shape[0]):
+            ch = cols[c]
+            X[ch, t] += (1.0 - f) * corr[i0, ch] + f * corr[i1, ch]
+    return True
+
+
+@numba.njit(inline="always", cache=True)
+def _between_frames(x, loop, segs, knots, P, cols, scale, corr, sel, kinds, starts, counts,
+                    dof_axes, pre, ref, X, Y, root, rot, k):  # pragma: no cover  # fmt: skip
+    """Where no spline spans ``x``: the lerp of the two neighbouring decoded frames' root
+    translations and the nlerp (shorter arc) of their rotations, into ``root[k]``, ``rot[k]``
+    (at a frame, that frame's rotations unchanged)."""
+    T = segs[segs.shape[0] - 1, 0] + segs[segs.shape[0] - 1, 1]
+    i0 = min(int(np.floor(x)), T - 1)
+    f = x - i0
+    b = (i0 + 1) % T if loop else min(i0 + 1, T - 1)
+    _frame(i0, segs, knots, P, cols, scale, corr, X)
+    _frame(b, segs, knots, P, cols, scale, corr, Y)
+    for c in range(3):
+        root[k, c] = (1.0 - f) * X[0, c] + f * Y[0, c]
+    for jj in range(sel.shape[0]):
+        q = sel[jj]
+        aw, ax, ay, az = rotation_row(X, 0, q, kinds, starts, counts, dof_axes, pre, ref)
+        if f == 0.0:  # at a frame: that frame's rotation, as the whole clip decodes it
+            rot[k, jj, 0] = aw
+            rot[k, jj, 1] = ax
+            rot[k, jj, 2] = ay
+            rot[k, jj, 3] = az
+            continue
+        bw, bx, by, bz = rotation_row(Y, 0, q, kinds, starts, counts, dof_axes, pre, ref)
+        g = 1.0 - f
+        h = -f if aw * bw + ax * bx + ay * by + az * bz < 0.0 else f  # the shorter arc
+        vw, vx, vy, vz = g * aw + h * bw, g * ax + h * bx, g * ay + h * by, g * az + h * bz
+        norm = np.sqrt(vw * vw + vx * vx + vy * vy + vz * vz)
+        rot[k, jj, 0] = vw / norm
+        rot[k, jj, 1] = vx / norm
+        rot[k, jj, 2] = vy / norm
+        rot[k, jj, 3] = vz / norm
+
+
+@numba.njit(cache=True)
+def pose(t, B):  # pragma: no cover - compiled
+    """One pose of a packed clip (:func:`_unpack`) at ``t`` seconds into its output slots:
+    clamped to the clip, or wrapped with period ``T / fps`` if its loop flag is set. Returns
+    False for a time that is not finite (nothing written)."""
+    segs, cols, sel, kinds, starts, counts, dof_axes, fps, knots, P, scale, corr, pre, ref, \
+        X, Y, A, root, rot = _unpack(B)  # fmt: skip
+    x = t * fps
+    if not np.isfinite(x):
+        return False
+    S = segs.shape[0]
+    T = segs[S - 1, 0] + segs[S - 1, 1]
+    loop = B[:PACK_HEAD].view(np.int64)[8] != 0
+    x = x % T if loop else min(max(x, 0.0), T - 1.0)
+    Xc = X.reshape((X.shape[1], 1))
+    if _spline_at(x, segs, knots, P, cols, scale, corr, Xc, 0):
+        root[0] = X[0, 0]
+        root[1] = X[0, 1]
+        root[2] = X[0, 2]
+        J = kinds.shape[0]
+        _pose_rotations(X, sel, kinds, starts, counts, dof_axes, pre, ref, A[: 3 * J],
+                        A[3 * J : 6 * J], A[6 * J :], rot)  # fmt: skip
+    else:
+        _between_frames(x, loop, segs, knots, P, cols, scale, corr, sel, kinds, starts, counts,
+                        dof_axes, pre, ref, X, Y, root.reshape((1, 3)),
+                        rot.reshape((1, rot.shape[0], 4)), 0)  # fmt: skip
+    return True
+
+
+@numba.njit(cache=True)
+def poses(u, B, out_root, out_rot):  # pragma: no cover - compiled
+    """Poses of a packed clip at frame positions ``u`` (already clamped or wrapped) into
+    ``out_root`` ``(n, 3)`` and ``out_rot`` ``(n, k, 4)``, a block of poses at a time: each
+    pose's channels, then each joint's rotations in one loop over the block."""
+    segs, cols, sel, kinds, starts, counts, dof_axes, fps, knots, P, scale, corr, pre, ref, \
+        X, Y, _, _, _ = _unpack(B)  # fmt: skip
+    loop = B[:PACK_HEAD].view(np.int64)[8] != 0
+    C = X.shape[1]
+    Xc = np.zeros((C, BLOCK))
+    Q = np.empty((4, BLOCK))
+    spline = np.empty(BLOCK, dtype=np.bool_)
+    for p0 in range(0, u.shape[0], BLOCK):
+        n = min(BLOCK, u.shape[0] - p0)
+        for t in range(n):
+            x = u[p0 + t]
+            spline[t] = _spline_at(x, segs, knots, P, cols, scale, corr, Xc, t)
+            if spline[t]:
+                out_root[p0 + t, 0] = Xc[0, t]
+                out_root[p0 + t, 1] = Xc[1, t]
+                out_root[p0 + t, 2] = Xc[2, t]
+            else:
+                _between_frames(x, loop, segs, knots, P, cols, scale, corr, sel, kinds, starts,
+                                counts, dof_axes, pre, ref, X, Y, out_root, out_rot,
+                                p0 + t)  # fmt: skip
+        for jj in range(sel.shape[0]):
+            _joint_block(Xc, n, sel[jj], kinds, starts, counts, dof_axes, pre, ref, Q)
+            for t in range(n):
+                if spline[t]:
+                    out_rot[p0 + t, jj, 0] = Q[0, t]
+                    out_rot[p0 + t, jj, 1] = Q[1, t]
+                    out_rot[p0 + t, jj, 2] = Q[2, t]
+                    out_rot[p0 + t, jj, 3] = Q[3, t]
