@@ -109,7 +109,7 @@ def test_a_buffer_file_is_read_no_further_than_its_byte_length(tmp_path, documen
     payload = _payload(document)
     (tmp_path / "clip.bin").write_bytes(payload + b"\0" * (1 << 20))
     read = []
-    real_read = io.gltf.os.fdopen
+    real_read = io.gltf.document.os.fdopen
 
     def spy(*args, **kwargs):
         file = real_read(*args, **kwargs)
@@ -117,7 +117,7 @@ def test_a_buffer_file_is_read_no_further_than_its_byte_length(tmp_path, documen
         file.read = lambda n=-1: read.append(n) or original(n)
         return file
 
-    monkeypatch.setattr(io.gltf.os, "fdopen", spy)
+    monkeypatch.setattr(io.gltf.document.os, "fdopen", spy)
     read_gltf(_write(tmp_path, _with_uri(document, "clip.bin")))
     assert read == [len(payload)]
     huge = _with_uri(document, "clip.bin")

@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 
 from quatmotion import limits, quat
 from quatmotion.errors import FormatError, FormatWarning, MissingDependencyError
-from quatmotion.io.gltf import _unique
+from quatmotion.io.gltf.read import unique_names
 from quatmotion.io.units import length_unit
 from quatmotion.motion import Motion, Skeleton
 
@@ -550,7 +550,7 @@ def _build(
     keep, sites = np.flatnonzero(~is_site), np.flatnonzero(is_site)
     renumber = -np.ones(J, dtype=np.int64)
     renumber[keep] = np.arange(len(keep))
-    kept_names = _unique([names[j] for j in keep])
+    kept_names = unique_names([names[j] for j in keep])
     try:
         skeleton = Skeleton(
             joint_names=tuple(kept_names),
@@ -561,7 +561,7 @@ def _build(
                 for j in keep
             ),
             euler="intrinsic",
-            site_names=tuple(_unique([names[s] for s in sites], taken=set(kept_names))),
+            site_names=tuple(unique_names([names[s] for s in sites], taken=set(kept_names))),
             site_parents=renumber[jp[sites]],
             site_offsets=offsets[sites],
             name=name,
