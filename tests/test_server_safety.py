@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import json
 import random
+import re
+import socket
 import struct
 import threading
 import time
+import tracemalloc
 
 import pytest
 from fastapi.testclient import TestClient
@@ -18,6 +21,7 @@ from quatmotion.io import write_asf, write_motion
 from quatmotion.server import CSRF_HEADER, UploadGate, create_app
 from quatmotion.server import uploads as uploads_module
 from quatmotion.synthetic import generate_clip
+from quatmotion.viz import frame_data
 
 BASE = "http://127.0.0.1"
 GUARD = {CSRF_HEADER: "1"}
@@ -193,22 +197,78 @@ def test_a_readers_unexpected_failure_is_still_a_400_naming_the_file(client, mon
 
 
 # ------------------------------------------------------------------------------ budget
+@pytest.mark.parametrize("suffix", [".bvh", ".amc", ".glb", ".gltf"])
+def test_an_upload_at_the_budget_is_parsed_and_one_byte_over_is_413(
+    motion_library, samples, suffix
+):
+    data = samples[suffix]
+    asf = samples[".asf"] if suffix == ".amc" else None
+    cost = UploadGate.cost(f"walk{suffix}", data)
+    cost += UploadGate.cost("walk.asf", asf) if asf is not None else 0
+    for budget, status in ((cost, 200), (cost - 1, 413)):
+        app = create_app(
+            motion_library["library"], motion_library["index"], uploads=UploadGate(1, budget)
+        )
+        with TestClient(app, base_url=BASE) as small:
+            response = _post(small, f"walk{suffix}", data, asf)
+            assert response.status_code == status, response.text
+            if status == 413:
+                detail = response.json()["detail"]
+                assert detail.startswith(f"walk{suffix} would need about") and "budget" in detail
+                assert "--upload-memory" in detail and "\n" not in detail
+            assert app.state.uploads.in_use == 0
+
+
+def _dense(data: bytes, suffix: str) -> bytes:
+    """The file with every number of its motion written ``0``: the most values per byte."""
+    if suffix == ".bvh":
+        head, _, motion = data.partition(b"MOTION")
+        lines = motion.split(b"\n")
+        zeroed = [re.sub(rb"\S+", b"0", line) for line in lines[3:]]
+        return head + b"MOTION" + b"\n".join(lines[:3] + zeroed)
+    number = rb"(?<=\s)[-+0-9.eE]+"
+    return b"\n".join(
+        re.sub(number, b"0", line) if line[:1].isalpha() else line for line in data.split(b"\n")
+    )
+
+
+@pytest.mark.parametrize("kind", [".bvh", ".amc", ".glb", ".gltf", "dense .bvh", "dense .amc"])
+def test_the_estimate_covers_what_parsing_an_upload_allocates(tmp_path, kind):
+    # tracemalloc sees NumPy's arrays too; the server's peak RSS is measured by
+    # tools/measure-upload-memory.py (docs/performance.md), the margin here is the same.
+    suffix = kind.split()[-1]
+    clip = generate_clip("walk", 5, n_frames=600)
+    write_motion(clip, tmp_path / f"walk{suffix}")
+    write_asf(clip.skeleton, tmp_path / "walk.asf")
+    data = (tmp_path / f"walk{suffix}").read_bytes()
+    data = _dense(data, suffix) if kind.startswith("dense") else data
+    asf = (tmp_path / "walk.asf").read_bytes() if suffix == ".amc" else None
+    estimate = UploadGate.cost(f"w{suffix}", data) + (UploadGate.cost("w.asf", asf) if asf else 0)
+    uploads_module.parse_upload(data, f"w{suffix}", asf, "w.asf")  # imports and caches first
+    tracemalloc.start()
+    try:
+        motion = uploads_module.parse_upload(data, f"w{suffix}", asf, "w.asf")
+        payload = frame_data.encode_clip(motion)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert motion.n_frames == 600 and payload
+    assert estimate >= 1.3 * peak, (estimate, peak, len(data))
+    if kind.startswith("dense"):  # the values, not the bytes, make a dense file costly
+        assert estimate > 2 * UploadGate.cost(f"w{suffix}", data[: len(data) // 2])
+
+
 def test_an_upload_over_the_memory_budget_is_413_before_its_body_is_read(motion_library):
-    data = (motion_library["clips"] / "walk_1.bvh").read_bytes()
-    budget = 30 * len(data)  # under the estimated cost of parsing it
+    data = (motion_library["clips"] / "walk_1.bvh").read_bytes() * 40  # some 2 MB
+    budget = UploadGate.least_cost(len(data) // 2)
     app = create_app(
         motion_library["library"], motion_library["index"], uploads=UploadGate(1, budget)
     )
     with TestClient(app, base_url=BASE, headers=GUARD) as small:
-        refused = small.post("/api/search/upload", files={"file": ("walk.bvh", data)})
-        assert refused.status_code == 413
-        assert (
-            "budget" in refused.json()["detail"] and "--upload-memory" in refused.json()["detail"]
-        )
-        half = data[: len(data) // 3]  # fits: parsed (and refused by the parser, truncated)
-        assert (
-            small.post("/api/search/upload", files={"file": ("walk.bvh", half)}).status_code == 400
-        )
+        refused = small.post("/api/search/upload", files={"file": ("w.bvh", data)})
+        assert refused.status_code == 413, refused.text
+        # refused on its declared length (the message names no file: none was read yet)
+        assert refused.json()["detail"].startswith("an upload of this size would need about")
         assert app.state.uploads.in_use == 0
 
 
@@ -246,6 +306,54 @@ def test_uploads_are_one_at_a_time_per_client_and_a_few_at_once(app, walk_bvh, m
         thread.join(60)
         app.state.uploads = UploadGate()
     assert outcome["first"] == 200
+
+
+def test_a_client_sending_its_upload_slowly_is_not_dropped(motion_library, walk_bvh):
+    # A real server (uvicorn, as quatmotion serve runs it): the body trickles in over 8 s,
+    # longer than uvicorn's keep-alive timeout (5 s); the upload is still answered.
+    import uvicorn
+
+    from quatmotion.server import listen
+
+    app = create_app(motion_library["library"], motion_library["index"])
+    sock = listen.bind("127.0.0.1", 0)
+    port = sock.getsockname()[1]
+    server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    thread.start()
+    try:
+        deadline = time.monotonic() + 60
+        while not server.started and time.monotonic() < deadline:
+            time.sleep(0.05)
+        boundary = "sl0w"
+        body = (
+            (
+                f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="w.bvh"'
+                "\r\n\r\n"
+            ).encode()
+            + walk_bvh
+            + f"\r\n--{boundary}--\r\n".encode()
+        )
+        head = (
+            f"POST /api/search/upload HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+            f"{CSRF_HEADER}: 1\r\nConnection: close\r\nContent-Length: {len(body)}\r\n"
+            f"Content-Type: multipart/form-data; boundary={boundary}\r\n\r\n"
+        ).encode()
+        with socket.create_connection(("127.0.0.1", port), timeout=120) as connection:
+            connection.sendall(head)
+            step = -(-len(body) // 4)
+            for i in range(0, len(body), step):
+                time.sleep(2)
+                connection.sendall(body[i : i + step])
+            answer = b""
+            while chunk := connection.recv(65536):
+                answer += chunk
+        status, _, rest = answer.partition(b"\r\n")
+        assert status == b"HTTP/1.1 200 OK", answer[:300]
+        assert json.loads(rest.partition(b"\r\n\r\n")[2])["query"] == "w"
+    finally:
+        server.should_exit = True
+        thread.join(30)
 
 
 def test_the_budget_holds_parses_whose_sum_is_over_it_in_turn():

@@ -1,10 +1,13 @@
 """Peak RSS (VmHWM) of ``quatmotion serve --index INDEX`` while N clients (127.0.0.2, .3...)
-upload one motion file at once; each client's status and time.
+upload one motion file at once; each client's status and time, and the peak's growth over
+the RSS before the uploads per byte uploaded (what ``server.uploads.PARSE_COST`` estimates).
 
-    python tools/measure-upload-memory.py PYTHONPATH|- INDEX FILE N
+    python tools/measure-upload-memory.py PYTHONPATH|- INDEX FILE N [ASF]
 
+FILE is uploaded under its own name (its suffix chooses the reader); ASF beside an .amc.
 PYTHONPATH: the root of another checkout, to measure its code with this Python (``-``: this
-one). Linux only (reads /proc).
+one). ``tools/make-upload-samples.py`` writes large files of every kind. Linux only (reads
+/proc; the peak is reset before the uploads through ``/proc/PID/clear_refs``).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ def _status(pid: int, field: str) -> float:
 
 def main() -> None:
     pythonpath, index, upload, clients = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
+    asf = Path(sys.argv[5]) if len(sys.argv) > 5 else None
     env = dict(os.environ)
     if pythonpath != "-":
         env["PYTHONPATH"] = pythonpath
@@ -49,11 +53,19 @@ def main() -> None:
     time.sleep(2)
     data = Path(upload).read_bytes()
     boundary = uuid.uuid4().hex
-    head = (
-        f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="upload.bvh"\r\n'
-        "Content-Type: application/octet-stream\r\n\r\n"
+    parts = [("file", Path(upload).name, data)]
+    if asf is not None:
+        parts.append(("asf", asf.name, asf.read_bytes()))
+    body = b"".join(
+        f'--{boundary}\r\nContent-Disposition: form-data; name="{field}"; filename="{name}"\r\n'
+        "Content-Type: application/octet-stream\r\n\r\n".encode()
+        + content
+        + b"\r\n"
+        for field, name, content in parts
     )
-    body = head.encode() + data + f"\r\n--{boundary}--\r\n".encode()
+    body += f"--{boundary}--\r\n".encode()
+    uploaded = sum(len(content) for _, _, content in parts)
+    Path(f"/proc/{server.pid}/clear_refs").write_text("5")  # VmHWM from here on
     before = _status(server.pid, "VmRSS")
     results: list[tuple[int, int, float, bytes]] = []
 
@@ -78,8 +90,9 @@ def main() -> None:
         thread.join()
     peak = _status(server.pid, "VmHWM")
     print(
-        f"{clients} concurrent uploads of {len(data) / 1e6:.1f} MB: server RSS before "
-        f"{before:.0f} MiB, peak {peak:.0f} MiB"
+        f"{clients} concurrent uploads of {uploaded / 1e6:.1f} MB: server RSS before "
+        f"{before:.0f} MiB, peak {peak:.0f} MiB, {(peak - before) * 2**20 / uploaded:.1f} "
+        "bytes per byte uploaded"
     )
     for k, status, seconds, text in sorted(results):
         print(f"  client {k}: {status} in {seconds:.1f} s {text if status != 200 else ''}")

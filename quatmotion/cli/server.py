@@ -71,8 +71,8 @@ MaxUploadOption = Annotated[
 UploadMemoryOption = Annotated[
     str,
     typer.Option(
-        help="Memory the parsing of uploads may use at once (an upload costs some 40 times "
-        "its size); a larger upload is refused (413), others wait their turn."
+        help="Memory the parsing of uploads may use at once (an upload costs some 12 to 47 "
+        "times its size, by kind); a larger upload is refused (413), others wait their turn."
     ),
 ]
 

@@ -4,9 +4,13 @@ the parsing itself (:func:`parse_upload`: whatever the file holds, a 4xx, never 
 Conventions
 -----------
 * An upload is a file parsed in memory (``POST /api/search/upload``). Parsing a motion file
-  costs many times its size (the text split into numbers, the arrays made from them): the
-  cost is estimated before parsing as :data:`PARSE_COST` bytes per byte of each file, by its
-  suffix (measured, with a margin: ``docs/performance.md``).
+  and searching with it costs many times its size (the text split into numbers, the arrays
+  made from them, the query's features, the viewer's payload): the cost is estimated before
+  parsing by :data:`PARSE_COST`, by the file's suffix: bytes per byte of the file and, for the
+  text formats, bytes per value it may hold (every separator may end a number: a file of
+  ``0 0 0`` costs four times more per byte than one of ``12.3456``). The factors are the peaks
+  measured on large files of each kind, dense and ordinary, times about 1.5 (1.49 to 1.64:
+  ``docs/performance.md``, ``tools/measure-upload-memory.py``).
 * Admission, before the body is read: one upload at a time per client (its address; 429
   otherwise) and at most ``slots`` at once overall (503 otherwise), each with
   ``Retry-After``. A client sending slowly keeps its slot as long as it sends: the server
@@ -26,6 +30,7 @@ import contextlib
 import logging
 import threading
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import PurePosixPath
 
 from starlette.exceptions import HTTPException
@@ -38,6 +43,7 @@ __all__ = [
     "DEFAULT_UPLOAD_MEMORY",
     "DEFAULT_UPLOAD_SLOTS",
     "PARSE_COST",
+    "ParseCost",
     "UploadGate",
     "parse_upload",
 ]
@@ -48,11 +54,39 @@ DEFAULT_UPLOAD_MEMORY = 2_000_000_000
 DEFAULT_UPLOAD_SLOTS = 4
 """Uploads taken at once, over every client."""
 
-PARSE_COST = {".bvh": 40, ".amc": 40, ".asf": 40, ".gltf": 40, ".glb": 20, ".fbx": 40}
-"""Estimated peak memory of parsing a file and searching with it, bytes per byte of the
-file, by suffix."""
+_SEPARATORS = (b" ", b"\t", b"\n", b"\r", b"\x0b", b"\x0c")  # what str.split() splits on
 
-_DEFAULT_COST = 40
+
+@dataclass(frozen=True)
+class ParseCost:
+    """Estimated peak memory of parsing a file of one kind and searching with it:
+    ``per_byte`` bytes per byte of the file, plus ``per_value`` bytes per value it may hold
+    (a text format's separators, each of which may end a number)."""
+
+    per_byte: int
+    per_value: int = 0
+
+    def of(self, data: bytes) -> int:
+        """Bytes, for the file ``data``."""
+        values = sum(data.count(s) for s in _SEPARATORS) + 1 if self.per_value else 0
+        return self.per_byte * len(data) + self.per_value * values
+
+
+_TEXT = ParseCost(per_byte=8, per_value=115)
+PARSE_COST = {
+    ".bvh": _TEXT,
+    ".amc": _TEXT,
+    ".asf": _TEXT,
+    ".gltf": ParseCost(24),
+    ".glb": ParseCost(27),
+    ".fbx": ParseCost(47),
+}
+"""The estimate of each kind of file, by suffix. Measured (one upload to ``quatmotion
+serve``, the server's peak RSS over its RSS before): BVH 12.3 bytes per byte for 10.6
+bytes a value (ordinary), 41.7 for 2.0 (``0 0 0``), that is 5.6 bytes per byte plus 72 per
+value; AMC 13.3 and 25.6, 2.8 plus 87; glTF 15.7, GLB 17.5, FBX 29.8 and 30.9 bytes per byte."""
+
+_UNKNOWN = ParseCost(max(c.per_byte for c in PARSE_COST.values()), _TEXT.per_value)
 _FRAMING = 65_536  # multipart headers, boundaries and form fields, bytes at most
 _RETRY_AFTER_S = "2"
 _WAIT_S = 600.0  # longest wait for the budget before 503
@@ -89,15 +123,17 @@ class UploadGate:
         self._room = threading.Condition(self._lock)
 
     @staticmethod
-    def cost(name: str, size: int) -> int:
-        """Estimated memory of parsing a file of ``size`` bytes named ``name``, bytes."""
-        return PARSE_COST.get(PurePosixPath(name).suffix.lower(), _DEFAULT_COST) * size
+    def cost(name: str, data: bytes) -> int:
+        """Estimated memory of parsing the file ``data`` named ``name``, bytes
+        (:data:`PARSE_COST`)."""
+        return PARSE_COST.get(PurePosixPath(name).suffix.lower(), _UNKNOWN).of(data)
 
     @staticmethod
     def least_cost(body: int) -> int:
         """The least memory parsing what a request body of ``body`` bytes holds may need
-        (all of it one file of the cheapest kind, less the multipart framing)."""
-        return min(PARSE_COST.values()) * max(0, body - _FRAMING)
+        (all of it one file of the cheapest kind holding a single value, less the multipart
+        framing)."""
+        return min(c.per_byte for c in PARSE_COST.values()) * max(0, body - _FRAMING)
 
     def check(self, cost: int, what: str = "the upload") -> None:
         """413 when ``cost`` alone is over the whole budget."""

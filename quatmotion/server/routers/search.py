@@ -89,7 +89,7 @@ async def search_upload(
         raise HTTPException(
             400, f"{name}: an AMC holds no skeleton; upload its ASF file too (form field 'asf')"
         )
-    cost = gate.cost(name, len(data)) + gate.cost(asf_name, len(asf_data or b""))
+    cost = gate.cost(name, data) + (gate.cost(asf_name, asf_data) if asf_data is not None else 0)
     gate.check(cost, name)
     return await run_in_threadpool(
         _search_upload, catalogue, gate, cost, data, name, asf_data, asf_name, method, top
