@@ -331,6 +331,7 @@ def _compress(space: _Workspace, methods: Iterable[str]) -> None:
         with Archive.open(out) as library:
             for name in library.names():
                 library.read(name)
+                library.read_rotations(name)  # the whole clip from its rows, one call
                 library.sample(name, [0.0, 0.01])
                 sampler = library.sampler(name)  # one pose per call, and a batch
                 sampler.pose(0.0)
