@@ -30,7 +30,6 @@ import dataclasses
 import json
 import math
 import os
-import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -209,18 +208,34 @@ def _show(value: float) -> str:
     return f"{int(number):,}" if whole else f"{number:g}"
 
 
-# A JSON string, its loop unrolled: a run of plain characters at a time (an alternation per
-# character takes 17 s over a 40 MB data URI, this 1 s).
-_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
-
-
 def json_depth(data: bytes | str) -> int:
     """How deep arrays and objects nest in a JSON text (0 for a scalar), in linear time and
     without recursion; brackets inside strings do not count."""
     raw = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else data
-    codes = np.frombuffer(_STRING.sub(b'""', raw), dtype=np.uint8)
-    steps = np.isin(codes, (ord("["), ord("{"))).astype(np.int64)
-    steps -= np.isin(codes, (ord("]"), ord("}")))
+    codes = np.frombuffer(raw, dtype=np.uint8)
+    # A quote is escaped when an odd run of backslashes ends just before it; a bracket after an
+    # odd count of unescaped quotes is text. Vectorised over those bytes only (a regular
+    # expression removing the strings took 2 s over the 12 MB of a stored skeleton of 200,000
+    # joints, this 0.4 s; a 40 MB data URI 1.2 s, this 0.4 s).
+    quotes = np.flatnonzero(codes == ord('"'))
+    slashes = np.flatnonzero(codes == ord("\\"))
+    if len(slashes) and len(quotes):
+        starts = np.ones(len(slashes), dtype=bool)
+        starts[1:] = np.diff(slashes) != 1
+        first = np.maximum.accumulate(np.where(starts, slashes, 0))  # where each run began
+        odd = (slashes - first) % 2 == 0  # an odd count of backslashes up to this one
+        before = np.searchsorted(slashes, quotes - 1)
+        found = before < len(slashes)
+        escaped = np.zeros(len(quotes), dtype=bool)
+        escaped[found] = (slashes[before[found]] == quotes[found] - 1) & odd[before[found]]
+        quotes = quotes[~escaped]
+    brackets = np.flatnonzero((codes == ord("[")) | (codes == ord("{")))
+    closing = np.flatnonzero((codes == ord("]")) | (codes == ord("}")))
+    at = np.concatenate((brackets, closing))
+    steps = np.concatenate((np.ones(len(brackets), np.int64), -np.ones(len(closing), np.int64)))
+    steps = steps[np.argsort(at, kind="stable")]
+    at = np.sort(at)
+    steps[np.searchsorted(quotes, at) % 2 == 1] = 0  # an odd count of quotes before: text
     return int(np.cumsum(steps).max(initial=0))
 
 

@@ -6,6 +6,8 @@ import json
 import threading
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from quatmotion import limits
 from quatmotion.errors import FormatError
@@ -101,3 +103,27 @@ def test_json_depth_is_quick_over_a_long_string() -> None:
     started = time.process_time()
     assert limits.json_depth(text) == 3
     assert time.process_time() - started < 4
+
+
+def _depth(value) -> int:
+    if isinstance(value, dict):
+        return 1 + max(map(_depth, value.values()), default=0)
+    if isinstance(value, list):
+        return 1 + max(map(_depth, value), default=0)
+    return 0
+
+
+_TEXT = st.text(alphabet='[]{}"\\ax', max_size=8)
+_JSON = st.recursive(
+    st.none() | st.integers() | _TEXT,
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(_TEXT, inner, max_size=3),
+    max_leaves=20,
+)
+
+
+@settings(max_examples=300, deadline=None, database=None, derandomize=True)
+@given(value=_JSON)
+def test_json_depth_is_the_documents_depth(value) -> None:
+    """Strings full of brackets, quotes and runs of backslashes: only the structure counts."""
+    for text in (json.dumps(value), json.dumps(value, indent=1, ensure_ascii=False)):
+        assert limits.json_depth(text) == _depth(value)

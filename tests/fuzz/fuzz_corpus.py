@@ -90,8 +90,77 @@ def generated() -> dict[str, bytes]:
         }
 
 
+KTIME_PER_SECOND = 46_186_158_000
+"""FBX's time unit (KTime) per second."""
+
+
+def ascii_fbx(
+    joints: int = 3,
+    *,
+    fps: float = 30.0,
+    seconds: tuple[float, float] = (0.0, 1.0),
+    takes: int = 1,
+    chain: bool = True,
+) -> bytes:
+    """A minimal ASCII FBX 7.4 file ufbx reads: ``joints`` limb nodes (a chain, or all
+    children of the first), ``takes`` animation stacks over ``seconds`` (no curves: the rest
+    pose at every frame) at a custom frame rate ``fps`` (any float, NaN included)."""
+    objects, links = [], []
+    for k in range(joints):
+        attribute, model = 10_000_000 + k, 20_000_000 + k
+        parent = 0 if k == 0 else 20_000_000 + (k - 1 if chain else 0)
+        objects.append(
+            f'\tNodeAttribute: {attribute}, "NodeAttribute::", "LimbNode" {{\n'
+            '\t\tTypeFlags: "Skeleton"\n\t}\n'
+            f'\tModel: {model}, "Model::j{k}", "LimbNode" {{\n\t\tVersion: 232\n'
+            "\t\tProperties70:  {\n"
+            '\t\t\tP: "Lcl Translation", "Lcl Translation", "", "A",0,1,0\n\t\t}\n\t}\n'
+        )
+        links.append(f'\tC: "OO",{attribute},{model}\n\tC: "OO",{model},{parent}\n')
+    start, stop = (int(t * KTIME_PER_SECOND) for t in seconds)
+    for t in range(takes):
+        stack, layer = 30_000_000 + 2 * t, 30_000_001 + 2 * t
+        objects.append(
+            f'\tAnimationStack: {stack}, "AnimStack::take{t}", "" {{\n\t\tProperties70:  {{\n'
+            f'\t\t\tP: "LocalStart", "KTime", "Time", "",{start}\n'
+            f'\t\t\tP: "LocalStop", "KTime", "Time", "",{stop}\n\t\t}}\n\t}}\n'
+            f'\tAnimationLayer: {layer}, "AnimLayer::BaseLayer", "" {{\n\t}}\n'
+        )
+        links.append(f'\tC: "OO",{layer},{stack}\n')
+    return (
+        "; FBX 7.4.0 project file\nFBXHeaderExtension:  {\n\tFBXHeaderVersion: 1003\n"
+        "\tFBXVersion: 7400\n}\nGlobalSettings:  {\n\tVersion: 1000\n\tProperties70:  {\n"
+        '\t\tP: "UpAxis", "int", "Integer", "",1\n\t\tP: "TimeMode", "enum", "", "",14\n'
+        f'\t\tP: "CustomFrameRate", "double", "Number", "",{fps!r}\n\t}}\n}}\n'
+        "Objects:  {\n" + "".join(objects) + "}\nConnections:  {\n" + "".join(links) + "}\n"
+    ).encode()
+
+
+HOSTILE_FBX = {
+    "joints_200k": lambda: ascii_fbx(200_000, chain=False),
+    "depth_300": lambda: ascii_fbx(300),
+    "frames_1e9": lambda: ascii_fbx(seconds=(0.0, 1e9 / 30)),  # KTime overflows: negative
+    "duration_1e7": lambda: ascii_fbx(seconds=(0.0, 1e7)),
+    "frames_2e6": lambda: ascii_fbx(seconds=(0.0, 2e6 / 30)),
+    "backwards": lambda: ascii_fbx(seconds=(5.0, 1.0)),
+    "fps_nan": lambda: ascii_fbx(fps=float("nan")),
+    "fps_inf": lambda: ascii_fbx(fps=float("inf")),
+    "fps_zero": lambda: ascii_fbx(fps=0.0),
+    "fps_negative": lambda: ascii_fbx(fps=-30.0),
+    "fps_1e9": lambda: ascii_fbx(fps=1e9),
+    "nested_braces": lambda: ascii_fbx().replace(
+        b"Objects:  {\n", b"Objects:  {\n" + b"X: {\n" * 100_000 + b"}\n" * 100_000, 1
+    ),
+    "truncated": lambda: ascii_fbx()[:300],
+}
+"""Crafted FBX files every command must refuse with one error line (never a signal), each
+before it samples a frame or allocates what a count implies."""
+
+
 def hostile(reader: str) -> list[bytes]:
     """The issue's proofs of concept for a reader (all must be refused)."""
+    if reader == "fbx":
+        return [make() for name, make in HOSTILE_FBX.items() if name != "joints_200k"]
     made = generated()
     if reader == "bvh":
         text = made["bvh"]
@@ -159,7 +228,8 @@ def seeds(reader: str) -> tuple[bytes, ...]:
     """Every seed of a reader: real heads, generated files, the hostile files."""
     if reader == "fbx":
         folder = Path(__file__).parents[1] / "data" / "fbx"
-        return tuple((folder / name).read_bytes() for name in FBX_SEEDS)
+        made = [(folder / name).read_bytes() for name in FBX_SEEDS]
+        return (*made, ascii_fbx(4), ascii_fbx(3, takes=3), *hostile(reader))
     found = [generated()[reader]]
     if DATA.is_dir():
         amc = sorted(DATA.glob("cmu/*/*.amc"))
