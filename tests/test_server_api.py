@@ -413,6 +413,12 @@ def test_openapi_documents_every_api_route(client):
         assert schema["default"] == DEFAULT_K
     pose_k = next(p for p in paths["/api/poses"]["get"]["parameters"] if p["name"] == "k")
     assert pose_k["schema"]["maximum"] == MAX_TOP
+    # errors as the app answers them: {"detail"} with a 4xx (never FastAPI's 422) or 503
+    for operations in paths.values():
+        for operation in operations.values():
+            assert {"200", "4XX", "503"} <= set(operation["responses"]), operation
+            assert "422" not in operation["responses"]
+    assert spec["components"]["schemas"]["ErrorModel"]["required"] == ["detail"]
 
 
 def test_a_number_of_results_out_of_range_is_400_naming_it(client):

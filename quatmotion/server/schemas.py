@@ -8,6 +8,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, Field
 
 __all__ = [
+    "ERROR_RESPONSES",
     "BuildModel",
     "ClipList",
     "ClipModel",
@@ -17,6 +18,7 @@ __all__ = [
     "SearchHitModel",
     "SearchResponse",
     "clip_model",
+    "ErrorModel",
 ]
 
 
@@ -117,3 +119,28 @@ class PoseResponse(BaseModel):
 def clip_model(info: Any) -> ClipModel:
     """The API model of a :class:`~quatmotion.server.clips.ClipInfo`."""
     return ClipModel(**info.as_dict())
+
+
+class ErrorModel(BaseModel):
+    """Every error's answer."""
+
+    detail: str = Field(description="What is wrong, one line (a file's errors name it).")
+
+
+ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    "4XX": {
+        "model": ErrorModel,
+        "description": "400 a malformed or invalid request (the field named), or an upload "
+        "its reader refuses; 403 a POST without the X-Quatmotion-Request header or from "
+        "another site; 404 a clip or file the server does not have; 413 a body over the "
+        "limit or an upload over the parsing budget; 415 a kind of file this server cannot "
+        "read; 429 a second upload of one client.",
+    },
+    503: {
+        "model": ErrorModel,
+        "description": "Not yet: the library is still being built, or the uploads' slots "
+        "are taken (Retry-After says when to ask again).",
+    },
+}
+"""The error answers of every API route, as the API's schema states them (FastAPI's 422 for
+an invalid request is answered 400 here: :mod:`quatmotion.server.handlers`)."""

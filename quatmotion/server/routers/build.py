@@ -6,11 +6,11 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from quatmotion.server.dependencies import Build
-from quatmotion.server.schemas import BuildModel
+from quatmotion.server.schemas import ERROR_RESPONSES, BuildModel
 
 __all__ = ["router"]
 
-router = APIRouter()
+router = APIRouter(responses=ERROR_RESPONSES)
 
 
 @router.get("/api/build", response_model=BuildModel, tags=["library"])

@@ -11,11 +11,11 @@ import quatmotion
 from quatmotion.io import MOTION_SUFFIXES
 from quatmotion.server.clips import SORT_KEYS
 from quatmotion.server.dependencies import Build, Catalogue, ClipId, MaxUpload
-from quatmotion.server.schemas import ClipList, ClipModel, InfoModel, clip_model
+from quatmotion.server.schemas import ERROR_RESPONSES, ClipList, ClipModel, InfoModel, clip_model
 
 __all__ = ["router"]
 
-router = APIRouter()
+router = APIRouter(responses=ERROR_RESPONSES)
 
 
 @router.get("/api/info", response_model=InfoModel, tags=["library"])

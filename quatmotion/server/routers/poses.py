@@ -7,11 +7,11 @@ from typing import Annotated
 from fastapi import APIRouter, Query
 
 from quatmotion.server.dependencies import TOP_RANGE, Catalogue, QueryClipId
-from quatmotion.server.schemas import PoseHitModel, PoseResponse
+from quatmotion.server.schemas import ERROR_RESPONSES, PoseHitModel, PoseResponse
 
 __all__ = ["router"]
 
-router = APIRouter()
+router = APIRouter(responses=ERROR_RESPONSES)
 
 
 @router.get("/api/poses", response_model=PoseResponse, tags=["search"])

@@ -23,15 +23,15 @@ from quatmotion.server.dependencies import (
     require_csrf_header,
     upload_name,
 )
-from quatmotion.server.schemas import SearchHitModel, SearchResponse
+from quatmotion.server.schemas import ERROR_RESPONSES, SearchHitModel, SearchResponse
 from quatmotion.server.uploads import UploadGate, parse_upload
 from quatmotion.viz import frame_data
 
 __all__ = ["router"]
 
-router = APIRouter()
+router = APIRouter(responses=ERROR_RESPONSES)
 
-upload_router = APIRouter(route_class=UploadRoute)
+upload_router = APIRouter(route_class=UploadRoute, responses=ERROR_RESPONSES)
 
 _METHOD = "Search method (one the index has features for; default: its first)."
 _TOP = "Results wanted."
