@@ -50,9 +50,11 @@ def _writable_folder(path: Path) -> bool:
     """Whether ``path`` exists or can be made, and a file can be created in it (Numba's test)."""
     try:
         path.mkdir(parents=True, exist_ok=True)
-        import tempfile
-
-        tempfile.TemporaryFile(dir=path).close()
+        # a file made and removed without importing tempfile, which every import of the
+        # package would pay for (the runtime's import budget, issue 32)
+        probe = path / f".quatmotion-probe-{os.getpid()}-{threading.get_ident()}"
+        os.close(os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+        os.unlink(probe)
     except OSError:
         return False
     return True

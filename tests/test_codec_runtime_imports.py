@@ -57,3 +57,36 @@ def test_every_codec_is_still_registered():
     from quatmotion.codec.methods import SparseMethod
 
     assert isinstance(codec.METHODS["qssd"], SparseMethod)
+
+
+RUNTIME_MUST_NOT_LOAD = (
+    "numba",
+    "scipy",
+    "sklearn",
+    "sqlite3",
+    "constriction",
+    "quatmotion.codec",
+    "quatmotion.motion",
+    "quatmotion.io",
+    "quatmotion.collection",
+    "quatmotion.runtime._kernels",
+)
+
+
+def test_importing_the_runtime_loads_numpy_and_itself_only():
+    """``import quatmotion.runtime`` (its rows, rig and sampler) loads no Numba, no codec, no
+    motion or reader of the package: its kernels load on the first decode."""
+    script = """
+import json, sys
+import quatmotion.runtime, quatmotion.runtime.clip, quatmotion.runtime.sampler
+before = sorted(sys.modules)
+quatmotion.runtime.kernels()  # the first decode
+print(json.dumps([before, sorted(sys.modules)]))
+"""
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    before, after = json.loads(out.stdout.strip().splitlines()[-1])
+    loaded = {m for m in before if m.startswith("quatmotion")}
+    assert loaded <= {"quatmotion", "quatmotion.errors", "quatmotion._jit", "quatmotion.runtime",
+                      "quatmotion.runtime.clip", "quatmotion.runtime.sampler"}  # fmt: skip
+    assert [m for m in RUNTIME_MUST_NOT_LOAD if m in before] == []
+    assert "numba" in after and "quatmotion.runtime._kernels" in after  # loaded when asked

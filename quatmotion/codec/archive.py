@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from quatmotion._format import FileFormat
 from quatmotion.codec.binary import Reader, inflate
-from quatmotion.codec.channels import _kernel_tables, channel_rotations, from_channels
+from quatmotion.codec.channels import _kernel_tables, from_channels
 from quatmotion.codec.container import (
     QMZ_FORMAT,
     ChunkRef,
@@ -48,12 +48,13 @@ from quatmotion.codec.skeletons import (
     inflate_text,
     skeleton_from_record,
 )
+from quatmotion.codec.spline import segment_tables
 from quatmotion.collection import ClipRef
 from quatmotion.errors import FormatError
 from quatmotion.io.names import match_clip
 from quatmotion.limits import check, load_json
 from quatmotion.motion import Motion, Skeleton
-from quatmotion.runtime import kernels
+from quatmotion.runtime.clip import ClipRows, Rig, clip_rotations
 
 if TYPE_CHECKING:
     from quatmotion.codec.settings import CompressSettings
@@ -186,6 +187,7 @@ class ArchiveReader:
         self._skeletons: dict[int, Skeleton] = {}
         self._layouts: dict[int, tuple[LayoutInfo, Any]] = {}
         self._samplers: OrderedDict[int, Any] = OrderedDict()
+        self._rigs: dict[tuple[int, int], Rig] = {}
         self._by_name: dict[str, int] | None = None
 
     def _split(self, chunks: list[ChunkRef]) -> None:
@@ -551,43 +553,62 @@ class ArchiveReader:
 
     def read_rotations(self, clip: int | str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """A clip's root translation ``(T, 3)`` cm and local rotations ``(T, J, 4)``: the
-        decoded arrays without the validation a :class:`Motion` adds (the fast path)."""
+        decoded arrays without the validation a :class:`Motion` adds (the fast path: one
+        compiled call from the clip's coefficient rows, :func:`quatmotion.runtime.clip.
+        clip_rotations`)."""
+        rows = self.clip_rows(clip)
+        decoded = clip_rotations(rows, self.rig(clip))
+        if decoded is None:
+            raise FormatError(f"clip {rows.name!r}: decoded channels are invalid", self._name)
+        return decoded
+
+    def clip_rows(self, clip: int | str) -> ClipRows:
+        """A clip decoded to its coefficient rows (:class:`~quatmotion.runtime.clip.ClipRows`,
+        what the runtime samples and decodes from): a spline method's control points, no frame
+        evaluated; any other method's decoded frames, one row each."""
         parts = self.clip_parts(clip)
-        layout = parts.layout.layout
-        # the columns the rotations read: the root's translation, then every rotation channel
-        m = int(layout.starts[-1] + layout.counts[-1]) if len(layout.starts) else 3
-        if not hasattr(self.method, "decode_coefficients"):
-            d = self.read_channels(parts.index)
-            rotations = channel_rotations(
-                d.channels, d.skeleton, d.layout.layout, d.layout.reference
-            )
-            return d.channels[:, :3], rotations
+        T, C = parts.entry.n_frames, parts.layout.layout.n_channels
         try:
-            _, tables, P, cols, scale = self.method.decode_coefficients(
-                parts.model, parts.payload, parts.context
-            )
+            if hasattr(self.method, "decode_coefficients"):
+                _, tables, P, cols, scale = self.method.decode_coefficients(
+                    parts.model, parts.payload, parts.context
+                )
+                fix = parts.corrections
+                lever = correction_lever(parts.layout)
+                fixes = (fix.frames, fix.channels, fix.values * fix.quantum / lever[fix.channels])
+            else:
+                X = self.method.decode(parts.model, parts.payload, parts.context)
+                P = self.checked_channels(parts, X)  # corrections applied
+                tables = segment_tables(T, (), 1)  # one segment kept frame by frame
+                cols, scale = np.arange(C), np.ones(C)
+                none = np.zeros(0, dtype=np.int64)
+                fixes = (none, none, np.zeros(0))
         except FormatError as error:
             raise self.method_error(parts, error) from None
-        if len(cols) < m or cols[m - 1] != m - 1:  # not the first active ones (sorted, unique)
-            raise FormatError(f"clip {parts.entry.name!r}: rotation channels not coded", self._name)
-        # one compiled call from the coefficient rows to rotations
-        fix = parts.corrections
-        lever = correction_lever(parts.layout)
-        dof_axes, pre = _kernel_tables(parts.skeleton, layout)
-        T = parts.entry.n_frames
-        root = np.empty((T, 3))
-        rotations = np.empty((T, len(layout.kinds), 4))
-        finite = kernels().clip_rotations(
-            tables.packed(), tables.knots, P, np.ascontiguousarray(scale), m, fix.frames,
-            fix.channels, fix.values * fix.quantum / lever[fix.channels], layout.kinds,
-            layout.starts, layout.counts, dof_axes, pre, np.ascontiguousarray(
-                parts.layout.reference), root, rotations,
+        return ClipRows(
+            parts.entry.name, T, float(parts.entry.fps), tables.packed(),
+            np.ascontiguousarray(tables.knots), np.ascontiguousarray(P, dtype=np.float64),
+            np.asarray(cols, dtype=np.int64), np.ascontiguousarray(scale, dtype=np.float64),
+            *(np.ascontiguousarray(a) for a in fixes),
         )  # fmt: skip
-        if not finite:
-            raise FormatError(
-                f"clip {parts.entry.name!r}: decoded channels are invalid", self._name
-            )
-        return root, rotations
+
+    def rig(self, clip: int | str) -> Rig:
+        """The rotation tables of a clip's skeleton and layout
+        (:class:`~quatmotion.runtime.clip.Rig`, made once per pair)."""
+        entry = self.header.clips[self.index_of(clip)]
+        key = (entry.skeleton, entry.layout)
+        rig = self._rigs.get(key)
+        if rig is None:
+            skeleton = self.skeleton(entry.skeleton)
+            info, _ = self.layout(entry.layout)
+            L = info.layout
+            dof_axes, pre = _kernel_tables(skeleton, L)
+            rig = self._rigs[key] = Rig(
+                skeleton.joint_names, *(np.ascontiguousarray(a) for a in (
+                    L.kinds, L.starts, L.counts, dof_axes, pre, info.reference)),
+                L.n_channels,
+            )  # fmt: skip
+        return rig
 
     def read(self, clip: int | str) -> Motion:
         """A clip as a :class:`Motion` (skeleton, fps, frames and name exactly as stored)."""
