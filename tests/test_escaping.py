@@ -293,3 +293,18 @@ def test_hostile_names_are_shown_as_text_and_run_no_script_in_a_browser(
         page.close()
         server.should_exit = True
         thread.join(30)
+
+
+def test_the_servers_log_writes_an_uploaded_files_name_escaped(client, caplog, monkeypatch):
+    from quatmotion.server import uploads
+
+    def broken(*_args, **_kwargs):
+        raise KeyError("accessors")
+
+    monkeypatch.setattr(uploads, "parse_motion", broken)
+    name = "\x1b[2J\x1b[31mtake.glb"
+    with caplog.at_level("WARNING", logger="quatmotion.server"):
+        answered = client.post("/api/search/upload", files={"file": (name, b"glTF")})
+    assert answered.status_code == 400 and answered.json()["detail"].startswith(name)
+    [record] = [r for r in caplog.records if r.name == "quatmotion.server"]
+    assert "\x1b" not in record.getMessage() and "\\x1b[2J" in record.getMessage()

@@ -206,7 +206,8 @@ def parse_upload(
     except ImportError as error:  # an optional reader not installed here: the server's lack
         raise HTTPException(415, f"{name}: this server cannot read it ({error})") from None
     except Exception as error:  # a reader's fault on odd bytes is still the file's answer
-        _log.warning("upload %s: the reader failed", name, exc_info=True)
+        # the name as a Python literal: its terminal escapes must not reach the server's console
+        _log.warning("upload %r: the reader failed", name, exc_info=True)
         raise HTTPException(
             400, f"{name}: cannot be read ({type(error).__name__}: {_one_line(error, '')})"
         ) from None
