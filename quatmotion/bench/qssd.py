@@ -433,41 +433,7 @@ def summary_tables(data: Mapping[str, Any]) -> list[dict[str, Any]]:
     tables = []
     t1 = get(data, "table1")
     if isinstance(t1, Mapping):
-        rows = []
-        for name, entry in t1.items():
-            if isinstance(entry, Mapping) and "qssd_test_paper" in entry:
-                rows.append(
-                    (
-                        name,
-                        entry.get("clips"),
-                        entry.get("frames"),
-                        entry.get("qssd_train_paper"),
-                        entry.get("qssd_test_paper"),
-                        entry.get("ksvd_train_paper"),
-                        entry.get("ksvd_test_paper"),
-                    )
-                )
-        for name, entry in (get(t1, "paper") or {}).items():
-            rows.append(
-                (
-                    f"paper: {name}",
-                    "",
-                    "",
-                    entry.get("qssd_train"),
-                    entry.get("qssd_test"),
-                    entry.get("ksvd_train"),
-                    entry.get("ksvd_test"),
-                )
-            )
-        tables.append(
-            table(
-                f"Table 1: reconstruction error (K={t1.get('K')}, L={t1.get('L')}, "
-                f"{t1.get('iterations')} iterations)",
-                ("data", "clips", "frames", "QSSD train", "QSSD test", "K-SVD train", "K-SVD test"),
-                tuple(rows),
-                f"Errors as the paper prints Eq. 11: {t1.get('error_unit', '')}",
-            )
-        )
+        tables.append(_table1(t1))
     t2 = get(data, "table2", "rows")
     if isinstance(t2, list):
         tables.append(
@@ -475,19 +441,7 @@ def summary_tables(data: Mapping[str, Any]) -> list[dict[str, Any]]:
                 "Table 2: seconds per iteration",
                 ("N", "n", "K", "L", "QSSD", "QSSD paper", "K-SVD", "K-SVD paper", "QSSD speed-up"),
                 tuple(
-                    (
-                        r.get("N"),
-                        r.get("n"),
-                        r.get("K"),
-                        r.get("L"),
-                        r.get("qssd_seconds"),
-                        r.get("paper_qssd_seconds"),
-                        r.get("ksvd_seconds"),
-                        r.get("paper_ksvd_seconds"),
-                        r.get("qssd_speedup_vs_paper"),
-                    )
-                    for r in t2
-                    if isinstance(r, Mapping)
+                    tuple(r.get(key) for key in _TABLE2_KEYS) for r in t2 if isinstance(r, Mapping)
                 ),
                 str(get(data, "table2", "note", default="")),
             )
@@ -511,6 +465,34 @@ def summary_tables(data: Mapping[str, Any]) -> list[dict[str, Any]]:
             )
         )
     return tables
+
+
+_TABLE2_KEYS = (
+    "N", "n", "K", "L", "qssd_seconds", "paper_qssd_seconds", "ksvd_seconds",
+    "paper_ksvd_seconds", "qssd_speedup_vs_paper",
+)  # fmt: skip
+_TABLE1_ERRORS = ("qssd_train", "qssd_test", "ksvd_train", "ksvd_test")
+
+
+def _table1(t1: Mapping[str, Any]) -> dict[str, Any]:
+    """Table 1 of a result: each data set's errors (the paper's Eq. 11), then the paper's."""
+    rows = [
+        (name, entry.get("clips"), entry.get("frames"))
+        + tuple(entry.get(f"{key}_paper") for key in _TABLE1_ERRORS)
+        for name, entry in t1.items()
+        if isinstance(entry, Mapping) and "qssd_test_paper" in entry
+    ]
+    rows += [
+        (f"paper: {name}", "", "") + tuple(entry.get(key) for key in _TABLE1_ERRORS)
+        for name, entry in (get(t1, "paper") or {}).items()
+    ]
+    return table(
+        f"Table 1: reconstruction error (K={t1.get('K')}, L={t1.get('L')}, "
+        f"{t1.get('iterations')} iterations)",
+        ("data", "clips", "frames", "QSSD train", "QSSD test", "K-SVD train", "K-SVD test"),
+        tuple(rows),
+        f"Errors as the paper prints Eq. 11: {t1.get('error_unit', '')}",
+    )
 
 
 def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:

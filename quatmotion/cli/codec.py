@@ -10,12 +10,12 @@ import typer
 from rich.table import Table
 
 from quatmotion.cli._app import app
+from quatmotion.cli._clip_files import Outputs, clip_files, clip_output, write_clip
 from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
     ForceUnitsOption,
     JsonOption,
-    Outputs,
     SchedulerOption,
     SkeletonOption,
     UnitsOption,
@@ -24,8 +24,6 @@ from quatmotion.cli._common import (
     check_outputs,
     check_units,
     check_writable,
-    clip_files,
-    clip_output,
     console,
     doubt_reporter,
     error_console,
@@ -37,7 +35,6 @@ from quatmotion.cli._common import (
     unit_label,
     unit_text,
     user_errors,
-    write_clip,
 )
 from quatmotion.errors import FormatError
 

@@ -10,12 +10,12 @@ from rich.table import Table
 from typer.core import TyperCommand
 
 from quatmotion.cli._app import app
+from quatmotion.cli._clip_files import Outputs, clip_files, write_clip
 from quatmotion.cli._common import (
     CliInputError,
     ForceOption,
     JointMapOption,
     JsonOption,
-    Outputs,
     SkeletonOption,
     TakeOption,
     TranslationsOption,
@@ -25,7 +25,6 @@ from quatmotion.cli._common import (
     check_translations,
     check_units,
     check_writable,
-    clip_files,
     console,
     joint_map_entries,
     number_in,
@@ -36,7 +35,6 @@ from quatmotion.cli._common import (
     unit_label,
     unit_text,
     user_errors,
-    write_clip,
 )
 
 if TYPE_CHECKING:
@@ -362,7 +360,7 @@ def convert(
     An AMC output gets its ASF beside it, same name. Existing files are kept unless --force;
     an input is never overwritten. If a clip fails, nothing written by the command is left.
     """
-    from quatmotion.io import MOTION_SUFFIXES, WRITTEN_SUFFIXES
+    from quatmotion.io import WRITTEN_SUFFIXES
 
     with user_errors():
         if len(paths) < 2:
@@ -378,42 +376,12 @@ def convert(
             require_file(path)
         if take is not None and len(inputs) > 1:
             raise CliInputError("--take names the take of one input; convert several one by one")
-        into_folder = len(inputs) > 1 or out.is_dir()
-        if not into_folder and out.suffix.lower() not in WRITTEN_SUFFIXES:
-            raise CliInputError(
-                f"{out}: unknown output type {out.suffix!r} (expected "
-                f"{', '.join(WRITTEN_SUFFIXES)}, or an existing folder)"
-            )
-        if into_folder and out.exists() and not out.is_dir():
-            raise CliInputError(f"{out}: several inputs need an output folder, not a file")
-        if into_folder and out.suffix.lower() in MOTION_SUFFIXES and not out.is_dir():
-            raise CliInputError(f"{out}: several inputs need an output folder")
-        targets = [out] if not into_folder else [out / f"{p.stem}{fmt}" for p in inputs]
-        if len(set(targets)) < len(targets):
-            raise CliInputError("two inputs have the same name: their outputs would collide")
+        targets, into_folder = _convert_targets(inputs, out, fmt)
         if into_folder:
             check_writable(out, folder=True)
         check_outputs(targets, [*inputs, skeleton], force=force)  # before reading: fail fast
         # Read everything first: a bad clip then stops the command before anything is written.
-        motions = []
-        with progress_bar() as progress:
-            task = progress.add_task("reading", total=len(inputs))
-            for path in inputs:
-                # In a batch, --skeleton is for its AMC files, --units and --bvh-translations
-                # for its BVH files (as every batch command reads them).
-                bvh, alone = path.suffix.lower() == ".bvh", len(inputs) == 1
-                sk = skeleton if alone or not bvh else None
-                how = translations if bvh else "auto"
-                motions.append(
-                    read_clip(
-                        path,
-                        sk,
-                        units if alone or bvh else None,
-                        translations=how,
-                        take=take if alone else None,
-                    )
-                )
-                progress.advance(task)
+        motions = _convert_inputs(inputs, skeleton, units, translations, take)
         planned = [clip_files(t, m.skeleton) for m, t in zip(motions, targets, strict=True)]
         check_outputs([f for files in planned for f in files], [*inputs, skeleton], force=force)
         with Outputs() as outputs:
@@ -426,6 +394,56 @@ def convert(
             console.print(f"wrote {len(inputs)} clip(s) to {out}")
         else:
             console.print(f"wrote {', '.join(str(w) for w in written)}")
+
+
+def _convert_targets(inputs: list[Path], out: Path, fmt: str) -> tuple[list[Path], bool]:
+    """``convert``'s output files (``out`` itself, or one per input in the folder ``out``),
+    and whether ``out`` is a folder; refused before anything is read or written."""
+    from quatmotion.io import MOTION_SUFFIXES, WRITTEN_SUFFIXES
+
+    into_folder = len(inputs) > 1 or out.is_dir()
+    if not into_folder and out.suffix.lower() not in WRITTEN_SUFFIXES:
+        raise CliInputError(
+            f"{out}: unknown output type {out.suffix!r} (expected "
+            f"{', '.join(WRITTEN_SUFFIXES)}, or an existing folder)"
+        )
+    if into_folder and out.exists() and not out.is_dir():
+        raise CliInputError(f"{out}: several inputs need an output folder, not a file")
+    if into_folder and out.suffix.lower() in MOTION_SUFFIXES and not out.is_dir():
+        raise CliInputError(f"{out}: several inputs need an output folder")
+    targets = [out] if not into_folder else [out / f"{p.stem}{fmt}" for p in inputs]
+    if len(set(targets)) < len(targets):
+        raise CliInputError("two inputs have the same name: their outputs would collide")
+    return targets, into_folder
+
+
+def _convert_inputs(
+    inputs: list[Path],
+    skeleton: Path | None,
+    units: str | None,
+    translations: str,
+    take: str | None,
+) -> list[Motion]:
+    """Every input read (a bad clip stops ``convert`` before anything is written). In a batch,
+    ``--skeleton`` is for its AMC files, ``--units`` and ``--bvh-translations`` for its BVH
+    files (as every batch command reads them), ``--take`` for one input only."""
+    motions = []
+    alone = len(inputs) == 1
+    with progress_bar() as progress:
+        task = progress.add_task("reading", total=len(inputs))
+        for path in inputs:
+            bvh = path.suffix.lower() == ".bvh"
+            motions.append(
+                read_clip(
+                    path,
+                    skeleton if alone or not bvh else None,
+                    units if alone or bvh else None,
+                    translations=translations if bvh else "auto",
+                    take=take if alone else None,
+                )
+            )
+            progress.advance(task)
+    return motions
 
 
 class _GenerateCommand(TyperCommand):

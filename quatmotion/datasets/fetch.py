@@ -19,7 +19,7 @@ import contextlib
 import http.client
 import urllib.error
 import urllib.request
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
 from rich.console import Console
@@ -194,17 +194,7 @@ def fetch_cmu(
     target_root = Path(dest) if dest is not None else data_root(must_exist=False) / "cmu"
     index = cmu_index() if index is None else index
     fixed_trials = None if trials is None else sorted({int(t) for t in trials})
-    progress = None
-    if show_progress:
-        progress = Progress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            DownloadColumn(),
-            TransferSpeedColumn(),
-            TimeRemainingColumn(),
-            console=console or Console(stderr=True),
-            transient=False,
-        )
+    progress = _download_bar(console) if show_progress else None
     files: list[Path] = []
 
     def get(url: str, target: Path) -> bool:
@@ -220,17 +210,41 @@ def fetch_cmu(
 
     with progress if progress is not None else contextlib.nullcontext():
         for ss in ss_list:
-            folder = target_root / ss
-            if not get(cmu_url(ss, None, base_url), folder / f"{ss}.asf"):
-                raise FetchError(f"{cmu_url(ss, None, base_url)}: not found (HTTP 404)")
             listed = fixed_trials if fixed_trials is not None else cmu_trials(ss, index)
-            if listed:
-                for tt in listed:
-                    url = cmu_url(ss, tt, base_url)
-                    if not get(url, folder / f"{ss}_{tt:02d}.amc"):
-                        raise FetchError(f"{url}: not found (HTTP 404)")
-            else:
-                for tt in range(1, _MAX_PROBED_TRIALS + 1):
-                    if not get(cmu_url(ss, tt, base_url), folder / f"{ss}_{tt:02d}.amc"):
-                        break
+            _fetch_subject(ss, listed, target_root / ss, base_url, get)
     return files
+
+
+def _download_bar(console: Console | None) -> Progress:
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        DownloadColumn(),
+        TransferSpeedColumn(),
+        TimeRemainingColumn(),
+        console=console or Console(stderr=True),
+        transient=False,
+    )
+
+
+def _fetch_subject(
+    ss: str,
+    trials: Sequence[int] | None,
+    folder: Path,
+    base_url: str,
+    get: Callable[[str, Path], bool],
+) -> None:
+    """One subject's ASF, then its trials' AMC files: those listed (each must exist), or
+    without a list every trial from 1 until the first the server does not have. ``get(url,
+    target)`` is False for a file the server does not have."""
+    if not get(cmu_url(ss, None, base_url), folder / f"{ss}.asf"):
+        raise FetchError(f"{cmu_url(ss, None, base_url)}: not found (HTTP 404)")
+    if trials:
+        for tt in trials:
+            url = cmu_url(ss, tt, base_url)
+            if not get(url, folder / f"{ss}_{tt:02d}.amc"):
+                raise FetchError(f"{url}: not found (HTTP 404)")
+        return
+    for tt in range(1, _MAX_PROBED_TRIALS + 1):
+        if not get(cmu_url(ss, tt, base_url), folder / f"{ss}_{tt:02d}.amc"):
+            break

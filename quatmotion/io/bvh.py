@@ -368,21 +368,8 @@ def parse_bvh(
             f"{', '.join(TRANSLATION_MODES)}"
         )
     head_end, motion_line, found = _find_motion_keyword(text)
-    joints_allowed = limits.current().joints
-    check_count(text[:head_end], _JOINT_LINE, "joints", joints_allowed, path, "joints")
-    hierarchy_tokens = [
-        (token, number)
-        for number, raw in enumerate(text[:head_end].split("\n"), start=1)
-        for token in fields(raw)
-    ]
-    tokens = _Tokens(hierarchy_tokens, path, motion_line)
-    hierarchy = _parse_hierarchy(tokens)
+    hierarchy = _hierarchy(text[:head_end], motion_line, found, path)
     names, parents, offsets, channels, site_names, site_parents, site_offsets = hierarchy
-    if tokens.peek() is not None:
-        token, line = tokens.next("MOTION")
-        raise FormatError(f"expected MOTION after the hierarchy, got {token!r}", path, line)
-    if not found:
-        raise FormatError("no MOTION section (truncated?)", path, motion_line)
     n_frames, frame_time, block, block_line = _motion_header(text[head_end:], motion_line, path)
     n_channels = sum(len(c) for c in channels)
     if n_channels == 0:
@@ -397,7 +384,6 @@ def parse_bvh(
     mode, mode_guessed, root_relative = _translation_mode(
         translations, channels, offsets_units, values, path
     )
-    site_units = np.asarray(site_offsets, dtype=np.float64).reshape(-1, 3)
     try:
         # Huge values overflow once scaled: the Skeleton and Motion checks then name them, so
         # NumPy's own warning (with its internal file paths) would only be noise.
@@ -410,7 +396,7 @@ def parse_bvh(
                 euler="intrinsic",
                 site_names=tuple(site_names),
                 site_parents=np.asarray(site_parents, dtype=np.int64),
-                site_offsets=site_units,
+                site_offsets=np.asarray(site_offsets, dtype=np.float64).reshape(-1, 3),
                 name=path.stem,
                 extras={"format": "bvh", "bvh_scale": 1.0},
             )
@@ -432,6 +418,26 @@ def parse_bvh(
             return rescaled(in_file_units, cm_per_unit, extras)
     except ValueError as error:  # e.g. values so large they overflow once scaled
         raise FormatError(str(error), path) from error
+
+
+def _hierarchy(head: str, motion_line: int, found: bool, path: Path) -> tuple:
+    """The HIERARCHY section (``head``: the text before the MOTION keyword, its joints counted
+    against :func:`quatmotion.limits.current` before a line is split): names, parents,
+    offsets, channels, end sites' names, parents and offsets (:func:`_parse_hierarchy`)."""
+    check_count(head, _JOINT_LINE, "joints", limits.current().joints, path, "joints")
+    hierarchy_tokens = [
+        (token, number)
+        for number, raw in enumerate(head.split("\n"), start=1)
+        for token in fields(raw)
+    ]
+    tokens = _Tokens(hierarchy_tokens, path, motion_line)
+    hierarchy = _parse_hierarchy(tokens)
+    if tokens.peek() is not None:
+        token, line = tokens.next("MOTION")
+        raise FormatError(f"expected MOTION after the hierarchy, got {token!r}", path, line)
+    if not found:
+        raise FormatError("no MOTION section (truncated?)", path, motion_line)
+    return hierarchy
 
 
 def _fps(frame_time: float) -> float:

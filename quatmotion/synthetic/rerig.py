@@ -245,29 +245,82 @@ def rerig(
         role, side = _role(source, name)
         if drop_extremities and role in _DROPPED or (j > 0 and not keep[sk.parents[j]]):
             keep[j] = False
-        template = spec.names[role]
-        word = {"L": spec.sides[0], "R": spec.sides[1]}.get(side or "", "")
-        names.append(template.replace("{S}", word).replace("{s}", word))
-    # the new joint list: (source index or -1 for an inserted joint, name, parent position)
-    rows: list[tuple[int, str, int, float]] = []  # source, name, new parent, share of offset
+        names.append(_named(spec, spec.names[role], side))
+    rows, position = _joint_rows(sk, source, spec, names, keep, twist, reorder)
+    parents = np.array([r[2] for r in rows], dtype=np.int64)
+    offsets, channels, axes, rotations, jt = _joint_arrays(motion, rows, keep)
+    site_names, site_parents, site_offsets = [], [], []
+    for s, (name, p) in enumerate(zip(sk.site_names, sk.site_parents, strict=True)):
+        if keep[p]:
+            site_names.append(name or f"{names[p]}_end")
+            site_parents.append(position[p])
+            site_offsets.append(sk.site_offsets[s])
+    site_offsets = np.array(site_offsets).reshape(-1, 3)
+    root_translation = np.array(motion.root_translation)
+    if mirror:  # reflect through the YZ plane: x -> -x
+        for x in (offsets, site_offsets, root_translation, *([] if jt is None else [jt])):
+            x[..., 0] *= -1
+        rotations[..., 2:] *= -1
+        axes[:, 2:] *= -1
+    new_names = [r[1] for r in rows]
+    if strip_names:
+        new_names = [f"joint{k}" for k in range(len(rows))]
+        site_names = [f"site{k}" for k in range(len(site_names))]
+    skeleton = Skeleton(
+        joint_names=tuple(new_names),
+        parents=parents,
+        offsets=offsets,
+        channels=tuple(channels),
+        euler=sk.euler,
+        axes=axes,
+        site_names=tuple(site_names),
+        site_parents=np.array(site_parents, dtype=np.int64),
+        site_offsets=site_offsets,
+        name=f"{sk.name}-{family}",
+    )
+    out = Motion(skeleton, motion.fps, root_translation, rotations, jt, motion.name)
+    renamed = {sk.joint_names[r[0]]: new_names[k] for k, r in enumerate(rows) if r[0] >= 0}
+    return Rerigged(out, renamed)
+
+
+def _named(spec: _Family, template: str, side: str | None) -> str:
+    """A joint's name in ``spec``'s family: its role's ``template`` with the side's word."""
+    word = {"L": spec.sides[0], "R": spec.sides[1]}.get(side or "", "")
+    return template.replace("{S}", word).replace("{s}", word)
+
+
+_Row = tuple[int, str, int, float]
+"""A joint of the new skeleton: its source joint (``-1 - child`` for an inline twist joint,
+``-10_000 - owner`` for a leaf twist joint), name, parent row and share of the offset."""
+
+
+def _joint_rows(
+    sk: Skeleton,
+    source: str,
+    spec: _Family,
+    names: list[str],
+    keep: list[bool],
+    twist: bool,
+    reorder: bool,
+) -> tuple[list[_Row], dict[int, int]]:
+    """The new joint list, parents first (the kept joints, children right side first with
+    ``reorder``, twist joints inserted with ``twist``), and each kept source joint's row."""
+    rows: list[_Row] = []
+    position: dict[int, int] = {}
+    side_order = {None: 0, "R": 1, "L": 2}
 
     def children(j: int) -> list[int]:
         kids = [c for c in sk.children(j) if keep[c]]
         if not reorder:
             return kids
-        side_order = {None: 0, "R": 1, "L": 2}
         return sorted(kids, key=lambda c: side_order[_role(source, sk.joint_names[c])[1]])
-
-    position: dict[int, int] = {}
 
     def visit(j: int, parent: int) -> None:
         role, side = _role(source, sk.joint_names[j])
         inline_parent = parent
         if twist and spec.inline and j > 0 and _parent_role(source, sk, j) in spec.twist:
             p_role, p_side = _role(source, sk.joint_names[sk.parents[j]])
-            word = {"L": spec.sides[0], "R": spec.sides[1]}.get(p_side or "", "")
-            tname = spec.twist[p_role].replace("{S}", word).replace("{s}", word)
-            rows.append((-1 - j, tname, parent, 0.5))
+            rows.append((-1 - j, _named(spec, spec.twist[p_role], p_side), parent, 0.5))
             inline_parent = len(rows) - 1
         rows.append((j, names[j], inline_parent, 0.5 if inline_parent != parent else 1.0))
         me = len(rows) - 1
@@ -275,18 +328,24 @@ def rerig(
         for c in children(j):
             visit(c, me)
         if twist and not spec.inline and role in spec.twist:
-            word = {"L": spec.sides[0], "R": spec.sides[1]}.get(side or "", "")
-            rows.append((-10_000 - j, spec.twist[role].replace("{S}", word).replace("{s}", word),
-                         me, 0.0))  # fmt: skip
+            rows.append((-10_000 - j, _named(spec, spec.twist[role], side), me, 0.0))
 
     visit(0, -1)
-    n = len(rows)
-    parents = np.array([r[2] for r in rows], dtype=np.int64)
+    return rows, position
+
+
+def _joint_arrays(
+    motion: Motion, rows: list[_Row], keep: list[bool]
+) -> tuple[np.ndarray, list[tuple[str, ...]], np.ndarray, np.ndarray, np.ndarray | None]:
+    """Offsets ``(J, 3)``, channels, axes ``(J, 4)``, rotations ``(T, J, 4)`` and joint
+    translations ``(T, J, 3)`` (or None) of the new joints: a kept joint's own (its offset
+    shared with an inline twist joint above it), no rotation for an inserted joint."""
+    sk = motion.skeleton
+    n, T = len(rows), motion.n_frames
     offsets = np.zeros((n, 3))
     channels: list[tuple[str, ...]] = []
     axes = np.zeros((n, 4))
     axes[:, 0] = 1.0
-    T = motion.n_frames
     rotations = np.zeros((T, n, 4))
     rotations[..., 0] = 1.0
     jt = None if motion.joint_translations is None else np.zeros((T, n, 3))
@@ -309,40 +368,7 @@ def rerig(
             kids = [c for c in sk.children(owner) if keep[c]]
             offsets[k] = (sk.offsets[kids[0]] / 3.0) if kids else np.zeros(3)
             channels.append(("rx", "ry", "rz"))
-    site_names, site_parents, site_offsets = [], [], []
-    for s, (name, p) in enumerate(zip(sk.site_names, sk.site_parents, strict=True)):
-        if keep[p]:
-            site_names.append(name or f"{names[p]}_end")
-            site_parents.append(position[p])
-            site_offsets.append(sk.site_offsets[s])
-    root_translation = np.array(motion.root_translation)
-    if mirror:  # reflect through the YZ plane: x -> -x
-        offsets[:, 0] *= -1
-        site_offsets = [o * np.array([-1.0, 1.0, 1.0]) for o in site_offsets]
-        root_translation[:, 0] *= -1
-        rotations[..., 2:] *= -1
-        axes[:, 2:] *= -1
-        if jt is not None:
-            jt[..., 0] *= -1
-    new_names = [r[1] for r in rows]
-    if strip_names:
-        new_names = [f"joint{k}" for k in range(n)]
-        site_names = [f"site{k}" for k in range(len(site_names))]
-    skeleton = Skeleton(
-        joint_names=tuple(new_names),
-        parents=parents,
-        offsets=offsets,
-        channels=tuple(channels),
-        euler=sk.euler,
-        axes=axes,
-        site_names=tuple(site_names),
-        site_parents=np.array(site_parents, dtype=np.int64),
-        site_offsets=np.array(site_offsets).reshape(-1, 3),
-        name=f"{sk.name}-{family}",
-    )
-    out = Motion(skeleton, motion.fps, root_translation, rotations, jt, motion.name)
-    renamed = {sk.joint_names[r[0]]: new_names[k] for k, r in enumerate(rows) if r[0] >= 0}
-    return Rerigged(out, renamed)
+    return offsets, channels, axes, rotations, jt
 
 
 def _parent_role(source: str, sk: Skeleton, j: int) -> str:
