@@ -133,6 +133,42 @@ def _score(
     return float(np.mean(found == kind)), float(np.mean(gait == kind))
 
 
+def _library_entry(
+    name: str,
+    files: list[tuple[pathlib.Path, str]],
+    queries: list[Query],
+    seeds: list[int],
+    log: Callable[[str], None],
+) -> dict[str, Any]:
+    """One library's results (:func:`run`): built once per seed, scored on its queries."""
+    clips = [
+        PoseClip.from_motion(io.read_motion(path), fps=FPS, height=HEIGHT_CM) for path, _ in files
+    ]
+    loaded = [(q, load(), kind, kick) for q, load, kind, kick in queries]
+    entry: dict[str, Any] = {
+        "clips": len(clips),
+        "poses": int(sum(len(c) for c in clips)),
+        "build_seconds": [],
+        "scores": {q: [] for q, *_ in loaded},
+        "scores_by_gait": {q: [] for q, *_ in loaded},
+    }
+    kinds = np.array([k for _, k in files])
+    for library_seed in seeds:
+        t0 = time.perf_counter()
+        library = PoseLibrary.build(clips, seed=library_seed)
+        entry["build_seconds"].append(time.perf_counter() - t0)
+        entry["metric"] = library.metric
+        for q, motion, kind, kick in loaded:
+            strict, by_gait = _score(library, kinds, motion, kind, kick)
+            entry["scores"][q].append(strict)
+            entry["scores_by_gait"][q].append(by_gait)
+        log(f"{name} library, seed {library_seed}: {entry['scores']}")
+    entry["mean"] = float(np.mean([np.mean(v) for v in entry["scores"].values()]))
+    entry["mean_by_gait"] = float(np.mean([np.mean(v) for v in entry["scores_by_gait"].values()]))
+    log(f"{name} library: mean {entry['mean']:.3f} (by gait {entry['mean_by_gait']:.3f})")
+    return entry
+
+
 def run(out: pathlib.Path, quick: bool = False, seed: int = 0, verbose: bool = True) -> dict:
     """Run the benchmark, write JSON to ``out`` and the bar chart beside it.
 
@@ -187,35 +223,7 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0, verbose: bool = T
     }
     queries = _queries(root)
     for name, files in _libraries(root).items():
-        clips = [
-            PoseClip.from_motion(io.read_motion(path), fps=FPS, height=HEIGHT_CM)
-            for path, _ in files
-        ]
-        loaded = [(q, load(), kind, kick) for q, load, kind, kick in queries[name]]
-        entry: dict[str, Any] = {
-            "clips": len(clips),
-            "poses": int(sum(len(c) for c in clips)),
-            "build_seconds": [],
-            "scores": {q: [] for q, *_ in loaded},
-            "scores_by_gait": {q: [] for q, *_ in loaded},
-        }
-        for library_seed in seeds:
-            t0 = time.perf_counter()
-            library = PoseLibrary.build(clips, seed=library_seed)
-            entry["build_seconds"].append(time.perf_counter() - t0)
-            entry["metric"] = library.metric
-            kinds = np.array([k for _, k in files])
-            for q, motion, kind, kick in loaded:
-                strict, by_gait = _score(library, kinds, motion, kind, kick)
-                entry["scores"][q].append(strict)
-                entry["scores_by_gait"][q].append(by_gait)
-            log(f"{name} library, seed {library_seed}: {entry['scores']}")
-        entry["mean"] = float(np.mean([np.mean(v) for v in entry["scores"].values()]))
-        entry["mean_by_gait"] = float(
-            np.mean([np.mean(v) for v in entry["scores_by_gait"].values()])
-        )
-        log(f"{name} library: mean {entry['mean']:.3f} (by gait {entry['mean_by_gait']:.3f})")
-        results["libraries"][name] = entry
+        results["libraries"][name] = _library_entry(name, files, queries[name], seeds, log)
     results["figures"] = [str(_figure(out, results))]
     results["seconds"] = time.perf_counter() - start
     atomic_write_json(out, results)

@@ -448,6 +448,27 @@ def _headlines(methods: list[str]) -> list[dict[str, Any]]:
     return out if d in methods else []
 
 
+def _scored_methods(
+    data: _Dataset, chosen: list[str], quick: bool, log: Callable[[str], None]
+) -> dict[str, Any]:
+    """Leave-one-out scores and query latency of each ``chosen`` method on one data set
+    (``dtw-fused-labels`` is measured by :func:`label_learning` instead)."""
+    library = Library(data.features, data.fingerprints)
+    out: dict[str, Any] = {}
+    for method in [m for m in chosen if m != LEARNED]:
+        scores, times = _leave_one_out(data, method)
+        repeats = 3 if method.startswith("paper") else (10 if quick else 50)
+        scores["latency"] = _latency(library, data.motions, method, repeats)
+        scores["rank_only_median_ms"] = float(1e3 * np.median(times))
+        out[method] = scores
+        log(
+            f"  {data.name} {method}: mAP {scores['map']:.3f} P@10 {scores['precision10']:.3f} "
+            f"TPR20 {scores['tpr20']:.3f} 1NN {scores['nn1']:.3f}, "
+            f"{scores['latency']['median_ms']:.2f} ms"
+        )
+    return out
+
+
 def run(
     out: Path, quick: bool = False, seed: int = 0, methods: list[str] | None = None
 ) -> dict[str, Any]:
@@ -482,20 +503,8 @@ def run(
         res: dict[str, Any] = {
             "clips": len(data.labels),
             "feature_seconds_per_clip": {k: float(np.mean(v)) for k, v in data.seconds.items()},
-            "methods": {},
         }
-        library = Library(data.features, data.fingerprints)
-        for method in [m for m in chosen if m != LEARNED]:  # LEARNED: label_learning
-            scores, times = _leave_one_out(data, method)
-            repeats = 3 if method.startswith("paper") else (10 if quick else 50)
-            scores["latency"] = _latency(library, data.motions, method, repeats)
-            scores["rank_only_median_ms"] = float(1e3 * np.median(times))
-            res["methods"][method] = scores
-            log(
-                f"  {name} {method}: mAP {scores['map']:.3f} P@10 {scores['precision10']:.3f} "
-                f"TPR20 {scores['tpr20']:.3f} 1NN {scores['nn1']:.3f}, "
-                f"{scores['latency']['median_ms']:.2f} ms"
-            )
+        res["methods"] = _scored_methods(data, chosen, quick, log)
         learning = label_learning(data)
         if learning is not None:
             res["label_learning"] = learning
