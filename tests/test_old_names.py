@@ -19,6 +19,7 @@ from quatmotion.parallel import Runner
 from quatmotion.pose.library import PoseLibrary
 from quatmotion.retrieval import ClipIndex, IndexSettings
 from quatmotion.retrieval.build import build_index
+from quatmotion.server import app as server_app
 from quatmotion.synthetic import generate_clip
 
 PACKAGE = Path(quatmotion.__file__).parent
@@ -114,6 +115,7 @@ _OLD_METHODS = {
 }
 _OLD_FUNCTIONS = {"build_index"}
 _OLD_IMPORTS = {("quatmotion.codec", n) for n in ("compress", "append", "open", "open_archive")}
+_OLD_IMPORTS |= {("quatmotion.server.app", n) for n in server_app._MOVED}
 _DEFINED_IN = {  # the aliases themselves
     "retrieval/build.py",
     "retrieval/__init__.py",

@@ -571,3 +571,15 @@ def test_clip_key_is_the_content_hash_whatever_names_the_clip(tmp_path):
     assert clips_module.clip_key("take_001", {"take_001": sha}) == sha
     assert clips_module.clip_key("take_001") is None
     assert clips_module.clip_key(tmp_path / "missing.bvh") is None
+
+
+def test_the_names_server_app_held_before_its_split_warn_and_still_work():
+    from quatmotion.server import app as app_module
+    from quatmotion.server import dependencies, middleware
+
+    with pytest.warns(DeprecationWarning, match=r"server\.app\.parse_size moved to .*0\.6\.0"):
+        assert app_module.parse_size is dependencies.parse_size
+    with pytest.warns(DeprecationWarning, match="server.middleware.CSRF_HEADER"):
+        assert app_module.CSRF_HEADER == middleware.CSRF_HEADER == CSRF_HEADER
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        app_module.nothing  # noqa: B018

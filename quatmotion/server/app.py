@@ -41,9 +41,12 @@ Conventions
 
 from __future__ import annotations
 
+import importlib
+import warnings
 from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import asynccontextmanager
 from pathlib import Path
+from typing import Any
 
 from fastapi import FastAPI
 from fastapi_offline import FastAPIOffline
@@ -165,3 +168,32 @@ def _lifespan(
         _close(catalogue, build)
 
     return lifespan  # type: ignore[return-value]
+
+
+# The names this module held before the server's split (0.4.0): found where they live now,
+# with a warning; removed in 0.6.0 (docs/migration-0.4.md).
+_MOVED = {
+    "CSRF_HEADER": "middleware",
+    "LOOPBACK_HOSTS": "middleware",
+    "allowed_hosts_for": "middleware",
+    "is_loopback": "middleware",
+    "DEFAULT_MAX_UPLOAD": "dependencies",
+    "MAX_TOP": "dependencies",
+    "parse_size": "dependencies",
+    "served_catalogue": "dependencies",
+    "PAGES": "routers.pages",
+    "parse_upload": "uploads",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _MOVED:
+        raise AttributeError(f"module 'quatmotion.server.app' has no attribute {name!r}")
+    home = f"quatmotion.server.{_MOVED[name]}"
+    warnings.warn(
+        f"quatmotion.server.app.{name} moved to {home}.{name} in 0.4.0 and goes in 0.6.0 "
+        "(docs/migration-0.4.md)",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return getattr(importlib.import_module(home), name)
