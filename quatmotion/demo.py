@@ -654,21 +654,26 @@ def _pose_step(
     report: BuildProgress,
     failed: dict[str, str],
 ) -> Path:
-    """The pose index of ``files`` (``folder/poses.idx``); the clips it refused noted in
-    ``failed``."""
+    """The pose index of ``files`` (``folder/poses.idx``: every take of an FBX file of several
+    a clip, with the clips' references); the clips it refused noted in ``failed``."""
     import functools
 
-    from quatmotion.pose.library import PoseLibrary, load_pose_clip
+    from quatmotion.collection import ReadSettings, find_clips
+    from quatmotion.pose.library import PoseLibrary, load_pose_source
 
+    read = ReadSettings(joint_map=tuple(joint_map))
+    clips = find_clips(files, read)
     pose_library, pose_failures = PoseLibrary.build_streamed(
-        files,
-        functools.partial(load_pose_clip, fps=30.0, height=170.0, joint_map=tuple(joint_map)),
+        clips,
+        functools.partial(load_pose_source, fps=30.0, height=170.0, read=read),
         seed=seed,
         workers=workers,
         progress=_step(report, "poses"),
     )
     for failure in pose_failures:
         failed.setdefault(str(failure.item), failure.message)
+    lost = {failure.index for failure in pose_failures}
+    pose_library.refs = [c.ref() for i, c in enumerate(clips) if i not in lost]
     pose_path = folder / "poses.idx"
     pose_library.save(pose_path)
     return pose_path

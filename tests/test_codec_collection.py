@@ -1,5 +1,5 @@
 """The codec as a collection file kind: CompressSettings, Archive.build/open/add, clip
-references and settings stored in the file (format version 2), clips named apart."""
+references and settings stored in the file (format version 2 on), clips named apart."""
 
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ def test_two_takes_with_one_stem_compress_as_two_clips(takes, tmp_path):
     assert [r.name for r in report.added] == ["s1/take_001", "s2/take_001"]
     assert report.ok and report.path == out and report.settings == settings
     with Archive.open(out) as archive:
-        assert archive.version == 2 and archive.format.version == 2
+        assert archive.version == 3 and archive.format.version == 3
         assert archive.settings == settings
         refs = archive.clips()
         assert [r.name for r in refs] == ["s1/take_001", "s2/take_001"]
@@ -106,7 +106,7 @@ def test_v030_file_opens_with_no_settings_and_file_local_refs(tmp_path):
         refs = archive.clips()
         assert [r.name for r in refs] == archive.names()
         assert len({r.sha256 for r in refs}) == 2 and all(r.path is None for r in refs)
-    # adding to a version 1 file rewrites it in version 2, the old clips' bytes kept
+    # adding to a version 1 file rewrites it in the current version, the old clips' bytes kept
     copy = tmp_path / "old.qmz"
     shutil.copy(FIXTURES / "bvh.qmz", copy)
     expected = np.load(FIXTURES / "expected.npz")
@@ -114,7 +114,7 @@ def test_v030_file_opens_with_no_settings_and_file_local_refs(tmp_path):
     write_bvh(generate_clip("jump", 7, n_frames=20), clip)
     Archive.add(copy, [clip], CompressSettings(max_error=2.0), runner=INLINE)
     with Archive.open(copy) as archive:
-        assert archive.version == 2 and len(archive) == 3
+        assert archive.version == 3 and len(archive) == 3
         assert archive.clips()[:2] == refs
         name = refs[0].name
         _, rotations = archive.read_rotations(name)
@@ -133,7 +133,7 @@ def test_ls_says_how_the_file_was_made_and_json_lists_refs(takes, tmp_path):
     shown = cli.invoke(app, ["ls", str(out)])
     assert "method naive, max error 1.5 cm on joints" in shown.output and "seed 4" in shown.output
     doc = json.loads(cli.invoke(app, ["ls", str(out), "--json"]).stdout)
-    assert doc["format_version"] == 2 and doc["settings"]["max_error"] == 1.5
+    assert doc["format_version"] == 3 and doc["settings"]["max_error"] == 1.5
     assert [c["ref"]["name"] for c in doc["clips"]] == ["s1/take_001", "s2/take_001"]
     assert doc["clips"][0]["ref"]["sha256"] == content_hash(takes / "s1" / "take_001.bvh")
     old = cli.invoke(app, ["ls", str(FIXTURES / "amc.qmz")])
@@ -150,9 +150,9 @@ def test_add_names_a_clip_apart_from_one_with_its_stem(takes, tmp_path):
         assert archive.read("s2/take_001").n_frames == 30
 
 
-def test_version_2_header_bytes_are_as_docs_format_says(takes, tmp_path):
+def test_version_3_header_bytes_are_as_docs_format_says(takes, tmp_path):
     """Parse the header by docs/format.md alone: the settings JSON, then each clip entry's
-    reference fields after `arms`."""
+    reference fields after `arms` (with version 3's take flag: 0, these files have one take)."""
     import io
     import zlib
 
@@ -161,7 +161,7 @@ def test_version_2_header_bytes_are_as_docs_format_says(takes, tmp_path):
 
     settings = CompressSettings(max_error=1.25, seed=2, read=ReadSettings(units="cm"))
     data = Archive.build([takes], None, settings, runner=INLINE).details["data"]
-    assert data[:8] == MAGIC and int.from_bytes(data[8:10], "little") == 2
+    assert data[:8] == MAGIC and int.from_bytes(data[8:10], "little") == 3
     head = next(scan_chunks(io.BytesIO(data), tmp_path, len(data)))
     r = Reader(zlib.decompress(data[head.offset : head.offset + head.length], -15))
     assert r.string() == "best"
@@ -184,5 +184,6 @@ def test_version_2_header_bytes_are_as_docs_format_says(takes, tmp_path):
         sha, path = r.take(32).hex(), r.string()
         assert sha == content_hash(path) and path.endswith(names[-1] + ".bvh")
         assert r.string() == "" and r.string() and r.string() == "cm" and r.u8() == 0
+        assert r.u8() == 0  # no take
     r.end()
     assert names == ["s1/take_001", "s2/take_001"]

@@ -263,8 +263,8 @@ def test_every_command_on_fbx_ends_by_itself(tmp_path):
         assert result.returncode == expected, (name, result.stdout, result.stderr)
     assert "'Armature|walk_b' of 2" in runs["info"].stdout
     said = {name: result.stdout + result.stderr for name, result in runs.items()}
-    assert "6 clips added, 0 already indexed, 0 failed" in said["index"]
-    assert "120 poses of 6 clips; 0 of 6 clips failed" in said["pose"]
+    assert "7 clips added, 0 already indexed, 0 failed" in said["index"]
+    assert "130 poses of 7 clips; 0 of 7 clips failed" in said["pose"]
     assert runs["bad"].stderr.startswith("error: ") and "bad.fbx" in runs["bad"].stderr
     original = _read("cmu_unreal.fbx")
     for out in ("out.bvh", "out.glb"):
@@ -335,10 +335,10 @@ def test_world_transforms_compose_alike_as_quaternions_and_as_matrices():
     assert np.allclose(np.abs(np.sum(r_quat * r_matrix, axis=-1)), 1.0, atol=1e-9)
 
 
-@pytest.mark.filterwarnings("ignore:.*2 takes:quatmotion.errors.FormatWarning")
 def test_serve_a_folder_of_fbx(tmp_path):
     """``serve DIR``'s library (demo.build_library: compressed, indexed, pose-indexed) from a
-    folder of FBX files, browsed through the web app."""
+    folder of FBX files, browsed through the web app: every take of a file of two a clip,
+    joined across the library, the index and the pose index (no take read by default)."""
     import shutil
 
     from fastapi.testclient import TestClient
@@ -356,7 +356,10 @@ def test_serve_a_folder_of_fbx(tmp_path):
     with TestClient(app, base_url="http://127.0.0.1") as client:
         clips = client.get("/api/clips")
     assert clips.status_code == 200
-    assert sorted(c["name"] for c in clips.json()["clips"]) == ["bandai_bvh_names", "cmu_bvh_names"]
+    served = {c["name"]: c for c in clips.json()["clips"]}
+    assert sorted(served) == ["bandai_bvh_names", "cmu_bvh_names/walk_a", "cmu_bvh_names/walk_b"]
+    for clip in served.values():
+        assert clip["in_library"] and clip["in_index"] and clip["in_poses"], clip
 
 
 @pytest.mark.parametrize("source", ["cmu", "bandai"])

@@ -23,7 +23,7 @@ SMALL = {"metric": "GPD+RDSR", "rank": 2, "n_unlabeled": 100, "n_pairs": 20, "fi
 def test_the_0_3_0_pose_library_opens_and_answers_as_it_did(v030):
     expected = json.loads((v030 / "index_pose_v030.json").read_text())["pose"]
     library = PoseLibrary.open(v030 / "pose_v030.npz")
-    assert library.version == 2 and library.format.version == 2 and FORMAT.version == 3
+    assert library.version == 2 and library.format.version == 2 and FORMAT.version == 4
     assert library.clip_names == expected["clip_names"]
     assert library.frame_of.tolist() == expected["frame_of"]
     matches = library.nearest(library.pose_query(0, 10)[0], k=3)
@@ -47,7 +47,7 @@ def test_a_library_built_from_files_stores_its_settings_and_references(tmp_path)
     assert [r.name for r in report.added] == ["s1/take_001", "s2/take_001"]
     assert not report.failures
     back = PoseLibrary.open(out)
-    assert back.version == 3 and back.settings == settings
+    assert back.version == 4 and back.settings == settings
     assert back.clips() == tuple(report.added) and isinstance(back.clips()[0], ClipRef)
     assert all(Path(r.path).is_absolute() for r in back.clips())
     listed = runner.invoke(app, ["pose", "ls", str(out), "--json"])

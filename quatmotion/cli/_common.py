@@ -272,8 +272,9 @@ TakeOption = Annotated[
     str | None,
     typer.Option(
         "--take",
-        help="The take of an FBX file (the animation of a glTF file) to read, by name or by "
-        "number from 0. Default: the first (a warning names the others).",
+        help="The take of an FBX file (the animation of a glTF file) to read, by name, short "
+        "name (walk of Armature|walk) or number from 0. Default: of one file, the first (a "
+        "warning names the others); of a collection, every take of an FBX file a clip.",
         show_default=False,
     ),
 ]

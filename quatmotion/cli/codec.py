@@ -18,6 +18,7 @@ from quatmotion.cli._common import (
     JsonOption,
     SchedulerOption,
     SkeletonOption,
+    TakeOption,
     UnitsOption,
     WorkersOption,
     bvh_unit_label,
@@ -175,6 +176,7 @@ def compress(
     method: Annotated[str, typer.Option(help=f"Codec: {_METHODS}.")] = "best",
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    take: TakeOption = None,
     seed: Annotated[int, typer.Option(help="Seed of random choices (same seed, same bytes).")] = 0,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
@@ -200,7 +202,7 @@ def compress(
             if not path.exists():
                 raise CliInputError(f"{path}: no such file or folder")
         read = ReadSettings(
-            units=_units(units), skeleton=None if skeleton is None else str(skeleton)
+            units=_units(units), skeleton=None if skeleton is None else str(skeleton), take=take
         )
         # Neither a bound nor a ratio: CompressSettings' default bound.
         bound = {} if max_error is None and ratio is None else {"max_error": max_error}
@@ -387,6 +389,7 @@ def append(
     ] = None,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
+    take: TakeOption = None,
     force_units: ForceUnitsOption = False,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
@@ -408,7 +411,7 @@ def append(
 
         with Archive.open(library) as archive:
             made = archive.settings
-        settings = _add_settings(made, max_error, units, skeleton)
+        settings = _add_settings(made, max_error, units, skeleton, take)
         ensure_kernels("read", "codec", workers=workers, scheduler=scheduler)
         with progress_bar() as progress:
             report = Archive.add(
@@ -439,7 +442,7 @@ def _units(units):
     return float(units)
 
 
-def _add_settings(made, max_error, units, skeleton):
+def _add_settings(made, max_error, units, skeleton, take=None):
     """The settings new clips are coded with: the file's own (version 2) with what the command
     line gives on top."""
     from quatmotion.codec import CompressSettings
@@ -450,6 +453,8 @@ def _add_settings(made, max_error, units, skeleton):
         read = read.replace(units=_units(units))
     if skeleton is not None:
         read = read.replace(skeleton=str(skeleton))
+    if take is not None:
+        read = read.replace(take=take)
     if max_error is not None:  # else the file's bound (or its ratio's quality), never a literal
         base = base.replace(max_error=max_error, ratio=None)
     return base.replace(read=read)

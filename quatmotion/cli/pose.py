@@ -30,6 +30,7 @@ from quatmotion.cli._common import (
     JsonOption,
     SchedulerOption,
     SkeletonOption,
+    TakeOption,
     UnitsOption,
     WorkersOption,
     at_least,
@@ -108,6 +109,7 @@ def index_command(
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
     joint_map: JointMapOption = None,
+    take: TakeOption = None,
     force: ForceOption = False,
 ) -> None:
     """Learn a pose distance on the library and index every pose of it.
@@ -123,7 +125,7 @@ def index_command(
         settings = _pose_settings(
             fps=fps, height=height, metric=metric, rank=rank, n_unlabeled=unlabeled,
             n_pairs=pairs, seed=seed, fit_poses=fit_poses, index_threads=index_threads,
-            skeleton=skeleton, units=units, joint_map=joint_map,
+            skeleton=skeleton, units=units, joint_map=joint_map, take=take,
         )  # fmt: skip
         where = resolve_scheduler(scheduler, workers=workers)
         files = find_motion_files(paths)
@@ -148,7 +150,7 @@ def index_command(
     say_wrote(
         output,
         f"{len(library.clip_of)} poses of {len(library.clip_names)} clips; "
-        f"{len(report.failures)} of {len(files)} clips failed",
+        f"{len(report.failures)} of {len(report.added) + len(report.failures)} clips failed",
     )
     if report.failures:
         raise typer.Exit(code=1)
@@ -165,6 +167,7 @@ def add_command(
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
     joint_map: JointMapOption = None,
+    take: TakeOption = None,
 ) -> None:
     """Add clips to a pose library with its stored settings and distance (nothing learned
     again); clips it already holds are skipped. Exits with code 1 if a clip failed."""
@@ -185,7 +188,7 @@ def add_command(
             report = PoseLibrary.add(
                 library_path, paths, skeleton=skeleton, units=units,
                 joint_map=joint_map_entries(joint_map) or None, runner=where,
-                workers=workers,
+                workers=workers, take=take,
                 progress=_StageBars(bar), on_doubt=doubt_reporter(bar),
             )  # fmt: skip
     library = report.details["library"]
@@ -208,7 +211,12 @@ _OPTION_OF = {
 
 
 def _pose_settings(
-    *, skeleton: Path | None, units: str | None, joint_map: Path | None = None, **values
+    *,
+    skeleton: Path | None,
+    units: str | None,
+    joint_map: Path | None = None,
+    take: str | None = None,
+    **values,
 ):  # -> PoseSettings
     """One :class:`PoseSettings` of the options, validated once by its constraints; a value
     refused is named by its option."""
@@ -224,6 +232,7 @@ def _pose_settings(
         units=units,
         skeleton=None if skeleton is None else str(skeleton),
         joint_map=joint_map_entries(joint_map),
+        take=take,
     )
     try:
         return PoseSettings(**values, read=read)
@@ -328,6 +337,7 @@ def search_command(
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
     joint_map: JointMapOption = None,
+    take: TakeOption = None,
 ) -> None:
     """Find the poses most like frame F of a clip (frames count from 0), or with
     --transitions the best poses to jump to from it."""
@@ -339,8 +349,8 @@ def search_command(
     with user_errors():
         if (clip is None) == (file is None):
             raise CliInputError("give exactly one of --clip (an indexed clip) or --file")
-        if file is None and (skeleton is not None or units is not None):
-            raise CliInputError("--skeleton and --units apply to a --file query")
+        if file is None and (skeleton is not None or units is not None or take is not None):
+            raise CliInputError("--skeleton, --units and --take apply to a --file query")
         check_units(units)
         if skeleton is not None:
             require_file(skeleton)
@@ -348,7 +358,7 @@ def search_command(
         library = PoseLibrary.open(library_path, ef_search=ef)
         if file is not None:
             entries = joint_map_entries(joint_map)
-            motion = read_clip(file, skeleton, units, strict=True, joint_map=entries)
+            motion = read_clip(file, skeleton, units, strict=True, joint_map=entries, take=take)
             stored = library.settings.read.joint_map if library.settings else ()
             if not entries and stored:
                 from quatmotion.collection import with_joint_map
@@ -368,7 +378,7 @@ def search_command(
             # a file of an indexed clip is that clip (its content hash), as --clip names it
             from quatmotion.collection.reading import file_hash
 
-            sha256 = file_hash(file, skeleton)
+            sha256 = file_hash(file, skeleton, take)
             same = [i for i, ref in enumerate(library.clips()) if ref.sha256 == sha256]
             own_clip = same[0] if same else -1
             query_doc = {"clip": file.stem, "path": str(file), "frame": found}
@@ -390,10 +400,11 @@ def search_command(
         )
         elapsed = time.perf_counter() - t0
     labels = _labels([m.name for m in matches])
+    names = [ref.name for ref in library.refs]  # the collection's names (none in version 2)
     results = [
         {
             "rank": m.rank,
-            "clip": Path(m.name).stem,
+            "clip": names[m.clip] if names else Path(m.name).stem,
             "path": m.name,
             "label": labels.get(m.name, ""),
             "distance": m.distance,

@@ -27,6 +27,7 @@ from quatmotion.cli._common import (
     JsonOption,
     SchedulerOption,
     SkeletonOption,
+    TakeOption,
     UnitsOption,
     WorkersOption,
     check_outputs,
@@ -89,6 +90,7 @@ def _settings(
     methods: list[str] | None = None,
     base=None,  # IndexSettings | None
     joint_map: Path | None = None,
+    take: str | None = None,
 ):  # -> IndexSettings
     """The one settings object of a build, from the options given on top of ``base`` (an
     index's stored settings for ``index add``; else :class:`IndexSettings`' defaults), checked
@@ -114,6 +116,8 @@ def _settings(
         read = read.replace(skeleton=str(asf))
     if joint_map is not None:
         read = read.replace(joint_map=joint_map_entries(joint_map))
+    if take is not None:
+        read = read.replace(take=take)
     given: dict[str, object] = {"read": read}
     if kinds is not None or methods:
         asked = ",".join(base.kinds) if kinds is None else kinds
@@ -222,6 +226,7 @@ def build_command(
     method: Annotated[list[str] | None, typer.Option(help=_BUILD_METHOD_HELP)] = None,
     label_folders: Annotated[bool, typer.Option(help=LABEL_FOLDERS_HELP)] = False,
     joint_map: JointMapOption = None,
+    take: TakeOption = None,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
@@ -233,8 +238,9 @@ def build_command(
     """
     with user_errors():
         settings = _settings(
-            kinds, skeleton, skeletons, units, label_folders, method, joint_map=joint_map
-        )
+            kinds, skeleton, skeletons, units, label_folders, method, joint_map=joint_map,
+            take=take,
+        )  # fmt: skip
     _build(paths, output, settings, labels, workers, scheduler, add=False)
 
 
@@ -255,6 +261,7 @@ def add_command(
         typer.Option(help=f"{LABEL_FOLDERS_HELP} Default: the index's.", show_default=False),
     ] = None,
     joint_map: JointMapOption = None,
+    take: TakeOption = None,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
 ) -> None:
@@ -265,10 +272,10 @@ def add_command(
 
     with user_errors():
         options = (kinds, skeleton, skeletons, units, label_folders, method)
-        _settings(*options, joint_map=joint_map)  # the options' own errors before the file's
+        _settings(*options, joint_map=joint_map, take=take)  # the options' errors first
         with ClipIndex.open(index) as idx:
             stored = idx.settings
-        settings = _settings(*options, base=stored, joint_map=joint_map)
+        settings = _settings(*options, base=stored, joint_map=joint_map, take=take)
     _build(paths, index, settings, labels, workers, scheduler, add=True)
 
 
@@ -374,6 +381,7 @@ def search_command(
         bool, typer.Option(help="Find where the query occurs inside longer clips.")
     ] = False,
     joint_map: JointMapOption = None,
+    take: TakeOption = None,
 ) -> None:
     """Rank the indexed clips by similarity to the query (or to each of --queries).
 
@@ -385,7 +393,7 @@ def search_command(
         _check_search_options(query, queries, method, within, skeleton, units)
         entries = joint_map_entries(joint_map)
         quick = None
-        if not entries:
+        if not entries and take is None:
             quick = _quick_answer(index, query, top, method, within, skeleton, units)
         if quick is not None:  # a single query by clip name, without Numba
             method_name, own, results = quick
@@ -398,7 +406,9 @@ def search_command(
                 _print_results([_Result(**r) for r in results], within)
             return
         texts = _query_texts(query, queries)
-        method_name, answers = _answer(index, texts, top, method, within, skeleton, units, entries)
+        method_name, answers = _answer(
+            index, texts, top, method, within, skeleton, units, entries, take
+        )
     _show_answers(texts, answers, method_name, as_json, batch=queries is not None, within=within)
 
 
@@ -474,6 +484,10 @@ def _quick_answer(
     return None if answer is None else (METHOD, *answer)
 
 
+_TAKE_SUFFIXES = (".fbx", ".glb", ".gltf")
+"""Query files ``--take`` applies to (:data:`quatmotion.io.fbx.FBX_SUFFIXES`, glTF's)."""
+
+
 def _answer(
     index: Path,
     texts: list[str],
@@ -483,11 +497,13 @@ def _answer(
     skeleton: Path | None,
     units: str | None,
     joint_map: tuple[str, ...] = (),
+    take: str | None = None,
 ) -> tuple[str, list[list]]:
     """Step 3: every query answered on the index opened once (a motion file is read, mapped
     by ``joint_map``, else by the index's stored map where its skeleton has those joints; any
-    other text names an indexed clip). Returns the method's name and each query's answer: the
-    indexed clip it is, left out of its results (None: none), and its results."""
+    other text names an indexed clip; ``take`` the take of an FBX or glTF query file). Returns
+    the method's name and each query's answer: the indexed clip it is, left out of its results
+    (None: none), and its results."""
     from quatmotion.collection.reading import file_hash
     from quatmotion.errors import ClipNameError
     from quatmotion.io import MOTION_SUFFIXES
@@ -504,12 +520,17 @@ def _answer(
             is_file = looks_like_file and path.exists()  # else a clip's name (walk.bvh too)
             if not is_file and (skeleton is not None or units is not None):
                 raise CliInputError("--skeleton and --units apply to a query file")
-            target = read_clip(path, skeleton, units, joint_map=joint_map) if is_file else text
+            its_take = take if path.suffix.lower() in _TAKE_SUFFIXES else None
+            target = (
+                read_clip(path, skeleton, units, joint_map=joint_map, take=its_take)
+                if is_file
+                else text
+            )
             if is_file and not joint_map and idx.settings.read.joint_map:
                 from quatmotion.collection import with_joint_map
 
                 target = with_joint_map(target, idx.settings.read.joint_map, if_fits=True)
-            sha256 = file_hash(path, skeleton) if is_file else None
+            sha256 = file_hash(path, skeleton, its_take) if is_file else None
             where = path if is_file else None
             try:
                 own = query_row(idx, target, sha256=sha256, path=where)

@@ -16,7 +16,8 @@ Conventions
   :meth:`Header.to_bytes`). A format version, once released, never changes meaning: this
   module writes :data:`FORMAT_VERSION` and keeps a reader of the header of every version from
   :data:`QMZ_FORMAT` ``.oldest_readable`` (version 1, 0.3.0: no clip references, no settings;
-  version 2: each clip's :class:`~quatmotion.collection.ClipRef` and the settings' JSON).
+  version 2, 0.4.0: each clip's :class:`~quatmotion.collection.ClipRef` and the settings'
+  JSON; version 3: the reference's take, one take of a file of several).
 * :func:`write_container` is the one writer of these bytes (the compressor assembles a
   :class:`Header` and the chunk payloads and hands them here).
 * Every error in reading is a :class:`~quatmotion.errors.FormatError` that names the file and
@@ -29,7 +30,7 @@ from __future__ import annotations
 import math
 import zlib
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
@@ -60,7 +61,7 @@ __all__ = [
 
 MAGIC = b"\x89QMZ\r\n\x1a\n"
 """First bytes of every ``.qmz`` file (as PNG's: catches text-mode mangling)."""
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 """The version this code writes and the newest it reads."""
 QMZ_FORMAT = FileFormat("qmz", FORMAT_VERSION, 1, "a .qmz motion library")
 """The ``.qmz`` format's name and versions (the one version check, :mod:`quatmotion._format`)."""
@@ -245,13 +246,17 @@ def _index(r: Reader, n: int, what: str, source: str | Path | None) -> int:
 
 
 def _write_ref(w: Writer, entry: ClipEntry) -> None:
-    """A clip entry's reference fields (version 2): sha256 (32 bytes), path, skeleton path,
-    skeleton fingerprint, units (strings, "" for none), units_guessed (u8)."""
+    """A clip entry's reference fields (version 3): sha256 (32 bytes), path, skeleton path,
+    skeleton fingerprint, units (strings, "" for none), units_guessed (u8), then the take (u8
+    0: none; 1: a string follows, the take's name)."""
     ref = entry.ref
     if ref is None:
         raise ValueError(f"clip {entry.name!r}: a version {FORMAT_VERSION} entry needs its ref")
     w.raw(bytes.fromhex(ref.sha256)).string(ref.path or "").string(ref.skeleton_path or "")
     w.string(ref.skeleton).string(ref.units).u8(int(ref.units_guessed))
+    w.u8(int(ref.take is not None))
+    if ref.take is not None:
+        w.string(ref.take)
 
 
 def _ref_v1(r: Reader, name: str, source: str | Path | None) -> ClipRef | None:
@@ -270,7 +275,16 @@ def _ref_v2(r: Reader, name: str, source: str | Path | None) -> ClipRef:
     )
 
 
-_REF_READERS = {1: _ref_v1, 2: _ref_v2}
+def _ref_v3(r: Reader, name: str, source: str | Path | None) -> ClipRef:
+    """Version 2's fields, then the take: a flag (0 none, 1 a string follows)."""
+    ref = _ref_v2(r, name, source)
+    flag = r.u8()
+    if flag > 1:
+        raise FormatError(f"header: clip {name!r}: take flag is {flag}, not 0 or 1", source)
+    return ref if not flag else replace(ref, take=r.string())
+
+
+_REF_READERS = {1: _ref_v1, 2: _ref_v2, 3: _ref_v3}
 """The clip entry's tail by format version: a decoder per version, kept once released."""
 
 

@@ -5,8 +5,10 @@ Conventions
 * :func:`find_clips` turns what a user names (files, folders, clips in memory) into
   :class:`ClipSource` items: folders searched recursively (:func:`quatmotion.io.find_motion_files`),
   every clip given a unique name (:func:`~quatmotion.collection.refs.unique_names`), every AMC
-  its ASF (:func:`find_skeleton`), every file its content hash. Nothing is parsed there: the
-  clips are read where they are used, in the batch workers, by :func:`read_clip`.
+  its ASF (:func:`find_skeleton`), every file its content hash, every take of an FBX file of
+  several a clip of its own (:func:`file_takes`; ``ReadSettings.take`` picks one). Nothing is
+  parsed there but an FBX file's list of takes: the clips are read where they are used, in
+  the batch workers, by :func:`read_clip`.
 * The ASF of an AMC (:func:`find_skeleton`), in order: ``ReadSettings.skeleton`` when it is a
   file (it is the skeleton of every AMC read with these settings); when it is a folder, the ASF
   there named as the conventions below name it, else the folder's only ASF; with no skeleton
@@ -29,7 +31,15 @@ from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
 
 from quatmotion._settings import Interval, Settings, StrOptions
-from quatmotion.collection.refs import ClipRef, content_hash, duplicates, motion_hash, unique_names
+from quatmotion.collection.refs import (
+    ClipRef,
+    content_hash,
+    duplicates,
+    file_digest,
+    motion_hash,
+    take_hash,
+    unique_names,
+)
 from quatmotion.errors import FormatError
 from quatmotion.io import LENGTH_UNITS, TRANSLATION_MODES
 from quatmotion.motion import Motion
@@ -39,6 +49,7 @@ __all__ = [
     "ReadClip",
     "ReadSettings",
     "file_hash",
+    "file_takes",
     "find_clips",
     "find_skeleton",
     "read_clip",
@@ -73,6 +84,10 @@ class ReadSettings(Settings):
         (:func:`quatmotion.motion.with_joint_map`), and search maps its skeleton by it before
         names and structure (:func:`quatmotion.motion.map_humanoid`). Empty: names and
         structure alone.
+    take : str or None
+        The take every FBX file is read at (a glTF file's animation), by name, short name or
+        position (:func:`quatmotion.io.fbx.take_index`); a file without it is refused. None:
+        every take of an FBX file of several is a clip (:func:`file_takes`).
     """
 
     units: str | float | None = None
@@ -80,6 +95,7 @@ class ReadSettings(Settings):
     strict: bool = True
     translations: str = "auto"
     joint_map: tuple[str, ...] = ()
+    take: str | None = None
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
         "units": [None, Interval(Real, 0, None, closed="neither"), StrOptions(set(LENGTH_UNITS))],
@@ -87,6 +103,7 @@ class ReadSettings(Settings):
         "strict": ["boolean"],
         "translations": [StrOptions({"auto", *TRANSLATION_MODES})],
         "joint_map": [tuple],
+        "take": [str, None],
     }
 
     def _check(self) -> None:
@@ -102,14 +119,15 @@ class ReadSettings(Settings):
 
 @dataclass(frozen=True)
 class ClipSource:
-    """A clip to read: a file (with the ASF of an AMC) or a motion in memory, with its name
-    in the collection and its content hash."""
+    """A clip to read: a file (with the ASF of an AMC, the take of a file of several) or a
+    motion in memory, with its name in the collection and its content hash."""
 
     name: str
     sha256: str
     path: Path | None = None
     skeleton_path: Path | None = None
     motion: Motion | None = field(default=None, repr=False, compare=False)
+    take: str | None = None
 
     def ref(self) -> ClipRef:
         """The reference before reading (fingerprint and unit not known yet)."""
@@ -118,6 +136,7 @@ class ClipSource:
             self.sha256,
             None if self.path is None else str(self.path),
             None if self.skeleton_path is None else str(self.skeleton_path),
+            take=self.take,
         )
 
     def __str__(self) -> str:  # how a batch failure names it
@@ -155,18 +174,46 @@ def find_skeleton(amc: Path, skeleton: str | Path | None = None) -> Path:
     return find_asf_for_amc(amc, given)
 
 
-def file_hash(path: str | Path, skeleton: str | Path | None = None) -> str:
+def file_hash(
+    path: str | Path, skeleton: str | Path | None = None, take: str | int | None = None
+) -> str:
     """A motion file's identity as a collection stores it (:func:`content_hash` of the file,
-    and of an AMC's ASF, found by :func:`find_skeleton` from ``skeleton``).
+    and of an AMC's ASF, found by :func:`find_skeleton` from ``skeleton``); for an FBX file of
+    several takes, of the take ``take`` names (the first when None, as reading it reads).
 
     Raises
     ------
     FormatError, OSError
-        As :func:`find_skeleton`; a file that cannot be read.
+        As :func:`find_skeleton`; a file that cannot be read; no such take.
     """
     path = Path(path)
     asf = find_skeleton(path, skeleton) if path.suffix.lower() == ".amc" else None
-    return content_hash(path, asf)
+    takes = file_takes(path, take)
+    return content_hash(path, asf, takes[0][0])
+
+
+def file_takes(path: Path, wanted: str | int | None = None) -> list[tuple[str | None, str | None]]:
+    """The clips a motion file makes, as (the take a reference stores, the short name its
+    clip name ends with): for an FBX file of several takes, each take (the one ``wanted``
+    names, :func:`quatmotion.io.fbx.take_index`); for any other file ``[(None, None)]`` (an
+    FBX file of one take or none too, ``wanted`` checked against it).
+
+    Raises
+    ------
+    FormatError
+        An FBX file that cannot be read, or without the take ``wanted`` names.
+    """
+    from quatmotion.io.fbx import FBX_SUFFIXES, read_fbx_takes, take_index, take_labels
+
+    if path.suffix.lower() not in FBX_SUFFIXES:
+        return [(None, None)]
+    names = read_fbx_takes(path)
+    picked = None if wanted is None else take_index(names, wanted, path)
+    if len(names) < 2:
+        return [(None, None)]
+    labels = take_labels(names)
+    chosen = range(len(names)) if picked is None else [picked]
+    return [(names[k], labels[k]) for k in chosen]
 
 
 def find_clips(
@@ -211,13 +258,16 @@ def find_clips(
         try:
             asf = find_skeleton(path, read.skeleton) if path.suffix.lower() == ".amc" else None
             asf = None if asf is None else Path(os.path.abspath(asf))
-            sha = content_hash(path, asf)
+            takes = file_takes(path, read.take)
+            digest = file_digest(path, asf)
         except (FormatError, OSError) as error:
             if on_error is None:
                 raise
             on_error.append((str(path), _one_line(error)))
             continue
-        found.append(ClipSource(name, sha, path, asf))
+        for take, label in takes:
+            clip = name if label is None else f"{name}/{label}"
+            found.append(ClipSource(clip, take_hash(digest, take), path, asf, take=take))
     for motion in motions:
         if not motion.name:
             raise ValueError("a clip given in memory needs a name (Motion.name)")
@@ -248,7 +298,7 @@ def read_clip(source: ClipSource | ClipRef, read: ReadSettings | None = None) ->
     if isinstance(source, ClipRef):
         path = None if source.path is None else Path(source.path)
         asf = None if source.skeleton_path is None else Path(source.skeleton_path)
-        source = ClipSource(source.name, source.sha256, path, asf)
+        source = ClipSource(source.name, source.sha256, path, asf, take=source.take)
     if source.motion is not None:
         motion, doubts = source.motion, implausible_values(source.motion)
     else:
@@ -261,6 +311,7 @@ def read_clip(source: ClipSource | ClipRef, read: ReadSettings | None = None) ->
             source.skeleton_path if amc else None,
             units=None if amc else read.units,
             translations=read.translations if bvh else "auto",
+            animation=None if amc or bvh else (source.take or read.take),
         )
     if motion.name != source.name:
         motion = motion.renamed(source.name)

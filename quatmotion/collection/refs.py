@@ -10,6 +10,11 @@ Conventions
 * :attr:`ClipRef.name` is what a user types and reads, unique within one collection: the file
   stem, or where stems collide, the path relative to the sources' common folder without its
   suffix (``s1/take_001`` and ``s2/take_001``), with the suffix too where only it differs.
+* **Takes.** A file of several takes (an FBX file's animation stacks) is a clip per take: its
+  reference carries the take's name (:attr:`ClipRef.take`), its hash is the file's bytes'
+  then the take's name (:func:`content_hash`), and its name is the file's name then the
+  take's short name (``walk/run``: :func:`quatmotion.io.fbx.take_labels`). A file of one take
+  is one clip, as any other file (no take, the file's hash): reading it reads its take.
 * Paths are stored absolute and resolved (``path``, ``skeleton_path``). A reader that does not
   find a stored path tries it relative to the collection file's folder
   (:meth:`ClipRef.locate`), so a folder moved whole with its library still finds its sources.
@@ -33,7 +38,10 @@ from quatmotion.motion import Motion
 __all__ = [
     "ClipRef",
     "content_hash",
+    "file_digest",
     "motion_hash",
+    "named_for_file",
+    "take_hash",
     "unique_names",
 ]
 
@@ -60,6 +68,9 @@ class ClipRef:
         per unit (``"2.54 cm"``); ``"asf"`` for an AMC (its ASF states the unit); "" unknown.
     units_guessed : bool
         Whether ``units`` was guessed from the skeleton's size (a BVH read without a unit).
+    take : str or None
+        The take of a file of several (an FBX animation stack's name) this clip is; None for
+        a file of one take or none.
     """
 
     name: str
@@ -69,6 +80,7 @@ class ClipRef:
     skeleton: str = ""
     units: str = ""
     units_guessed: bool = False
+    take: str | None = None
 
     def __post_init__(self) -> None:
         if not self.name:
@@ -145,14 +157,32 @@ def _locate(stored: str | None, base: str | Path | None) -> Path | None:
     return None
 
 
-def content_hash(path: str | Path, skeleton: str | Path | None = None) -> str:
-    """SHA-256 (hex) of a motion file's bytes, then of its skeleton file's if given."""
+def content_hash(
+    path: str | Path, skeleton: str | Path | None = None, take: str | None = None
+) -> str:
+    """SHA-256 (hex) of a motion file's bytes, then of its skeleton file's if given, then of
+    the take's name if given (one take of a file of several)."""
+    return take_hash(file_digest(path, skeleton), take)
+
+
+def file_digest(path: str | Path, skeleton: str | Path | None = None) -> Any:
+    """The running SHA-256 of a motion file's bytes and its skeleton file's (the part of
+    :func:`content_hash` every take of a file shares)."""
     h = hashlib.sha256()
     for p in (path, skeleton):
         if p is not None:
             with open(p, "rb") as f:
                 for chunk in iter(lambda: f.read(1 << 20), b""):
                     h.update(chunk)
+    return h
+
+
+def take_hash(digest: Any, take: str | None) -> str:
+    """:func:`content_hash` from :func:`file_digest`'s ``digest`` (not changed) and a take."""
+    if take is None:
+        return digest.hexdigest()
+    h = digest.copy()
+    h.update(b"\0quatmotion-take\0" + take.encode("utf-8", "surrogatepass"))
     return h.hexdigest()
 
 
@@ -188,6 +218,13 @@ def unique_names(paths: Sequence[Path]) -> list[str]:
     return names
 
 
+def named_for_file(name: str, file_name: str, take: str | None) -> str:
+    """The name of a clip called ``name`` once its file is named ``file_name``
+    (:func:`unique_names`): that name, and for one take of a file of several (``take`` not
+    None), the take's short name after it (the last part of ``name``: ``walk/run``)."""
+    return file_name if take is None else f"{file_name}/{PurePosixPath(name).name}"
+
+
 def duplicates(names: Iterable[str]) -> list[str]:
     """The names that occur more than once, sorted."""
     return sorted(n for n, c in Counter(names).items() if c > 1)
@@ -208,7 +245,9 @@ def name_apart(ref: ClipRef, held: Sequence[ClipRef], path: Path | str) -> ClipR
         return ref
     other = names[ref.name]
     if ref.path is not None and other.path is not None and other.path != ref.path:
-        renamed = unique_names([Path(other.path), Path(ref.path)])[1]
+        renamed = named_for_file(
+            ref.name, unique_names([Path(other.path), Path(ref.path)])[1], ref.take
+        )
         if renamed not in names:
             return replace(ref, name=renamed)
     raise ValueError(f"{path}: already holds a clip named {ref.name!r}")

@@ -27,7 +27,10 @@ Conventions
   a whole number is that number), from its start to its end, every frame evaluated by ufbx: no
   key reduction, no resampling of our own. A joint whose translation moves relative to its
   parent (beyond 1e-4 cm) makes the clip carry ``joint_translations``. A file without takes
-  gives a clip of no frames.
+  gives a clip of no frames. A take is named by its name, its short name
+  (:func:`take_labels`: ``run`` of Blender's ``Armature|run``) or its position
+  (:func:`take_index`); a collection makes a clip of every take of a file of several
+  (:func:`quatmotion.collection.find_clips`).
 * The skeleton's ``extras``: ``format="fbx"``, ``length_scale``, ``fbx_take`` (the take
   read), ``fbx_takes`` (every take's name), ``fbx_up`` (the file's up axis, ``"+Y"``...).
 
@@ -51,6 +54,7 @@ import re
 import sys
 import traceback
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -63,7 +67,15 @@ from quatmotion.io.gltf.read import unique_names
 from quatmotion.io.units import length_unit
 from quatmotion.motion import Motion, Skeleton
 
-__all__ = ["FBX_SUFFIXES", "fbx_takes", "parse_fbx", "read_fbx"]
+__all__ = [
+    "FBX_SUFFIXES",
+    "fbx_takes",
+    "parse_fbx",
+    "read_fbx",
+    "read_fbx_takes",
+    "take_index",
+    "take_labels",
+]
 
 FBX_SUFFIXES = (".fbx",)
 CM_PER_METRE = 100.0
@@ -72,6 +84,7 @@ MOVING_TRANSLATION_CM = 1e-4
 ``joint_translations`` (float32 keys of centimetre translations vary by ~1e-6 cm)."""
 
 _MODEL = re.compile(rb"^[ \t]*Model:", re.MULTILINE)
+_NOT_IN_FILE_NAMES = re.compile(r'[\x00-\x1f/\\:*?"<>|]')
 _END_NAME = re.compile(r"(?:[_\-.\s]end|nub|end_?site)$", re.IGNORECASE)
 
 
@@ -125,6 +138,50 @@ def fbx_takes(data: bytes, path: str | Path) -> list[str]:
     """The names of the takes (animation stacks) of an FBX file's bytes, in file order."""
     with _Scene(data, Path(path)) as loaded:
         return [stack.name for stack in _elements(loaded.scene, loaded.scene.anim_stacks)]
+
+
+def read_fbx_takes(path: str | Path) -> list[str]:
+    """:func:`fbx_takes` of the file at ``path`` (its size checked first)."""
+    path = Path(path)
+    limits.check("file_bytes", path.stat().st_size, path, "the file's size")
+    return fbx_takes(path.read_bytes(), path)
+
+
+def take_labels(names: Sequence[str]) -> list[str]:
+    """Short names of a file's takes, unique, for clip names (``walk/run``): the part after
+    the last ``|`` (Blender writes ``Armature|run``) where those are unique, else the whole
+    name; characters a file name cannot hold made ``_``; a take named by nothing usable, and
+    one whose short name another took first, ``take{k}`` (its position)."""
+    shorts = [name.rsplit("|", 1)[-1] for name in names]
+    chosen = shorts if len(set(shorts)) == len(shorts) else list(names)
+    labels: list[str] = []
+    for k, name in enumerate(chosen):
+        label = _NOT_IN_FILE_NAMES.sub("_", name).strip(" .")
+        labels.append(label if label and label not in labels else f"take{k}")
+    return labels
+
+
+def take_index(names: Sequence[str], wanted: str | int, path: str | Path | None) -> int:
+    """The position of the take ``wanted`` names among a file's takes ``names``: a take's
+    name, else its short name (:func:`take_labels`), else a position from 0 (a take named
+    ``"2"`` is that take, not the third).
+
+    Raises
+    ------
+    FormatError
+        Naming the file and its takes.
+    """
+    text = str(wanted)
+    if text in names:
+        return list(names).index(text)
+    labels = take_labels(names)
+    if text in labels:
+        return labels.index(text)
+    if isinstance(wanted, int) or text.isdigit():
+        if not 0 <= int(text) < len(names):
+            raise FormatError(f"no take {int(text)}: the file has {len(names)}", path)
+        return int(text)
+    raise FormatError(f"no take named {text!r}; the file has {list(names)}", path)
 
 
 # --------------------------------------------------------------------------------------------
@@ -353,22 +410,14 @@ class _Reader:
                 warnings.warn(
                     FormatWarning(
                         f"the file holds {len(stacks)} takes ({', '.join(map(repr, names[:8]))}"
-                        f"{'...' if len(names) > 8 else ''}); the first is read (info, convert "
-                        "and view read another with --take NAME)",
+                        f"{'...' if len(names) > 8 else ''}); the first is read (--take NAME reads "
+                        "another)",
                         self.path,
                     ),
                     stacklevel=4,
                 )
             return stacks[0] if stacks else None
-        number = isinstance(wanted, int) or (isinstance(wanted, str) and wanted.isdigit())
-        if number and wanted not in names:  # a take named "2" is that take, not the third
-            k = int(wanted)
-            if not 0 <= k < len(stacks):
-                raise self.fail(f"no take {k}: the file has {len(stacks)}")
-            return stacks[k]
-        if wanted not in names:
-            raise self.fail(f"no take named {wanted!r}; the file has {names}")
-        return stacks[names.index(wanted)]
+        return stacks[take_index(names, wanted, self.path)]
 
     def frame_rate(self) -> tuple[float, float]:
         """(the rate frames are evaluated at, the rate reported), frames per second."""

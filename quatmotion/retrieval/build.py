@@ -14,6 +14,7 @@ hash) and says it resumed.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ from quatmotion.collection import (
     read_clip,
     unique_names,
 )
+from quatmotion.collection.refs import named_for_file
 from quatmotion.io import Doubt
 from quatmotion.io.labels import read_labels_csv
 from quatmotion.parallel import Failure, Runner, Scheduler
@@ -134,24 +136,26 @@ def _plan(index: IndexFile, found: list[ClipSource], report: BuildReport) -> lis
     kept = {r.ref.path for r in rows if r.ref.path}
     new = [s for s in found if (str(s.path) if s.path else None, s.sha256) not in held]
     report.skipped += [s.ref() for s in found if s not in new]
-    old_paths = [Path(r.ref.path) for r in rows if r.ref.path]
-    new_files = [s for s in new if s.path is not None and str(s.path) not in kept]
-    names = unique_names(old_paths + [s.path for s in new_files])  # type: ignore[misc]
-    old_names = dict(zip((r.ref.path for r in rows if r.ref.path), names, strict=False))
+    old_paths = list(dict.fromkeys(r.ref.path for r in rows if r.ref.path))  # a file's takes:
+    new_files = list(dict.fromkeys(  # one path, named once
+        str(s.path) for s in new if s.path is not None and str(s.path) not in kept
+    ))  # fmt: skip
+    names = unique_names([Path(p) for p in old_paths + new_files])
+    file_names = dict(zip(old_paths + new_files, names, strict=True))
     index.rename(
         {
-            r.name: old_names[r.ref.path]
+            r.name: renamed
             for r in rows
-            if r.ref.path and old_names[r.ref.path] != r.name
+            if r.ref.path
+            and (renamed := named_for_file(r.name, file_names[r.ref.path], r.ref.take)) != r.name
         }
     )
-    new_names = dict(zip((str(s.path) for s in new_files), names[len(old_paths) :], strict=True))
     out = []
     for s in new:
         name = s.name
         if s.path is not None:  # a changed file keeps its clip's name
-            name = new_names.get(str(s.path)) or old_names.get(str(s.path)) or s.name
-        out.append(ClipSource(name, s.sha256, s.path, s.skeleton_path, s.motion))
+            name = named_for_file(s.name, file_names[str(s.path)], s.take)
+        out.append(dataclasses.replace(s, name=name))
     return out
 
 

@@ -18,11 +18,14 @@ Conventions
 * A clip and all its feature rows are written in one transaction, and transactions are
   committed in batches: a build that is killed leaves a readable index of the clips committed
   so far, and the next build skips them (same path and content hash).
-* Versions (:data:`FORMAT`): 2 writes the clip references and the settings; 1 (quatmotion
-  0.3.0, paths as given, names the file stems) is still read, its clips given references on
-  reading (names made unique, paths resolved against the index's folder), and is extended
-  only after a rebuild. What differs between them is one reader per version
-  (:data:`_READERS`), chosen once when the file is opened.
+* Versions (:data:`FORMAT`): 3 adds the take of a clip that is one take of a file of several
+  (``clips.take``: :attr:`ClipRef.take`); 2 writes the clip references and the settings, is
+  read with no takes and, opened for writing, is made a version 3 in place (the column added,
+  the version changed, in one transaction); 1 (quatmotion 0.3.0, paths as given, names the
+  file stems) is still read, its clips given references on reading (names made unique, paths
+  resolved against the index's folder), and is extended only after a rebuild. What differs
+  between them is one reader per version (:data:`_READERS`), chosen once when the file is
+  opened.
 * Opening checks the format and version (:class:`~quatmotion.errors.FormatError` for a file
   that is not SQLite, a truncated database, another format, or a version this code does not
   read) and that the feature parameters are the ones this code computes (else: rebuild).
@@ -126,6 +129,7 @@ CREATE TABLE clips (
     skeleton TEXT NOT NULL DEFAULT '',
     units TEXT NOT NULL DEFAULT '',
     units_guessed INTEGER NOT NULL DEFAULT 0,
+    take TEXT,
     label TEXT NOT NULL DEFAULT '',
     frames INTEGER NOT NULL,
     fps REAL NOT NULL,
@@ -316,6 +320,8 @@ class IndexFile:
             if write and reader.read_only is not None:
                 raise FormatError(reader.read_only, path)
             settings = reader.settings(meta, path)
+            if write and version == 2:
+                version = _upgrade_v2(db, path)
         except (FormatError, ValueError, TypeError) as error:
             db.close()
             if isinstance(error, FormatError):
@@ -427,13 +433,17 @@ class IndexFile:
         with _writing(self.path), self._db:
             for r in records:
                 ref = r.ref
-                if ref.path is not None:
-                    self._db.execute("DELETE FROM clips WHERE path = ?", (ref.path,))
+                if ref.path is not None:  # the file's old clip, or that take's (and a whole file's)
+                    self._db.execute(
+                        "DELETE FROM clips WHERE path = ? AND (? IS NULL OR take IS NULL "
+                        "OR take = ?)",
+                        (ref.path, ref.take, ref.take),
+                    )
                 self._db.execute("DELETE FROM clips WHERE name = ?", (ref.name,))
                 cur = self._db.execute(
                     "INSERT INTO clips (name, sha256, path, skeleton_path, skeleton, units, "
-                    "units_guessed, label, frames, fps, rotation_key) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    "units_guessed, take, label, frames, fps, rotation_key) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     (
                         ref.name,
                         ref.sha256,
@@ -442,6 +452,7 @@ class IndexFile:
                         ref.skeleton,
                         ref.units,
                         int(ref.units_guessed),
+                        ref.take,
                         r.label,
                         r.frames,
                         r.fps,
@@ -533,15 +544,31 @@ def _stored_path_v1(path: str | Path) -> str:
     return str(path)  # as given at build time
 
 
-def _rows_v2(db: sqlite3.Connection, path: Path) -> list[ClipRow]:
+def _upgrade_v2(db: sqlite3.Connection, path: Path) -> int:
+    """A version-2 index opened for writing made a version 3: the ``take`` column added, the
+    version changed, in one transaction (a version-2 clip is a whole file: no take)."""
+    with _writing(path), db:
+        db.execute("ALTER TABLE clips ADD COLUMN take TEXT")
+        db.execute("UPDATE meta SET value = '3' WHERE key = 'version'")
+    return 3
+
+
+def _rows_v3(db: sqlite3.Connection, path: Path) -> list[ClipRow]:
+    return _rows_v2(db, path, take="take")
+
+
+def _rows_v2(db: sqlite3.Connection, path: Path, take: str = "NULL") -> list[ClipRow]:
+    """Version 2's rows (no ``take`` column: every clip a whole file); version 3's with
+    ``take="take"``."""
     base = path.resolve().parent
     out = []
     for row in db.execute(
-        "SELECT id, name, sha256, path, skeleton_path, skeleton, units, units_guessed, label, "
-        "frames, fps, rotation_key FROM clips ORDER BY id"
+        "SELECT id, name, sha256, path, skeleton_path, skeleton, units, units_guessed, "
+        f"{take}, label, frames, fps, rotation_key FROM clips ORDER BY id"
     ):
-        (clip, name, sha, stored, asf, skeleton, units, guessed, label, frames, fps, key) = row
-        ref = ClipRef(name, sha, stored, asf, skeleton, units, bool(guessed))
+        (clip, name, sha, stored, asf, skeleton, units, guessed, take_name, label, *rest) = row
+        frames, fps, key = rest
+        ref = ClipRef(name, sha, stored, asf, skeleton, units, bool(guessed), take_name)
         found = ref.locate(base)[0]
         where = str(found) if found is not None else (stored or "")
         out.append(ClipRow(int(clip), ref, label, int(frames), float(fps), key, where))
@@ -580,6 +607,7 @@ _READERS = {
         "quatmotion index build to extend it",
     ),
     2: _Reader(_rows_v2, _settings_v2, os.path.abspath, blobs=True, read_only=None),
+    3: _Reader(_rows_v3, _settings_v2, os.path.abspath, blobs=True, read_only=None),
 }
 """The reader of each format version this code reads, kept once released."""
 

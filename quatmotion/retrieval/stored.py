@@ -25,7 +25,7 @@ from quatmotion.retrieval import features as feat
 
 __all__ = ["FEATURE_PARAMETERS", "FORMAT", "check_index", "read_array"]
 
-FORMAT = FileFormat("quatmotion-retrieval-index", 2, 1, "a quatmotion clip index")
+FORMAT = FileFormat("quatmotion-retrieval-index", 3, 1, "a quatmotion clip index")
 
 FEATURE_PARAMETERS = {
     "feature_fps": feat.FEATURE_FPS,
@@ -39,7 +39,11 @@ FEATURE_PARAMETERS = {
 }
 """What the stored features depend on; an index built with other values must be rebuilt."""
 
-_TABLES = {1: ("meta", "clips", "features"), 2: ("meta", "clips", "features", "blobs")}
+_TABLES = {
+    1: ("meta", "clips", "features"),
+    2: ("meta", "clips", "features", "blobs"),
+    3: ("meta", "clips", "features", "blobs"),
+}
 
 
 def check_index(db: sqlite3.Connection, path: Path) -> tuple[int, dict[str, str]]:

@@ -357,7 +357,8 @@ class ClipCatalogue:
         pose_paths = list(self._poses.clip_names) if self._poses is not None else []
         pose_names = _display_names(pose_paths, [Path(n).stem for n in pose_paths])
         row_keys = [clip_key(r) for r in rows]
-        pose_keys = [clip_key(n) for n in pose_paths]
+        refs = self._poses.refs if self._poses is not None else []  # version 3 on: hashes
+        pose_keys = [r.sha256 for r in refs] if refs else [clip_key(n) for n in pose_paths]
         # The clips whose key is known, by the name a library written before clip references
         # gives them (names that occur once only).
         by_name = _keys_by_name([(row_names, row_keys), (pose_names, pose_keys)])
@@ -544,7 +545,7 @@ class ClipCatalogue:
             raise UnavailableError(f"the original file of clip {name!r} is missing")
         try:
             skeleton = _skeleton_of(ref, path)
-            if content_hash(path, skeleton) != ref.sha256:
+            if content_hash(path, skeleton, ref.take) != ref.sha256:
                 raise UnavailableError(
                     f"the original file of clip {name!r} changed since it was indexed"
                 )

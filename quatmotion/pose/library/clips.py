@@ -113,11 +113,15 @@ def load_pose_source(
     """Read one clip of a collection (:func:`quatmotion.collection.read_clip`) and prepare it
     for a pose library (the per-clip job of :meth:`PoseLibrary.build`: module level).
 
-    The clip is named by its file's path (its name for a clip made in memory); a clip beyond a
-    kilometre is refused (``read.strict``: its features would overflow).
+    The clip is named by its file's path (its name for a clip made in memory; for one take of
+    a file of several, the path without its suffix, then the take's short name: matched by
+    ``walk/run`` as the collection names it); a clip beyond a kilometre is refused
+    (``read.strict``: its features would overflow).
     """
     motion, _, doubts = read_clip(source, dataclasses.replace(read, strict=True))
     name = str(source.path) if source.path is not None else source.name
+    if source.path is not None and source.take is not None:
+        name = f"{source.path.with_suffix('')}/{pathlib.PurePosixPath(source.name).name}"
     with np.errstate(all="ignore"):
         clip = PoseClip.from_motion(motion, fps=fps, height=height, name=name)
     return dataclasses.replace(clip, doubts=tuple(doubts))

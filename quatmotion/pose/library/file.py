@@ -31,9 +31,10 @@ from quatmotion.pose.transition import TransitionClassifier
 
 __all__ = ["FORMAT", "derived_refs", "read_library", "write_library"]
 
-FORMAT = FileFormat("quatmotion-pose-library", 3, 2, "a quatmotion pose library")
-"""3: the clips' references and the settings in ``meta``; 2 (0.3.0, still read): poses on the
-canonical body, features clipped to the library's range."""
+FORMAT = FileFormat("quatmotion-pose-library", 4, 2, "a quatmotion pose library")
+"""4: a clip's reference carries its take (``take``: one take of a file of several); 3 (0.4.0,
+still read, every clip a whole file): the clips' references and the settings in ``meta``; 2
+(0.3.0, still read): poses on the canonical body, features clipped to the library's range."""
 _FORMAT = FORMAT.name
 _VERSION = FORMAT.version
 _NOT_A_LIBRARY = (

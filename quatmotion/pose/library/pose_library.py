@@ -263,14 +263,15 @@ class PoseLibrary:
         progress: Callable[[str, int, int], None] | None = None,
         log: Callable[[str], None] | None = None,
         on_doubt: Callable[[str, Doubt], None] | None = None,
+        take: str | None = None,
     ) -> BuildReport:
         """Add ``sources`` to the library at ``path`` with its stored settings and distance
         (nothing is learned again): each new clip is read, projected and inserted into the
         graph; a clip whose content the library already holds is skipped; a new clip whose
         name a stored clip of another file has is named by the collection's rule
         (:func:`~quatmotion.collection.unique_names` over the two paths). The file is
-        rewritten whole (temporary file, then rename). ``skeleton``, ``units`` and
-        ``joint_map`` (``"Canonical=joint"`` entries) replace the stored
+        rewritten whole (temporary file, then rename). ``skeleton``, ``units``, ``joint_map``
+        (``"Canonical=joint"`` entries) and ``take`` replace the stored
         :class:`~quatmotion.collection.ReadSettings`' for the new clips.
 
         Raises
@@ -292,6 +293,7 @@ class PoseLibrary:
             "skeleton": None if skeleton is None else os.fspath(skeleton),
             "units": units,
             "joint_map": None if joint_map is None else tuple(joint_map),
+            "take": take,
         }
         given = {k: v for k, v in given.items() if v is not None}
         if given:  # how the new clips are read, over the stored reading settings
