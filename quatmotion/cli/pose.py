@@ -281,6 +281,8 @@ def ls_command(
         if settings is None
         else (f"{settings['metric']}, {settings['fps']:g} fps, height {settings['height']:g} cm")
     )
+    if read is not None and read.joint_map:
+        made += f"; joint map {', '.join(read.joint_map)}"
     console.print(
         f"{len(refs)} clips, {len(library.clip_of)} poses; pose library version "
         f"{library.version}; {made}",
