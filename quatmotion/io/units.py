@@ -6,10 +6,11 @@ Conventions
   file may be in; :func:`length_unit` takes a name or a number (``2.54``, ``"2.54"``).
 * **The body** (:func:`find_body`): the head and the ankles of a skeleton, found by joint names
   (English and the usual rig prefixes, ``lfoot``, ``LeftFoot``, ``Foot_L``, ``Bip01 L Foot``,
-  and German, French, Spanish, Italian, Japanese and Chinese words), else by its shape: a body
-  has two joints where two long limbs or more branch off (pelvis and chest), a spine apart; a
-  lone hand has one (the wrist). A skeleton with neither a named head or leg nor that shape is
-  not a body, and its size says nothing about its unit.
+  and German, French, Spanish, Italian, Japanese and Chinese words: those of
+  :func:`quatmotion.motion.humanoid.body_part`, the one home of joint names), else by its
+  shape: a body has two joints where two long limbs or more branch off (pelvis and chest), a
+  spine apart; a lone hand has one (the wrist). A skeleton with neither a named head or leg
+  nor that shape is not a body, and its size says nothing about its unit.
 * **Its size** in file units (:func:`body_size`): the stature chain, the bone path from an ankle
   up to the top of the head, which no pose changes (a T-pose's arm span, a figure lying down,
   a rest pose laid out along an axis, a studio's position channels all leave it alone); bone
@@ -24,13 +25,13 @@ Conventions
 from __future__ import annotations
 
 import copy
-import re
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion.motion import Motion, Skeleton, forward_kinematics
+from quatmotion.motion.humanoid import body_part
 
 __all__ = [
     "LENGTH_UNITS",
@@ -120,64 +121,6 @@ def unit_name(cm_per_unit: float) -> str | None:
 # The body
 # --------------------------------------------------------------------------------------------
 
-_HEAD = {"head", "headtop", "kopf", "tete", "tête", "cabeza", "testa", "skull", "cranium"}
-_FOOT = {
-    "foot", "feet", "ankle", "toe", "toes", "toebase", "heel", "fuss", "fuß", "knöchel",
-    "knochel", "zeh", "zehe", "zehen", "pied", "cheville", "orteil", "orteils", "pie",
-    "tobillo", "piede", "caviglia",
-}  # fmt: skip
-_LEG = {
-    "leg", "upleg", "upperleg", "lowerleg", "thigh", "knee", "shin", "calf", "femur", "tibia",
-    "bein", "oberschenkel", "unterschenkel", "knie", "jambe", "cuisse", "genou", "pierna",
-    "muslo", "rodilla", "gamba", "coscia", "ginocchio",
-}  # fmt: skip
-# Words of scripts that do not separate words: matched as substrings, feet before legs (足首,
-# the ankle, holds 足, the leg of Japanese rigs).
-_HEAD_CJK = ("頭", "头")
-_FOOT_CJK = ("足首", "つま先", "足先", "爪先", "かかと", "踵", "脚踝")
-_LEG_CJK = ("足", "脚", "ひざ", "膝", "もも", "腿")
-_HAND = {
-    "hand", "finger", "fingers", "thumb", "index", "middle", "ring", "pinky", "pinkie",
-    "little", "palm", "wrist", "carpal", "metacarpal", "phalanx", "phalange", "knuckle",
-    "daumen", "pouce", "doigt", "main", "mano", "dedo", "pulgar", "dito",
-}  # fmt: skip
-_HAND_CJK = ("指", "手")
-_SIDES = ("left", "right", "l", "r")
-_CAMEL = re.compile(r"(?<=[a-z0-9])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])")
-_NOT_WORD = re.compile(r"[\W_\d]+")
-
-
-def _words(name: str) -> list[str]:
-    """A joint name's words, lower case: ``mixamorig:LeftToeBase`` -> mixamorig, left, toe,
-    base; with a side letter or word stuck to the front split off (``lfoot`` -> l, foot)."""
-    words = []
-    for word in _NOT_WORD.split(_CAMEL.sub(" ", name).lower()):
-        if not word:
-            continue
-        for side in _SIDES:
-            rest = word[len(side) :]
-            if word.startswith(side) and rest in _HEAD | _FOOT | _LEG:
-                words += [side, rest]
-                break
-        else:
-            words.append(word)
-    return words
-
-
-def _part(name: str) -> str | None:
-    """``"head"``, ``"foot"``, ``"leg"``, ``"hand"`` or None: what body part a joint name
-    says."""
-    words = set(_words(name))
-    if words & _HEAD or any(c in name for c in _HEAD_CJK):
-        return "head"
-    if words & _FOOT or any(c in name for c in _FOOT_CJK):
-        return "foot"
-    if words & _LEG or any(c in name for c in _LEG_CJK):
-        return "leg"
-    if words & _HAND or any(c in name for c in _HAND_CJK):
-        return "hand"
-    return None
-
 
 class Body(NamedTuple):
     """Where a skeleton's head and ankles are: indices of points, joints then end sites (the
@@ -230,7 +173,7 @@ def find_body(skeleton: Skeleton) -> Body | None:
     body whose parts are not known. A lone hand, a prop or a tail is None.
     """
     names = _names(skeleton)
-    parts = [_part(n) for n in names]
+    parts = [body_part(n) for n in names]
     parents = np.concatenate((skeleton.parents, skeleton.site_parents))
     tree = _tree(skeleton)
     heads = [p for p, part in enumerate(parts) if part == "head"]

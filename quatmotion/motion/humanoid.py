@@ -60,10 +60,14 @@ __all__ = [
     "JOINTS_16",
     "JOINT_MAP_EXTRA",
     "PARENTS_16",
+    "PART_CJK",
+    "PART_WORDS",
     "HumanoidError",
     "HumanoidMap",
+    "body_part",
     "check_joint_map",
     "map_humanoid",
+    "name_words",
     "parse_name",
     "with_joint_map",
 ]
@@ -130,12 +134,14 @@ _PREFIXES = re.compile(
 )
 _CAMEL = re.compile(r"(?<=[a-z])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])|(?<=\D)(?=\d)|(?<=\d)(?=\D)")
 _SPLIT = re.compile(r"[^a-z0-9]+")
+_FINGERS = {"finger", "fingers", "thumb", "index", "middle", "ring", "pinky", "pinkie", "little"}
+_TOES = {"toe", "toes", "toebase"}
+_PALM = {"palm", "metacarpal", "carpal"}
 _HELPERS = {
     "twist", "roll", "helper", "help", "end", "nub", "tip", "ik", "fk", "pole", "target",
     "ctrl", "control", "mch", "corrective", "dummy", "null", "share", "bend", "aux", "fix",
     "top", "jaw", "eye", "brow", "lip", "cheek", "tongue", "ear", "nose", "teeth", "breast",
-    "finger", "fingers", "thumb", "index", "middle", "ring", "pinky", "pinkie", "little",
-    "toe", "toes", "toebase", "ball", "palm", "metacarpal", "carpal", "hipjoint",
+    *_FINGERS, *_TOES, *_PALM, "ball", "hipjoint",
     "clavicle", "collar", "scapula", "site", "weapon", "prop", "attach", "slot",
 }  # fmt: skip
 _TWISTS = {
@@ -159,6 +165,73 @@ _KNOWN = (
     }
 )
 _SIDE_WORDS = {"l": "L", "left": "L", "r": "R", "right": "R", "lft": "L", "rgt": "R", "rt": "R"}
+
+# Body parts by the words of a name, in the languages rigs are named in: the head, feet, legs
+# and hands, what finds a body's stature chain (quatmotion.io.units.find_body) whether or not
+# the 16 joints can be mapped. The English keys of ALIASES are among them.
+PART_WORDS: dict[str, frozenset[str]] = {
+    "head": frozenset({
+        *ALIASES["Head"], "headtop", "kopf", "tete", "tête", "cabeza", "testa", "skull",
+        "cranium",
+    }),
+    "foot": frozenset({
+        *ALIASES["Foot"], *_TOES, "feet", "heel", "fuss", "fuß", "knöchel", "knochel", "zeh",
+        "zehe", "zehen", "pied", "cheville", "orteil", "orteils", "pie", "tobillo", "piede",
+        "caviglia",
+    }),
+    "leg": frozenset({
+        *(k for k in ALIASES["Hip_"] if k != "hip"), *ALIASES["Knee"], "leg", "knee", "bein",
+        "oberschenkel", "unterschenkel", "knie", "jambe", "cuisse", "genou", "pierna",
+        "muslo", "rodilla", "gamba", "coscia", "ginocchio",
+    }),
+    "hand": frozenset({
+        *ALIASES["Hand"], *_FINGERS, *_PALM, "phalanx", "phalange", "knuckle", "daumen",
+        "pouce", "doigt", "main", "mano", "dedo", "pulgar", "dito",
+    }),
+}  # fmt: skip
+"""Words (lower case, any script that separates words) naming each body part; a thigh is a
+leg (``hip`` is not: many rigs call the pelvis so)."""
+PART_CJK: dict[str, tuple[str, ...]] = {
+    "head": ("頭", "头"),
+    "foot": ("足首", "つま先", "足先", "爪先", "かかと", "踵", "脚踝"),
+    "leg": ("足", "脚", "ひざ", "膝", "もも", "腿"),
+    "hand": ("指", "手"),
+}
+"""Words of scripts that do not separate words, matched as substrings; feet before legs (足首,
+the ankle, holds 足, the leg of Japanese rigs)."""
+_PART_ORDER = ("head", "foot", "leg", "hand")
+_PART_SIDES = ("left", "right", "l", "r")
+_PART_CAMEL = re.compile(r"(?<=[a-z0-9])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])")
+_NOT_A_LETTER = re.compile(r"[\W_\d]+")
+
+
+def name_words(name: str) -> list[str]:
+    """A joint name's words, lower case, any script: ``mixamorig:LeftToeBase`` -> mixamorig,
+    left, toe, base; a side letter or word stuck to the front of a head, foot or leg word
+    split off (``lfoot`` -> l, foot)."""
+    limbs = PART_WORDS["head"] | PART_WORDS["foot"] | PART_WORDS["leg"]
+    words = []
+    for word in _NOT_A_LETTER.split(_PART_CAMEL.sub(" ", name).lower()):
+        if not word:
+            continue
+        for side in _PART_SIDES:
+            rest = word[len(side) :]
+            if word.startswith(side) and rest in limbs:
+                words += [side, rest]
+                break
+        else:
+            words.append(word)
+    return words
+
+
+def body_part(name: str) -> str | None:
+    """``"head"``, ``"foot"``, ``"leg"``, ``"hand"`` or None: the body part a joint name says
+    (:data:`PART_WORDS`, :data:`PART_CJK`), in that order of precedence."""
+    words = set(name_words(name))
+    for part in _PART_ORDER:
+        if words & PART_WORDS[part] or any(c in name for c in PART_CJK[part]):
+            return part
+    return None
 
 
 class HumanoidError(ValueError):
