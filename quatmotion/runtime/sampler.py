@@ -203,7 +203,7 @@ class Sampler:
         out = len(self._B) - 3 - 4 * k
         self._root = self._B[out : out + 3]
         self._rot = self._B[out + 3 :].reshape(k, 4)
-        self._pose = compiled.pose
+        self._pose = compiled.pose_entry()
         self._poses = compiled.poses
         self._clip = clip
         self.joints = sel
