@@ -82,6 +82,7 @@ __all__ = [
     "refuse_unit",
     "report_skipped",
     "require_file",
+    "require_inputs",
     "skeleton_mappings",
     "unit_label",
     "unit_text",
@@ -223,6 +224,16 @@ def require_file(path: Path) -> Path:
     if path.is_dir():
         raise CliInputError(f"{path}: is a folder, expected a file")
     return path
+
+
+def require_inputs(inputs: Iterable[Path], skeleton: Path | None = None) -> None:
+    """A batch command's inputs, before any work: every file or folder exists, and the
+    ``--skeleton`` given is a file (:class:`CliInputError` naming the first that is not)."""
+    if skeleton is not None:
+        require_file(skeleton)
+    for path in inputs:
+        if not path.exists():
+            raise CliInputError(f"{path}: no such file or folder")
 
 
 # --- options shared by several commands ------------------------------------------------------

@@ -32,6 +32,7 @@ from quatmotion.cli._common import (
     progress_bar,
     report_skipped,
     require_file,
+    require_inputs,
     say_wrote,
     unit_label,
     unit_text,
@@ -196,11 +197,7 @@ def compress(
 
     with user_errors(out):
         check_units(units)
-        if skeleton is not None:
-            require_file(skeleton)
-        for path in inputs:
-            if not path.exists():
-                raise CliInputError(f"{path}: no such file or folder")
+        require_inputs(inputs, skeleton)
         read = ReadSettings(
             units=_units(units), skeleton=None if skeleton is None else str(skeleton), take=take
         )
@@ -401,11 +398,7 @@ def append(
     with user_errors(library):
         require_file(library)
         check_units(units)
-        if skeleton is not None:
-            require_file(skeleton)
-        for path in inputs:
-            if not path.exists():
-                raise CliInputError(f"{path}: no such file or folder")
+        require_inputs(inputs, skeleton)
         check_outputs([library], [*inputs, skeleton], replace=True)
         from quatmotion.cli._kernels import ensure_kernels
 

@@ -44,6 +44,7 @@ from quatmotion.cli._common import (
     read_clip,
     report_skipped,
     require_file,
+    require_inputs,
     say_wrote,
     skeleton_mappings,
     user_errors,
@@ -142,9 +143,7 @@ def _build(
 
     with user_errors():
         label_map = labels_option(labels)
-        for path in paths:
-            if not path.exists():
-                raise CliInputError(f"{path}: no such file or folder")
+        require_inputs(paths)
         asf = Path(settings.read.skeleton) if settings.read.skeleton else None
         asf_files = sorted(asf.glob("*.asf")) if asf is not None and asf.is_dir() else [asf]
         check_outputs([output], [*paths, labels, *asf_files], replace=True)

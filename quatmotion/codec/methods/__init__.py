@@ -15,11 +15,12 @@ import importlib
 from collections.abc import Iterator, MutableMapping
 from typing import Any
 
-from quatmotion.codec.methods._base import ClipContext, EncodedLibrary, Method
+from quatmotion.codec.methods._base import ClipContext, CodingOptions, EncodedLibrary, Method
 
 __all__ = [
     "METHODS",
     "ClipContext",
+    "CodingOptions",
     "EncodedLibrary",
     "Method",
     "NaiveMethod",

@@ -36,6 +36,19 @@ class ClipContext:
     """Which of the layout's channels the clip codes (translation joints at rest are not)."""
 
 
+@dataclass(frozen=True)
+class CodingOptions:
+    """What a method aims at when it learns a layout's model (:meth:`Method.fit_layout`) and
+    codes a clip (:meth:`Method.encode_clip`)."""
+
+    quality: float
+    """The method's quality knob (its quantiser step; larger means smaller payloads)."""
+    max_error: float | None
+    """The bound the encoder aims at, cm (None: none)."""
+    seed: int = 0
+    """Seed of the fitting's random choices (coding a clip makes none)."""
+
+
 class Method(ABC):
     """A codec. Subclasses set :attr:`name` and implement :meth:`fit_layout`,
     :meth:`model_bytes`, :meth:`encode_clip`, :meth:`load_model` and :meth:`decode`.
@@ -68,30 +81,20 @@ class Method(ABC):
         file (appending: returned unchanged) or ``None`` (fit one); a layout without members
         gets ``None``."""
         given = list(models or [])
+        options = CodingOptions(quality, max_error, seed)
         out: list[Any] = []
         for k in range(len(library.layouts)):
             if k < len(given) and given[k] is not None:
                 out.append(given[k])
             elif members[k]:
-                out.append(
-                    self.fit_layout(
-                        library, k, members[k], quality=quality, max_error=max_error, seed=seed
-                    )
-                )
+                out.append(self.fit_layout(library, k, members[k], options))
             else:
                 out.append(None)
         return out
 
     @abstractmethod
     def fit_layout(
-        self,
-        library: PreparedLibrary,
-        k: int,
-        members: list[int],
-        *,
-        quality: float,
-        max_error: float | None,
-        seed: int,
+        self, library: PreparedLibrary, k: int, members: list[int], options: CodingOptions
     ) -> Any:
         """Layout ``k``'s model learned on the clips ``members`` (at least one)."""
 
@@ -101,13 +104,7 @@ class Method(ABC):
 
     @abstractmethod
     def encode_clip(
-        self,
-        library: PreparedLibrary,
-        i: int,
-        model: Any,
-        *,
-        quality: float,
-        max_error: float | None,
+        self, library: PreparedLibrary, i: int, model: Any, options: CodingOptions
     ) -> bytes:
         """Clip ``i``'s payload, given its layout's model from :meth:`fit_models`. Pure: it
         reads only clip ``i``, its layout and ``model``, so clips may be coded in any order or

@@ -29,7 +29,7 @@ from quatmotion.codec.channels import (
     to_channels,
 )
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary
-from quatmotion.codec.methods._base import ClipContext, Method
+from quatmotion.codec.methods._base import ClipContext, CodingOptions, Method
 from quatmotion.errors import FormatError
 from quatmotion.quat import identity
 
@@ -60,14 +60,7 @@ class NaiveMethod(Method):
     default_quality = 0.8
 
     def fit_layout(
-        self,
-        library: PreparedLibrary,
-        k: int,
-        members: list[int],
-        *,
-        quality: float,
-        max_error: float | None,
-        seed: int,
+        self, library: PreparedLibrary, k: int, members: list[int], options: CodingOptions
     ) -> Any:
         return None  # nothing shared: every clip stands alone
 
@@ -75,15 +68,9 @@ class NaiveMethod(Method):
         return b""
 
     def encode_clip(
-        self,
-        library: PreparedLibrary,
-        i: int,
-        model: Any,
-        *,
-        quality: float,
-        max_error: float | None,
+        self, library: PreparedLibrary, i: int, model: Any, options: CodingOptions
     ) -> bytes:
-        step = float(quality)
+        step = float(options.quality)
         stride = stride_for(step)
         clip = library.clips[i]
         layout, unit = _file_layout(library.layouts[clip.layout])

@@ -40,7 +40,7 @@ from quatmotion.codec import entropy
 from quatmotion.codec.binary import Reader, Writer
 from quatmotion.codec.channels import KIND_ROOT
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary
-from quatmotion.codec.methods._base import ClipContext, Method
+from quatmotion.codec.methods._base import ClipContext, CodingOptions, Method
 from quatmotion.errors import FormatError
 from quatmotion.sparse import KSVD, QSSD, quaternion_combination
 
@@ -186,21 +186,14 @@ class SparseMethod(Method):
         return _coarse(d.reshape(clip.channels.shape[0], -1))
 
     def fit_layout(
-        self,
-        library: PreparedLibrary,
-        k: int,
-        members: list[int],
-        *,
-        quality: float,
-        max_error: float | None,
-        seed: int,
+        self, library: PreparedLibrary, k: int, members: list[int], options: CodingOptions
     ) -> Any:
         info = library.layouts[k]
         n = len(_sample_joints(info))
         Y = np.concatenate([self._coarse_of(library, i) for i in members])
         samples = quat.canonicalize(quat.exp(Y.reshape(-1, n, 3) / _GAIN / 2.0))
-        est, _, _ = self._fit(samples, seed)
-        model, blob = self._model_bytes(est, info, quality)
+        est, _, _ = self._fit(samples, options.seed)
+        model, blob = self._model_bytes(est, info, options.quality)
         model["bytes"] = blob
         return model
 
@@ -208,16 +201,11 @@ class SparseMethod(Method):
         return model.get("bytes", b"")  # a model read from a file is already there
 
     def encode_clip(
-        self,
-        library: PreparedLibrary,
-        i: int,
-        model: Any,
-        *,
-        quality: float,
-        max_error: float | None,
+        self, library: PreparedLibrary, i: int, model: Any, options: CodingOptions
     ) -> bytes:
         info = library.layouts[library.clips[i].layout]
-        return self._encode_clip(library, i, info, model, self._coarse_of(library, i), quality)
+        coarse = self._coarse_of(library, i)
+        return self._encode_clip(library, i, info, model, coarse, options.quality)
 
     def _model_bytes(self, est, info: LayoutInfo, quality: float):
         """Quantise the dictionary; returns the decoder's model and its bytes."""

@@ -44,7 +44,7 @@ from quatmotion.codec import entropy
 from quatmotion.codec.binary import Reader, Writer
 from quatmotion.codec.channels import joint_channels, joint_rotations
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary, decode_log2, encode_log2
-from quatmotion.codec.methods._base import ClipContext, Method
+from quatmotion.codec.methods._base import ClipContext, CodingOptions, Method
 from quatmotion.codec.metrics import frame_errors
 from quatmotion.codec.spline import (
     MIN_SPLINE_FRAMES,
@@ -315,31 +315,18 @@ class SplineMethod(Method):
 
     # ---------------------------------------------------------------------------- encoding
     def fit_layout(
-        self,
-        library: PreparedLibrary,
-        k: int,
-        members: list[int],
-        *,
-        quality: float,
-        max_error: float | None,
-        seed: int,
+        self, library: PreparedLibrary, k: int, members: list[int], options: CodingOptions
     ) -> Any:
-        return self._fit_model(library, k, members, max_error, quality)
+        return self._fit_model(library, k, members, options.max_error, options.quality)
 
     def model_bytes(self, model: Any, layout: LayoutInfo) -> bytes:
         return model.to_bytes()
 
     def encode_clip(
-        self,
-        library: PreparedLibrary,
-        i: int,
-        model: Any,
-        *,
-        quality: float,
-        max_error: float | None,
+        self, library: PreparedLibrary, i: int, model: Any, options: CodingOptions
     ) -> bytes:
-        breaks = self._breaks(library, i, max_error)
-        return self._encode_clip(library, i, model, breaks, quality, max_error)
+        breaks = self._breaks(library, i, options.max_error)
+        return self._encode_clip(library, i, model, breaks, options.quality, options.max_error)
 
     def _active(self, library: PreparedLibrary, i: int) -> NDArray[np.bool_]:
         clip = library.clips[i]

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 from quatmotion.codec.channels import to_channels
 from quatmotion.codec.library import PreparedClip, PreparedLibrary
+from quatmotion.codec.methods import CodingOptions
 from quatmotion.codec.metrics import ClipErrors
 from quatmotion.codec.repair import (
     Corrections,
@@ -85,10 +86,8 @@ def code_clip(task: ClipTask, models: SharedModels) -> CodedClip:
     library = _prepared(task, models)
     method = models.method
     if task.payload is None:
-        payload = method.encode_clip(
-            library, 0, models.models[task.layout], quality=models.quality,
-            max_error=models.max_error,
-        )  # fmt: skip
+        options = CodingOptions(models.quality, models.max_error)
+        payload = method.encode_clip(library, 0, models.models[task.layout], options)
     else:
         spool, offset, length = task.payload
         with open(spool, "rb") as file:
