@@ -92,7 +92,7 @@ def main() -> None:
     print(
         f"{clients} concurrent uploads of {uploaded / 1e6:.1f} MB: server RSS before "
         f"{before:.0f} MiB, peak {peak:.0f} MiB, {(peak - before) * 2**20 / uploaded:.1f} "
-        "bytes per byte uploaded"
+        "bytes per byte of one upload"
     )
     for k, status, seconds, text in sorted(results):
         print(f"  client {k}: {status} in {seconds:.1f} s {text if status != 200 else ''}")

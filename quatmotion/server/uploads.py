@@ -9,7 +9,7 @@ Conventions
   parsing by :data:`PARSE_COST`, by the file's suffix: bytes per byte of the file and, for the
   text formats, bytes per value it may hold (every separator may end a number: a file of
   ``0 0 0`` costs four times more per byte than one of ``12.3456``). The factors are the peaks
-  measured on large files of each kind, dense and ordinary, times about 1.5 (1.49 to 1.64:
+  measured on large files of each kind, dense and ordinary, times about 1.5 (1.41 to 1.64:
   ``docs/performance.md``, ``tools/measure-upload-memory.py``).
 * Admission, before the body is read: one upload at a time per client (its address; 429
   otherwise) and at most ``slots`` at once overall (503 otherwise), each with
@@ -83,8 +83,9 @@ PARSE_COST = {
 }
 """The estimate of each kind of file, by suffix. Measured (one upload to ``quatmotion
 serve``, the server's peak RSS over its RSS before): BVH 12.3 bytes per byte for 10.6
-bytes a value (ordinary), 41.7 for 2.0 (``0 0 0``), that is 5.6 bytes per byte plus 72 per
-value; AMC 13.3 and 25.6, 2.8 plus 87; glTF 15.7, GLB 17.5, FBX 29.8 and 30.9 bytes per byte."""
+bytes a value (ordinary), 16.2 for 7.8, 41.7 for 2.0 (``0 0 0``), that is about 5.6 bytes
+per byte plus 72 per value; AMC 13.3 and 25.6, 2.8 plus 87; glTF 15.7, GLB 17.5, FBX 29.8
+and 30.9 bytes per byte."""
 
 _UNKNOWN = ParseCost(max(c.per_byte for c in PARSE_COST.values()), _TEXT.per_value)
 _FRAMING = 65_536  # multipart headers, boundaries and form fields, bytes at most
