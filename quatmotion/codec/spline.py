@@ -161,61 +161,6 @@ def _knots(length: int, spacing: float, inserted: tuple) -> NDArray[np.float64]:
     return t
 
 
-@numba.njit(inline="always", cache=True)
-def cubic_basis(knots, t0, n, x):  # pragma: no cover - compiled
-    """The knot interval ``i`` of ``x`` (the last in ``[3, n - 1]`` with ``t[i] <= x``) and the
-    four cubic B-spline values at ``x`` of rows ``i - 3 .. i`` (Cox-de Boor)."""
-    lo = 3
-    hi = n - 1
-    while lo < hi:
-        mid = (lo + hi + 1) // 2
-        if x >= knots[t0 + mid]:
-            lo = mid
-        else:
-            hi = mid - 1
-    N0, N1, N2, N3 = _basis_at(knots, t0, lo, x)
-    return lo, N0, N1, N2, N3
-
-
-@numba.njit(inline="always", cache=True)
-def _basis_at(knots, t0, i, x):  # pragma: no cover - compiled
-    N0, N1, N2, N3 = 1.0, 0.0, 0.0, 0.0
-    # degree 1
-    l1 = x - knots[t0 + i]
-    r1 = knots[t0 + i + 1] - x
-    den = r1 + l1
-    tmp = N0 / den if den > 0.0 else 0.0
-    N0 = r1 * tmp
-    N1 = l1 * tmp
-    # degree 2
-    l2 = x - knots[t0 + i - 1]
-    r2 = knots[t0 + i + 2] - x
-    den = r1 + l2
-    tmp = N0 / den if den > 0.0 else 0.0
-    N0 = r1 * tmp
-    saved = l2 * tmp
-    den = r2 + l1
-    tmp = N1 / den if den > 0.0 else 0.0
-    N1 = saved + r2 * tmp
-    N2 = l1 * tmp
-    # degree 3
-    l3 = x - knots[t0 + i - 2]
-    r3 = knots[t0 + i + 3] - x
-    den = r1 + l3
-    tmp = N0 / den if den > 0.0 else 0.0
-    N0 = r1 * tmp
-    saved = l3 * tmp
-    den = r2 + l2
-    tmp = N1 / den if den > 0.0 else 0.0
-    N1 = saved + r2 * tmp
-    saved = l2 * tmp
-    den = r3 + l1
-    tmp = N2 / den if den > 0.0 else 0.0
-    N2 = saved + r3 * tmp
-    N3 = l1 * tmp
-    return N0, N1, N2, N3
-
-
 @numba.njit(cache=True)
 def _evaluate_channels(first, length, rows, spl, knots, ks, P, cols, scale, X):  # pragma: no cover
     C = cols.shape[0]
