@@ -15,7 +15,7 @@ Conventions
 * The de Boor steps are those of :func:`quatmotion.codec.spline._evaluate_channels` (the
   weights computed once per position and shared by every channel), so a position at a frame
   gives that frame's decoded channels to the bit, whichever kernel evaluates it.
-* Rotations from channels (:func:`rotation_row`, :func:`_joint_block`): one arithmetic,
+* Rotations from channels (:func:`_joint_block`, :func:`_pose_rotations`): one arithmetic,
   written once per kind, so a pose sampled at a frame time equals the whole clip's frame to
   the bit, and vectorised loops (over frames) give the bits of the scalar ones (no fast-math:
   no contraction, no reassociation).
@@ -41,7 +41,6 @@ __all__ = [
     "pose",
     "pose_entry",
     "poses",
-    "rotation_row",
     "rotations_of_channels",
     "sincos",
 ]
@@ -149,32 +148,10 @@ def _dof(j, ax, sh, ch, first, intrinsic, w, x, y, z, pre):  # pragma: no cover 
 
 
 @numba.njit(inline="always", cache=True)
-def rotation_row(X, t, j, kinds, starts, counts, dof_axes, pre, ref):  # pragma: no cover
-    """Joint ``j``'s local rotation from row ``t`` of channels ``X``, a ``(w, x, y, z)``
-    tuple (the arithmetic of :func:`_joint_block`, one frame)."""
-    kind = kinds[j]
-    a = starts[j]
-    w, x, y, z = 1.0, 0.0, 0.0, 0.0
-    if kind == 2:
-        w, x, y, z = _rotvec(ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3],
-                             X[t, a], X[t, a + 1], X[t, a + 2])  # fmt: skip
-    elif kind == 3:
-        w, x, y, z = _rotvec(ref[j, 0], ref[j, 1], ref[j, 2], ref[j, 3],
-                             X[t, a + 1], X[t, a + 2], X[t, a + 3])  # fmt: skip
-        w, x, y, z = _heading(X[t, a], w, x, y, z)
-    elif kind == 1:
-        intrinsic = pre[j, 3, 0] > 0.5
-        for i in range(counts[j]):
-            sh, ch = sincos(0.5 * X[t, a + i])
-            w, x, y, z = _dof(j, dof_axes[j, i], sh, ch, i == 0, intrinsic, w, x, y, z, pre)
-    return w, x, y, z
-
-
-@numba.njit(inline="always", cache=True)
 def _joint_block(Xc, n, j, kinds, starts, counts, dof_axes, pre, ref, Q):  # pragma: no cover
     """Joint ``j``'s rotations of the first ``n`` columns of channel-major ``Xc`` ``(C, B)``
     into ``Q`` ``(4, B)``: the kind's branch once, then one loop over the columns (the
-    arithmetic of :func:`rotation_row`)."""
+    arithmetic of :func:`_pose_rotations`)."""
     kind = kinds[j]
     a = starts[j]
     if kind == 2 or kind == 3:
@@ -218,7 +195,7 @@ def _joint_block(Xc, n, j, kinds, starts, counts, dof_axes, pre, ref, Q):  # pra
 @numba.njit(inline="always", cache=True)
 def _pose_rotations(X, sel, kinds, starts, counts, dof_axes, pre, ref, A, SN, CS, rot):  # noqa: E501  # pragma: no cover
     """The rotations of joints ``sel`` from one row of channels ``X`` ``(1, C)`` into ``rot``
-    ``(k, 4)``, the arithmetic of :func:`rotation_row` in three passes: every angle whose
+    ``(k, 4)``, the arithmetic of :func:`_joint_block` in three passes: every angle whose
     sine and cosine a joint needs into ``A``, their sines and cosines in one loop (``SN``,
     ``CS``: independent, so they overlap, where joint by joint each waits on the last),
     then the products."""
@@ -448,7 +425,8 @@ def _unpack(B):  # pragma: no cover - compiled
     length), then ``segs``, ``cols``, ``sel``, ``kinds``, ``starts``, ``counts``,
     ``dof_axes``; the floats after ``I``: ``fps``, ``knots``, ``P``, ``scale``, ``corr``,
     ``pre``, ``ref``, two scratch rows ``X`` and ``Y`` ``(C,)``, scratch angles, sines and
-    cosines ``(3 J,)`` each, then one pose's output (``root`` (3,), ``rot`` (k, 4))."""
+    cosines ``(3 J,)`` each and rotations ``(k, 4)``, then one pose's output (``root``
+    ``(3,)``, ``rot`` ``(k, 4)``)."""
     I = B[:PACK_HEAD].view(np.int64)
     S, c, n, J, nc, C, k, nk, ni = I[0], I[1], I[2], I[3], I[4], I[5], I[6], I[7], I[9]
     I = B[:ni].view(np.int64)
@@ -483,8 +461,8 @@ def _unpack(B):  # pragma: no cover - compiled
     f += C
     Y = _rows(B[f : f + C], 1, C)
     f += C
-    A = B[f : f + 9 * J]
-    f += 9 * J
+    A = B[f : f + 9 * J + 4 * k]
+    f += 9 * J + 4 * k
     root = B[f : f + 3]
     f += 3
     rot = _rows(B[f : f + 4 * k], k, 4)
@@ -493,20 +471,21 @@ def _unpack(B):  # pragma: no cover - compiled
 
 
 @numba.njit(inline="always", cache=True)
-def _frame(i, segs, knots, P, cols, scale, corr, X):  # pragma: no cover - compiled
-    """The decoded channels ``cols`` of frame ``i`` (corrections added) into ``X[0]``."""
+def _frame(i, segs, knots, P, cols, scale, corr, X, t):  # pragma: no cover - compiled
+    """The decoded channels ``cols`` of frame ``i`` (corrections added) into column ``t`` of
+    channel-major ``X`` ``(C, B)``."""
     s = _segment_of(segs, i)
     if segs[s, 3] != 0:
         b, a0, a1, a2, a3, a4, a5 = _weights(float(i), s, segs, knots)
         for c in range(cols.shape[0]):
-            X[0, cols[c]] = _deboor(P, b, c, a0, a1, a2, a3, a4, a5) / scale[c]
+            X[cols[c], t] = _deboor(P, b, c, a0, a1, a2, a3, a4, a5) / scale[c]
     else:
         r = segs[s, 2] + i - segs[s, 0]
         for c in range(cols.shape[0]):
-            X[0, cols[c]] = P[r, c] / scale[c]
+            X[cols[c], t] = P[r, c] / scale[c]
     if corr.shape[0] > 0:
         for c in range(cols.shape[0]):
-            X[0, cols[c]] += corr[i, cols[c]]
+            X[cols[c], t] += corr[i, cols[c]]
 
 
 @numba.njit(inline="always", cache=True)
@@ -548,37 +527,28 @@ def _corrections_at(x, segs, cols, corr, X, t):  # pragma: no cover - compiled
 
 
 @numba.njit(inline="always", cache=True)
-def _between_frames(x, loop, segs, knots, P, cols, scale, corr, sel, kinds, starts, counts,
-                    dof_axes, pre, ref, X, Y, root, rot, k):  # pragma: no cover  # fmt: skip
-    """Where no spline spans ``x``: the lerp of the two neighbouring decoded frames' root
-    translations and the nlerp (shorter arc) of their rotations, into ``root[k]``, ``rot[k]``
-    (at a frame, that frame's rotations unchanged)."""
+def _neighbours(x, loop, segs, knots, P, cols, scale, corr, X, Y, t):  # pragma: no cover  # noqa: E501
+    """Where no spline spans ``x``: the two neighbouring decoded frames' channels into column
+    ``t`` of ``X`` and ``Y``; the fraction of the way from the first to the second."""
     T = segs[segs.shape[0] - 1, 0] + segs[segs.shape[0] - 1, 1]
     i0 = min(int(np.floor(x)), T - 1)
-    f = x - i0
     b = (i0 + 1) % T if loop else min(i0 + 1, T - 1)
-    _frame(i0, segs, knots, P, cols, scale, corr, X)
-    _frame(b, segs, knots, P, cols, scale, corr, Y)
-    for c in range(3):
-        root[k, c] = (1.0 - f) * X[0, c] + f * Y[0, c]
-    for jj in range(sel.shape[0]):
-        q = sel[jj]
-        aw, ax, ay, az = rotation_row(X, 0, q, kinds, starts, counts, dof_axes, pre, ref)
-        if f == 0.0:  # at a frame: that frame's rotation, as the whole clip decodes it
-            rot[k, jj, 0] = aw
-            rot[k, jj, 1] = ax
-            rot[k, jj, 2] = ay
-            rot[k, jj, 3] = az
-            continue
-        bw, bx, by, bz = rotation_row(Y, 0, q, kinds, starts, counts, dof_axes, pre, ref)
-        g = 1.0 - f
-        h = -f if aw * bw + ax * bx + ay * by + az * bz < 0.0 else f  # the shorter arc
-        vw, vx, vy, vz = g * aw + h * bw, g * ax + h * bx, g * ay + h * by, g * az + h * bz
-        norm = np.sqrt(vw * vw + vx * vx + vy * vy + vz * vz)
-        rot[k, jj, 0] = vw / norm
-        rot[k, jj, 1] = vx / norm
-        rot[k, jj, 2] = vy / norm
-        rot[k, jj, 3] = vz / norm
+    _frame(i0, segs, knots, P, cols, scale, corr, X, t)
+    _frame(b, segs, knots, P, cols, scale, corr, Y, t)
+    return x - i0
+
+
+@numba.njit(inline="always", cache=True)
+def _nlerp(f, aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compiled
+    """The normalised lerp (shorter arc) of two rotations, ``a`` itself at ``f = 0`` (a frame,
+    as the whole clip decodes it)."""
+    if f == 0.0:
+        return aw, ax, ay, az
+    g = 1.0 - f
+    h = -f if aw * bw + ax * bx + ay * by + az * bz < 0.0 else f  # the shorter arc
+    vw, vx, vy, vz = g * aw + h * bw, g * ax + h * bx, g * ay + h * by, g * az + h * bz
+    norm = np.sqrt(vw * vw + vx * vx + vy * vy + vz * vz)
+    return vw / norm, vx / norm, vy / norm, vz / norm
 
 
 @numba.njit(cache=True)
@@ -602,11 +572,26 @@ def pose(t, B):  # pragma: no cover - compiled
         root[2] = X[0, 2]
         J = kinds.shape[0]
         _pose_rotations(X, sel, kinds, starts, counts, dof_axes, pre, ref, A[: 3 * J],
-                        A[3 * J : 6 * J], A[6 * J :], rot)  # fmt: skip
+                        A[3 * J : 6 * J], A[6 * J : 9 * J], rot)  # fmt: skip
     else:
-        rots = as_strided(rot, shape=(1, rot.shape[0], 4), strides=(0, 32, 8))
-        _between_frames(x, loop, segs, knots, P, cols, scale, corr, sel, kinds, starts, counts,
-                        dof_axes, pre, ref, X, Y, _rows(root, 1, 3), rots, 0)  # fmt: skip
+        Yc = as_strided(Y[0], shape=(Y.shape[1], 1), strides=(8, 8))
+        f = _neighbours(x, loop, segs, knots, P, cols, scale, corr, Xc, Yc, 0)
+        for c in range(3):
+            root[c] = (1.0 - f) * X[0, c] + f * Y[0, c]
+        J = kinds.shape[0]
+        _pose_rotations(X, sel, kinds, starts, counts, dof_axes, pre, ref, A[: 3 * J],
+                        A[3 * J : 6 * J], A[6 * J : 9 * J], rot)  # fmt: skip
+        if f != 0.0:
+            R = _rows(A[9 * J : 9 * J + 4 * rot.shape[0]], rot.shape[0], 4)
+            _pose_rotations(Y, sel, kinds, starts, counts, dof_axes, pre, ref, A[: 3 * J],
+                            A[3 * J : 6 * J], A[6 * J : 9 * J], R)  # fmt: skip
+            for jj in range(rot.shape[0]):
+                w, qx, qy, qz = _nlerp(f, rot[jj, 0], rot[jj, 1], rot[jj, 2], rot[jj, 3],
+                                       R[jj, 0], R[jj, 1], R[jj, 2], R[jj, 3])  # fmt: skip
+                rot[jj, 0] = w
+                rot[jj, 1] = qx
+                rot[jj, 2] = qy
+                rot[jj, 3] = qz
     return True
 
 
@@ -628,26 +613,35 @@ def poses(u, B, out_root, out_rot):  # pragma: no cover - compiled
     loop = B[:PACK_HEAD].view(np.int64)[8] != 0
     C = X.shape[1]
     Xc = np.zeros((C, BLOCK))
+    Yc = np.zeros((C, BLOCK))
     Q = np.empty((4, BLOCK))
-    spline = np.empty(BLOCK, dtype=np.bool_)
+    R = np.empty((4, BLOCK))
+    frac = np.empty(BLOCK)  # -1 where a spline spans the pose, else between two frames
     for p0 in range(0, u.shape[0], BLOCK):
         n = min(BLOCK, u.shape[0] - p0)
+        between = False
         for t in range(n):
             x = u[p0 + t]
-            spline[t] = _spline_at(x, segs, knots, P, cols, scale, corr, Xc, t)
-            if spline[t]:
-                out_root[p0 + t, 0] = Xc[0, t]
-                out_root[p0 + t, 1] = Xc[1, t]
-                out_root[p0 + t, 2] = Xc[2, t]
+            if _spline_at(x, segs, knots, P, cols, scale, corr, Xc, t):
+                frac[t] = -1.0
+                for c in range(3):
+                    out_root[p0 + t, c] = Xc[c, t]
             else:
-                _between_frames(x, loop, segs, knots, P, cols, scale, corr, sel, kinds, starts,
-                                counts, dof_axes, pre, ref, X, Y, out_root, out_rot,
-                                p0 + t)  # fmt: skip
+                f = _neighbours(x, loop, segs, knots, P, cols, scale, corr, Xc, Yc, t)
+                frac[t] = f
+                between = True
+                for c in range(3):
+                    out_root[p0 + t, c] = (1.0 - f) * Xc[c, t] + f * Yc[c, t]
         for jj in range(sel.shape[0]):
             _joint_block(Xc, n, sel[jj], kinds, starts, counts, dof_axes, pre, ref, Q)
+            if between:
+                _joint_block(Yc, n, sel[jj], kinds, starts, counts, dof_axes, pre, ref, R)
             for t in range(n):
-                if spline[t]:
-                    out_rot[p0 + t, jj, 0] = Q[0, t]
-                    out_rot[p0 + t, jj, 1] = Q[1, t]
-                    out_rot[p0 + t, jj, 2] = Q[2, t]
-                    out_rot[p0 + t, jj, 3] = Q[3, t]
+                w, qx, qy, qz = Q[0, t], Q[1, t], Q[2, t], Q[3, t]
+                if frac[t] > 0.0:
+                    w, qx, qy, qz = _nlerp(frac[t], w, qx, qy, qz, R[0, t], R[1, t], R[2, t],
+                                           R[3, t])  # fmt: skip
+                out_rot[p0 + t, jj, 0] = w
+                out_rot[p0 + t, jj, 1] = qx
+                out_rot[p0 + t, jj, 2] = qy
+                out_rot[p0 + t, jj, 3] = qz

@@ -195,7 +195,7 @@ class Sampler:
             corr,
             pre,
             ref,
-            np.zeros(2 * C + 9 * J + 3 + 4 * k),
+            np.zeros(2 * C + 9 * J + 4 * k + 3 + 4 * k),
         )
         self._B = np.empty(n_ints + sum(np.size(a) for a in floats))
         self._B[:n_ints].view(np.int64)[:] = np.concatenate([np.ravel(a) for a in ints])
