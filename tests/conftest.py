@@ -52,6 +52,40 @@ def serve_directory() -> Iterator[Callable[..., str]]:
         thread.join(timeout=5)
 
 
+@pytest.fixture()
+def serve_app() -> Iterator[Callable[[Any], str]]:
+    """Serve web apps with uvicorn, as ``quatmotion serve`` does (its socket bound by
+    ``server.listen``: 127.0.0.1, a free port, a thread each) for one test.
+
+    Call it with an ASGI app; it returns the base URL once the server answers. Every server
+    it started is stopped when the test ends.
+    """
+    import time
+
+    import uvicorn
+
+    from quatmotion.server import listen
+
+    started: list[tuple[Any, threading.Thread]] = []
+
+    def start(app: Any) -> str:
+        sock = listen.bind("127.0.0.1", 0)
+        server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
+        thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+        thread.start()
+        started.append((server, thread))
+        deadline = time.monotonic() + 60
+        while not server.started and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert server.started, "uvicorn did not start within 60 s"
+        return listen.url_of(sock).rstrip("/")
+
+    yield start
+    for server, thread in started:
+        server.should_exit = True
+        thread.join(timeout=30)
+
+
 # The real mocap folder ($QUATMOTION_DATA, else ../shared/data): tests that read it carry the
 # ``needs_data`` marker and skip, naming the folder, only where it is absent (CI always has it).
 _DATA = data_root(must_exist=False)

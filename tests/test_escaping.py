@@ -235,30 +235,16 @@ _IN_VIEWER = _injected("img, svg, iframe, object")  # (its error panel has <b> o
 
 
 def test_hostile_names_are_shown_as_text_and_run_no_script_in_a_browser(
-    browser, hostile_index, tmp_path
+    browser, hostile_index, tmp_path, serve_app
 ):
     """The web app (served by uvicorn, as ``quatmotion serve`` does) and the viewer page in
     headless Chromium: every hostile name shown as text, in text and in title attributes; no
     element of theirs made, no script of theirs run, no link of theirs followed."""
-    import threading
-    import time
-
-    import uvicorn
-
-    from quatmotion.server import listen
-
-    sock = listen.bind("127.0.0.1", 0)
-    server = uvicorn.Server(uvicorn.Config(create_app(index=hostile_index), log_level="warning"))
-    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
-    thread.start()
+    base = serve_app(create_app(index=hostile_index))
     page = browser.new_page(viewport={"width": 1280, "height": 800})
     errors: list[str] = []
     page.on("pageerror", lambda error: errors.append(str(error)))
     try:
-        deadline = time.monotonic() + 60
-        while not server.started and time.monotonic() < deadline:
-            time.sleep(0.05)
-        base = listen.url_of(sock).rstrip("/")
         page.goto(f"{base}/")
         _ready(page, "html[data-state=ready]")
         shown = page.locator("#clips").text_content() or ""
@@ -291,8 +277,6 @@ def test_hostile_names_are_shown_as_text_and_run_no_script_in_a_browser(
         assert not errors, errors
     finally:
         page.close()
-        server.should_exit = True
-        thread.join(30)
 
 
 def test_the_servers_log_writes_an_uploaded_files_name_escaped(client, caplog, monkeypatch):

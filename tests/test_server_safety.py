@@ -308,52 +308,36 @@ def test_uploads_are_one_at_a_time_per_client_and_a_few_at_once(app, walk_bvh, m
     assert outcome["first"] == 200
 
 
-def test_a_client_sending_its_upload_slowly_is_not_dropped(motion_library, walk_bvh):
+def test_a_client_sending_its_upload_slowly_is_not_dropped(motion_library, walk_bvh, serve_app):
     # A real server (uvicorn, as quatmotion serve runs it): the body trickles in over 8 s,
     # longer than uvicorn's keep-alive timeout (5 s); the upload is still answered.
-    import uvicorn
-
-    from quatmotion.server import listen
-
-    app = create_app(motion_library["library"], motion_library["index"])
-    sock = listen.bind("127.0.0.1", 0)
-    port = sock.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(app, log_level="warning"))
-    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
-    thread.start()
-    try:
-        deadline = time.monotonic() + 60
-        while not server.started and time.monotonic() < deadline:
-            time.sleep(0.05)
-        boundary = "sl0w"
-        body = (
-            (
-                f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="w.bvh"'
-                "\r\n\r\n"
-            ).encode()
-            + walk_bvh
-            + f"\r\n--{boundary}--\r\n".encode()
-        )
-        head = (
-            f"POST /api/search/upload HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
-            f"{CSRF_HEADER}: 1\r\nConnection: close\r\nContent-Length: {len(body)}\r\n"
-            f"Content-Type: multipart/form-data; boundary={boundary}\r\n\r\n"
+    base = serve_app(create_app(motion_library["library"], motion_library["index"]))
+    host, port = base.removeprefix("http://").rsplit(":", 1)
+    boundary = "sl0w"
+    body = (
+        (
+            f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="w.bvh"\r\n\r\n'
         ).encode()
-        with socket.create_connection(("127.0.0.1", port), timeout=120) as connection:
-            connection.sendall(head)
-            step = -(-len(body) // 4)
-            for i in range(0, len(body), step):
-                time.sleep(2)
-                connection.sendall(body[i : i + step])
-            answer = b""
-            while chunk := connection.recv(65536):
-                answer += chunk
-        status, _, rest = answer.partition(b"\r\n")
-        assert status == b"HTTP/1.1 200 OK", answer[:300]
-        assert json.loads(rest.partition(b"\r\n\r\n")[2])["query"] == "w"
-    finally:
-        server.should_exit = True
-        thread.join(30)
+        + walk_bvh
+        + f"\r\n--{boundary}--\r\n".encode()
+    )
+    head = (
+        f"POST /api/search/upload HTTP/1.1\r\nHost: {host}:{port}\r\n"
+        f"{CSRF_HEADER}: 1\r\nConnection: close\r\nContent-Length: {len(body)}\r\n"
+        f"Content-Type: multipart/form-data; boundary={boundary}\r\n\r\n"
+    ).encode()
+    with socket.create_connection((host, int(port)), timeout=120) as connection:
+        connection.sendall(head)
+        step = -(-len(body) // 4)
+        for i in range(0, len(body), step):
+            time.sleep(2)
+            connection.sendall(body[i : i + step])
+        answer = b""
+        while chunk := connection.recv(65536):
+            answer += chunk
+    status, _, rest = answer.partition(b"\r\n")
+    assert status == b"HTTP/1.1 200 OK", answer[:300]
+    assert json.loads(rest.partition(b"\r\n\r\n")[2])["query"] == "w"
 
 
 def test_the_budget_holds_parses_whose_sum_is_over_it_in_turn():
