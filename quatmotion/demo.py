@@ -659,15 +659,16 @@ def _pose_step(
     import functools
 
     from quatmotion.collection import ReadSettings, find_clips
-    from quatmotion.pose.library import PoseLibrary, load_pose_source
+    from quatmotion.parallel import Runner
+    from quatmotion.pose.library import PoseLibrary, PoseSettings, load_pose_source
 
     read = ReadSettings(joint_map=tuple(joint_map))
     clips = find_clips(files, read)
     pose_library, pose_failures = PoseLibrary.build_streamed(
         clips,
         functools.partial(load_pose_source, fps=30.0, height=170.0, read=read),
-        seed=seed,
-        workers=workers,
+        PoseSettings(seed=seed),
+        runner=Runner.resolve(workers=workers),
         progress=_step(report, "poses"),
     )
     for failure in pose_failures:

@@ -374,21 +374,14 @@ def _pose(space: _Workspace) -> None:
     import functools
 
     from quatmotion.io import read_motion
-    from quatmotion.pose.library import METRICS, PoseLibrary, load_pose_clip
+    from quatmotion.parallel import Runner
+    from quatmotion.pose.library import METRICS, PoseLibrary, PoseSettings, load_pose_clip
 
     load = functools.partial(load_pose_clip, fps=15.0, height=170.0)
     query = read_motion(space.files[0])
     for metric in METRICS:
-        library, _ = PoseLibrary.build_streamed(
-            space.files,
-            load,
-            fit_poses=200,
-            rank=8,
-            n_unlabeled=100,
-            n_pairs=20,
-            metric_name=metric,
-            scheduler="inline",
-        )
+        settings = PoseSettings(fit_poses=200, rank=8, n_unlabeled=100, n_pairs=20, metric=metric)
+        library, _ = PoseLibrary.build_streamed(space.files, load, settings, runner=Runner.inline())
         vector, clip, _ = library.pose_query(0, 10)
         library.nearest(vector, k=3, exclude_clip=clip)
         library.nearest(library.motion_query(query, 10)[0], k=3)

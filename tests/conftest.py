@@ -229,7 +229,7 @@ def motion_library(tmp_path_factory) -> dict[str, Path]:
     from quatmotion import codec
     from quatmotion.io import read_motion, write_motion
     from quatmotion.pose.data import PoseClip
-    from quatmotion.pose.library import PoseLibrary
+    from quatmotion.pose.library import PoseLibrary, PoseSettings
     from quatmotion.retrieval import ClipIndex, IndexSettings
     from quatmotion.synthetic import generate_clip
 
@@ -251,7 +251,8 @@ def motion_library(tmp_path_factory) -> dict[str, Path]:
         PoseClip.from_motion(read_motion(f), fps=30, height=170, name=str(f))
         for f in sorted(clips.glob("*.bvh"))
     ]
-    PoseLibrary.build(prepared, n_pairs=100, n_unlabeled=500).save(root / "poses.idx")
+    settings = PoseSettings(n_pairs=100, n_unlabeled=500)
+    PoseLibrary.build_in_memory(prepared, settings).save(root / "poses.idx")
     return {
         "clips": clips,
         "library": root / "lib.qmz",

@@ -12,10 +12,11 @@ import pytest
 from quatmotion import io
 from quatmotion.codec import Archive, CompressSettings
 from quatmotion.collection.kind import Kind
+from quatmotion.pose.library import PoseLibrary, PoseSettings
 from quatmotion.retrieval import ClipIndex, IndexSettings
 from quatmotion.synthetic import generate_clip
 
-KINDS = [Archive, ClipIndex]  # the pose library is still to come to the surface
+KINDS = [Archive, ClipIndex, PoseLibrary]
 
 
 def _conforms(method: object, wanted: object) -> bool:
@@ -52,8 +53,12 @@ def test_the_check_refuses_what_the_surface_was_before():
 
 @pytest.mark.parametrize(
     ("kind", "settings", "suffix"),
-    [(Archive, CompressSettings(max_error=1.0), ".qmz"), (ClipIndex, IndexSettings(), ".qidx")],
-    ids=["Archive", "ClipIndex"],
+    [
+        (Archive, CompressSettings(max_error=1.0), ".qmz"),
+        (ClipIndex, IndexSettings(), ".qidx"),
+        (PoseLibrary, PoseSettings(metric="GPD+RDSR", rank=2, n_pairs=20, n_unlabeled=100), ".npz"),
+    ],
+    ids=["Archive", "ClipIndex", "PoseLibrary"],
 )
 def test_build_and_add_through_the_surface_report_doubts(
     tmp_path, studio_walk, kind, settings, suffix

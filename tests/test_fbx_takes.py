@@ -99,7 +99,10 @@ def test_every_collection_file_stores_the_take_and_adds_per_take(tmp_path):
     Archive.build(sources, tmp_path / "l.qmz", CompressSettings(), runner=Runner.inline())
     ClipIndex.build(sources, tmp_path / "x.qidx", IndexSettings(), workers=1)
     PoseLibrary.build(
-        sources, tmp_path / "p.npz", PoseSettings(rank=2, n_pairs=20, n_unlabeled=50), workers=1
+        sources,
+        tmp_path / "p.npz",
+        PoseSettings(rank=2, n_pairs=20, n_unlabeled=50),
+        runner=Runner.inline(),
     )
     with Archive.open(tmp_path / "l.qmz") as archive:
         assert archive.version == 3
@@ -113,7 +116,7 @@ def test_every_collection_file_stores_the_take_and_adds_per_take(tmp_path):
     # re-adding the same file: every take already there; the index keeps both takes
     assert not Archive.add(tmp_path / "l.qmz", [TWO_TAKES], runner=Runner.inline()).added
     assert len(ClipIndex.add(tmp_path / "x.qidx", [TWO_TAKES], workers=1).skipped) == 2
-    assert not PoseLibrary.add(tmp_path / "p.npz", [TWO_TAKES], workers=1).added
+    assert not PoseLibrary.add(tmp_path / "p.npz", [TWO_TAKES], runner=Runner.inline()).added
     with ClipIndex.open(tmp_path / "x.qidx") as index:
         assert len(index) == 3
 

@@ -338,26 +338,23 @@ def test_dask_builds_the_same_pose_library_as_the_local_pool(dask_cluster: str) 
     from sklearn.decomposition import PCA
 
     from quatmotion.bench.scale import generated_pose_clip
-    from quatmotion.pose.library import PoseLibrary
+    from quatmotion.parallel import Runner
+    from quatmotion.pose.library import PoseLibrary, PoseSettings
 
     specs = [(kind, seed, 30 + 5 * seed) for seed, kind in enumerate(["walk", "kick"] * 3)]
     specs[3] = ("moonwalk", 3, 40)  # a bad clip among good ones
 
-    def build(**where: object) -> tuple[PoseLibrary, list]:
+    def build(runner: Runner) -> tuple[PoseLibrary, list]:
         return PoseLibrary.build_streamed(
             specs,
             functools.partial(generated_pose_clip, fps=30.0, height=170.0),
-            fit_poses=100,
-            rank=6,
-            n_unlabeled=100,
-            n_pairs=20,
-            metric=PCA(n_components=6, random_state=0),
-            flush_poses=64,
-            **where,
+            PoseSettings(fit_poses=100, rank=6, n_unlabeled=100, n_pairs=20, flush_poses=64),
+            runner=runner,
+            estimator=PCA(n_components=6, random_state=0),
         )
 
-    local, local_failures = build(workers=2)
-    dask, dask_failures = build(scheduler=dask_cluster)
+    local, local_failures = build(Runner.local(workers=2))
+    dask, dask_failures = build(Runner.dask(dask_cluster))
     assert [f.index for f in dask_failures] == [f.index for f in local_failures] == [3]
     assert dask.index.to_bytes() == local.index.to_bytes()
     assert dask.clip_names == local.clip_names

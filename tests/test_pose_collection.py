@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from quatmotion.cli import app
 from quatmotion.collection import ClipRef, content_hash
 from quatmotion.io import write_motion
+from quatmotion.parallel import Runner
 from quatmotion.pose.library import FORMAT, PoseLibrary, PoseSettings
 from quatmotion.synthetic import generate_clip
 
@@ -43,7 +44,7 @@ def test_a_library_built_from_files_stores_its_settings_and_references(tmp_path)
                      tmp_path / "clips" / folder / "take_001.bvh")  # fmt: skip
     settings = PoseSettings(**SMALL)
     out = tmp_path / "p.npz"
-    report = PoseLibrary.build([tmp_path / "clips"], out, settings, workers=1)
+    report = PoseLibrary.build([tmp_path / "clips"], out, settings, runner=Runner.inline())
     assert [r.name for r in report.added] == ["s1/take_001", "s2/take_001"]
     assert not report.failures
     back = PoseLibrary.open(out)
@@ -73,7 +74,9 @@ def test_adding_clips_keeps_the_distance_skips_held_clips_and_names_apart(tmp_pa
         write_motion(generate_clip(kind, seed, n_frames=40, fps=30.0),
                      clips / folder / "take_001.bvh")  # fmt: skip
     out = tmp_path / "p.npz"
-    PoseLibrary.build([clips / "s1", clips / "s2"], out, PoseSettings(**SMALL), workers=1)
+    PoseLibrary.build(
+        [clips / "s1", clips / "s2"], out, PoseSettings(**SMALL), runner=Runner.inline()
+    )
     before = PoseLibrary.open(out)
     # s3/take_001 collides with a stored stem; s1/take_001 is already there (same content)
     result = runner.invoke(app, ["pose", "add", str(out), str(clips / "s3"), str(clips / "s1")])
@@ -97,3 +100,62 @@ def test_adding_clips_keeps_the_distance_skips_held_clips_and_names_apart(tmp_pa
         first.clip,
         first.frame,
     )
+
+
+# -- the keywords before issue 33 (docs/migration-0.4.md) ----------------------------------
+FAST = {"n_pairs": 20, "n_unlabeled": 100}
+SPECS = [("walk", 0, 40), ("squat", 1, 47), ("kick", 2, 45)]
+
+
+def _load():
+    import functools
+
+    from quatmotion.bench.scale import generated_pose_clip
+
+    return functools.partial(generated_pose_clip, fps=15.0, height=170.0)
+
+
+def test_the_in_memory_build_under_its_old_name_warns_and_builds_the_same_library():
+    clips = [_load()(s) for s in SPECS]
+    new = PoseLibrary.build_in_memory(clips, PoseSettings(**FAST, seed=3))
+    with pytest.warns(DeprecationWarning, match="build_in_memory"):
+        old = PoseLibrary.build(clips, **FAST, seed=3)
+    assert isinstance(old, PoseLibrary) and old.index.to_bytes() == new.index.to_bytes()
+    with pytest.warns(DeprecationWarning, match="estimator="):
+        PoseLibrary.build_in_memory(clips, PoseSettings(**FAST), metric=None)
+    with pytest.raises(TypeError, match="'ranks'"):
+        PoseLibrary.build_in_memory(clips, ranks=3)
+
+
+def test_the_streamed_builds_old_keywords_warn_and_build_what_the_settings_build():
+    with pytest.warns(DeprecationWarning) as caught:
+        old, _ = PoseLibrary.build_streamed(SPECS, _load(), metric_name="GPD+LMS", **FAST,
+                                            workers=1)  # fmt: skip
+    said = " ".join(str(w.message) for w in caught)
+    assert "PoseSettings(...)" in said and "runner=Runner" in said
+    settings = PoseSettings(metric="GPD+LMS", **FAST)
+    new, _ = PoseLibrary.build_streamed(SPECS, _load(), settings, runner=Runner.inline())
+    assert old.metric == new.metric == "GPD+LMS"
+    assert old.index.to_bytes() == new.index.to_bytes()
+    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match="rank"):
+        PoseLibrary.build_streamed(SPECS, _load(), rank=0)  # checked by PoseSettings
+
+
+def test_add_takes_the_settings_whole_and_refuses_what_would_change_the_library(tmp_path):
+    (tmp_path / "a").mkdir()
+    for i, kind in enumerate(["walk", "squat", "kick"]):
+        write_motion(generate_clip(kind, i, n_frames=40, fps=30.0), tmp_path / "a" / f"{kind}.bvh")
+    settings = PoseSettings(**SMALL)
+    out = tmp_path / "p.npz"
+    paths = sorted((tmp_path / "a").glob("*.bvh"))
+    PoseLibrary.build(paths[:1], out, settings, runner=Runner.inline())
+    assert PoseLibrary.stored_settings(out) == settings
+    with pytest.raises(ValueError, match="rank=2"):
+        PoseLibrary.add(out, paths[1:2], settings.replace(rank=3), runner=Runner.inline())
+    read_cm = settings.replace(read=settings.read.replace(units="cm"))
+    report = PoseLibrary.add(out, paths[1:2], read_cm, runner=Runner.inline())
+    assert len(report.added) == 1 and report.settings == read_cm
+    with pytest.warns(DeprecationWarning, match="settings.read"):
+        report = PoseLibrary.add(out, paths[2:], units="cm", runner=Runner.inline())
+    assert len(report.added) == 1 and report.settings.read.units == "cm"
+    assert PoseLibrary.stored_settings(out) == settings  # an add keeps what the file stores

@@ -19,7 +19,7 @@ from quatmotion import io
 from quatmotion.datasets import data_root
 from quatmotion.motion import Motion
 from quatmotion.pose.data import PoseClip
-from quatmotion.pose.library import PoseLibrary
+from quatmotion.pose.library import PoseLibrary, PoseSettings
 from quatmotion.synthetic import generate_clip
 
 DATA = data_root(must_exist=False)
@@ -29,7 +29,7 @@ BANDAI = DATA / "bandai1" / "clips"
 
 def _library(files: list[tuple[Path, str]]) -> tuple[PoseLibrary, np.ndarray, np.ndarray]:
     clips = [PoseClip.from_motion(io.read_motion(f), fps=30, height=170) for f, _ in files]
-    lib = PoseLibrary.build(clips, n_unlabeled=2000, n_pairs=300, seed=0)
+    lib = PoseLibrary.build_in_memory(clips, PoseSettings(n_unlabeled=2000, n_pairs=300, seed=0))
     kinds = np.array([k for _, k in files])[lib.clip_of]
     return lib, kinds, lib.index.vectors(np.arange(len(kinds)))
 

@@ -11,7 +11,7 @@ from scipy.spatial.distance import cdist
 
 from quatmotion.datasets import data_root
 from quatmotion.pose.index import HNSWIndex, exact_knn, recall_at_k
-from quatmotion.pose.library import PoseLibrary
+from quatmotion.pose.library import PoseLibrary, PoseSettings
 
 DATA = data_root(must_exist=False)
 
@@ -263,7 +263,7 @@ def test_default_metric_is_gpdr_logit_with_a_diagonal_projection(n_clips: int) -
         PoseClip.from_motion(generate_clip(k, 1, n_frames=240), fps=15, height=170, name=k)
         for k in ("walk", "squat", "wave")[:n_clips]
     ]
-    library = PoseLibrary.build(clips, n_unlabeled=200, n_pairs=60)
+    library = PoseLibrary.build_in_memory(clips, PoseSettings(n_unlabeled=200, n_pairs=60))
     assert DEFAULT_METRIC == "GPDR+LOGIT" and library.metric == "GPDR+LOGIT"
     assert library.meta["n_negative_pairs"] > 0
     W = library.model["W"]
@@ -295,13 +295,10 @@ def test_a_query_far_outside_the_library_range_does_not_swamp_its_pose() -> None
         PoseClip.from_motion(generate_clip(kind, 1, n_frames=240), fps=30, height=170)
         for kind in ("walk", "squat", "wave")
     ]
-    lib = PoseLibrary.build(
+    lib = PoseLibrary.build_in_memory(
         clips,
-        rank=20,
-        n_unlabeled=200,
-        n_pairs=20,
-        metric=_Projection(20),
-        metric_name="GPD+RDSR",
+        PoseSettings(rank=20, n_unlabeled=200, n_pairs=20, metric="GPD+RDSR"),
+        estimator=_Projection(20),
     )
     raw = np.concatenate([c.poses.gpd for c in clips])
     scale, offset = lib.model["scale"], lib.model["offset"]

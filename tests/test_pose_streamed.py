@@ -12,7 +12,8 @@ import pytest
 from sklearn.decomposition import PCA
 
 from quatmotion.bench.scale import generated_pose_clip
-from quatmotion.pose.library import PoseLibrary
+from quatmotion.parallel import Runner
+from quatmotion.pose.library import PoseLibrary, PoseSettings
 
 # RDSR's fit takes minutes (tested in test_pose_rdsr.py); the plumbing is under test here, so a
 # PCA projection of the same interface (fit(X, pairs), components_ (rank, D)) stands in.
@@ -21,17 +22,13 @@ LOAD = functools.partial(generated_pose_clip, fps=30.0, height=170.0)
 SPECS = [(kind, seed, 40 + 7 * seed) for seed, kind in enumerate(["walk", "squat", "kick"] * 3)]
 
 
-def _build(specs: list, **options) -> tuple[PoseLibrary, list]:
+def _build(specs: list, workers: int, fit_poses: int = 20_000) -> tuple[PoseLibrary, list]:
+    settings = PoseSettings(rank=RANK, n_unlabeled=200, n_pairs=40, flush_poses=100,
+                            fit_poses=fit_poses)  # fmt: skip
     return PoseLibrary.build_streamed(
-        specs,
-        LOAD,
-        rank=RANK,
-        n_unlabeled=200,
-        n_pairs=40,
-        metric=PCA(n_components=RANK, random_state=0),
-        flush_poses=100,
-        **options,
-    )
+        specs, LOAD, settings, runner=Runner.resolve(workers=workers),
+        estimator=PCA(n_components=RANK, random_state=0),
+    )  # fmt: skip
 
 
 def test_streamed_build_is_the_same_inline_and_on_two_workers() -> None:
@@ -58,12 +55,10 @@ def test_streamed_build_is_the_same_inline_and_on_two_workers() -> None:
 def test_a_small_library_gets_the_model_of_the_in_memory_build() -> None:
     streamed, _ = _build(SPECS[:4], fit_poses=10**6, workers=2)
     clips = [LOAD(s) for s in SPECS[:4]]
-    built = PoseLibrary.build(
+    built = PoseLibrary.build_in_memory(
         clips,
-        rank=RANK,
-        n_unlabeled=200,
-        n_pairs=40,
-        metric=PCA(n_components=RANK, random_state=0),
+        PoseSettings(rank=RANK, n_unlabeled=200, n_pairs=40),
+        estimator=PCA(n_components=RANK, random_state=0),
     )
     for key in built.model:
         np.testing.assert_array_equal(streamed.model[key], built.model[key])

@@ -135,7 +135,7 @@ def test_pose_search_transitions_from_the_shell(built) -> None:
 
     from quatmotion.cli import app
     from quatmotion.pose.data import PoseClip
-    from quatmotion.pose.library import PoseLibrary
+    from quatmotion.pose.library import PoseLibrary, PoseSettings
 
     out, paths = built
     res = CliRunner().invoke(
@@ -144,8 +144,9 @@ def test_pose_search_transitions_from_the_shell(built) -> None:
     assert res.exit_code == 0, res.output
     assert "poses to jump to from" in res.output and "P(bad transition)" in res.output
     # a library without a judge (one clip: no transitions between clips) says so
-    one = PoseLibrary.build([PoseClip.from_motion(generate_clip("walk", 1, n_frames=600),
-                                                  fps=15, height=170)], n_pairs=20)  # fmt: skip
+    one = PoseLibrary.build_in_memory([PoseClip.from_motion(generate_clip("walk", 1, n_frames=600),
+                                                            fps=15, height=170)],
+                                      PoseSettings(n_pairs=20))  # fmt: skip
     assert one.pose_rows is None and "one clip" in one.meta["transitions"]
     path = out.with_name("one.idx")
     one.save(path)

@@ -506,7 +506,7 @@ def test_clips_of_one_stem_in_two_folders_stay_two_rows_joined_on_their_content(
 
     from quatmotion.parallel import Runner
     from quatmotion.pose.data import PoseClip
-    from quatmotion.pose.library import PoseLibrary
+    from quatmotion.pose.library import PoseLibrary, PoseSettings
     from quatmotion.retrieval import ClipIndex, IndexSettings
 
     files = {
@@ -533,7 +533,8 @@ def test_clips_of_one_stem_in_two_folders_stay_two_rows_joined_on_their_content(
         PoseClip.from_motion(read_motion(p), fps=30, height=170, name=str(p))
         for p in paths.values()
     ]
-    PoseLibrary.build(prepared, n_pairs=50, n_unlabeled=200).save(tmp_path / "p.idx")
+    settings = PoseSettings(n_pairs=50, n_unlabeled=200)
+    PoseLibrary.build_in_memory(prepared, settings).save(tmp_path / "p.idx")
 
     for served in (
         create_app(tmp_path / "c.qmz", tmp_path / "c.qidx", tmp_path / "p.idx"),

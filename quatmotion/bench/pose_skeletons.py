@@ -36,7 +36,7 @@ from quatmotion._atomic import atomic_write_json
 from quatmotion.datasets import data_root
 from quatmotion.motion import Motion
 from quatmotion.pose.data import PoseClip
-from quatmotion.pose.library import PoseLibrary
+from quatmotion.pose.library import PoseLibrary, PoseSettings
 from quatmotion.synthetic import generate_clip
 from quatmotion.viz import pyplot, save_figure
 
@@ -155,7 +155,7 @@ def _library_entry(
     kinds = np.array([k for _, k in files])
     for library_seed in seeds:
         t0 = time.perf_counter()
-        library = PoseLibrary.build(clips, seed=library_seed)
+        library = PoseLibrary.build_in_memory(clips, PoseSettings(seed=library_seed))
         entry["build_seconds"].append(time.perf_counter() - t0)
         entry["metric"] = library.metric
         for q, motion, kind, kick in loaded:

@@ -76,7 +76,13 @@ from quatmotion.parallel import (
     shutdown_pools,
 )
 from quatmotion.pose.data import PoseClip
-from quatmotion.pose.library import PoseLibrary, load_pose_clip, project_gpd, projected_clip
+from quatmotion.pose.library import (
+    PoseLibrary,
+    PoseSettings,
+    load_pose_clip,
+    project_gpd,
+    projected_clip,
+)
 from quatmotion.retrieval.build import ClipJob, index_clip
 from quatmotion.retrieval.index import ClipRecord
 from quatmotion.synthetic import KINDS, generate_clip
@@ -330,11 +336,10 @@ def _probe(n_poses: int, seed: int, workers: int | None) -> dict[str, Any]:
         library, failures = PoseLibrary.build_streamed(
             specs,
             functools.partial(generated_pose_clip, fps=FPS, height=HEIGHT_CM),
-            rank=RANK,
-            seed=seed,
-            metric=PCA(n_components=RANK, random_state=seed),
-            workers=workers,
+            PoseSettings(rank=RANK, seed=seed),
+            runner=Runner.resolve(workers=workers),
             progress=progress,
+            estimator=PCA(n_components=RANK, random_state=seed),
         )
         marks["built"] = time.perf_counter()
         memory.phase = "save"

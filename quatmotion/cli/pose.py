@@ -5,9 +5,10 @@ as :func:`quatmotion.io.read_amc` finds them, or ``--skeleton``), prepares each 
 (:meth:`quatmotion.pose.data.PoseClip.from_motion`: resampled to ``--fps``, put on the canonical
 body of ``--height`` cm, so that skeletons of different proportions compare) and builds a
 :class:`~quatmotion.pose.library.PoseLibrary` with
-:meth:`~quatmotion.pose.library.PoseLibrary.build_streamed`: clips prepared in parallel
-(``--workers``, ``--scheduler``; :mod:`quatmotion.parallel`), a bar counting finished clips,
-unreadable files listed at the end and exit code 1 when there were any. ``search`` answers
+:meth:`~quatmotion.pose.library.PoseLibrary.build`: clips prepared in parallel
+(``--workers``, ``--scheduler``: one :class:`~quatmotion.parallel.Runner`), a bar counting
+finished clips, unreadable files listed at the end and exit code 1 when there were any.
+``search`` answers
 with the nearest poses: clip, frame number in the clip's file (from 0), time in seconds and
 distance.
 """
@@ -66,45 +67,52 @@ def _echo(message: str) -> None:
     error_console.print(message, markup=False, highlight=False, soft_wrap=True)
 
 
+PathsArgument = Annotated[
+    list[Path], typer.Argument(help="Folders (searched recursively) or .amc/.bvh files.")
+]
+FpsOption = Annotated[
+    float,
+    typer.Option(help=f"Frame rate poses are sampled at, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g}."),
+]
+HeightOption = Annotated[
+    float, typer.Option(help="Stature of the common body every skeleton is put on, cm.")
+]
+MetricOption = Annotated[
+    str,
+    typer.Option(
+        help="Pose distance to learn: GPDR+LOGIT or GPDR+LMS (the GPD with the root's speed "
+        "and turn rate), GPD+LOGIT, GPD+LMS or GPD+RDSR (docs/performance.md)."
+    ),
+]
+RankOption = Annotated[int, typer.Option(help="Dimensions of RDSR's projection W.")]
+UnlabeledOption = Annotated[int, typer.Option(help="Unlabeled poses for RDSR.")]
+PairsOption = Annotated[
+    int, typer.Option(help="Transition pairs wanted (similar, and as many dissimilar for LMS).")
+]
+SeedOption = Annotated[int, typer.Option(help="Random seed (0 or more).")]
+FitPosesOption = Annotated[
+    int, typer.Option(help="Poses (of clips drawn at random) the distance is learned on.")
+]
+IndexThreadsOption = Annotated[
+    int,
+    typer.Option(help="Threads inserting poses into the HNSW graph (1: the same file every run)."),
+]
+
+
 @pose_app.command("index")
 def index_command(
-    paths: Annotated[
-        list[Path], typer.Argument(help="Folders (searched recursively) or .amc/.bvh files.")
-    ],
+    paths: PathsArgument,
     output: Annotated[Path, typer.Option("-o", "--output", help="Library file to write.")],
-    fps: Annotated[
-        float,
-        typer.Option(
-            help=f"Frame rate poses are sampled at, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g}."
-        ),
-    ] = 30.0,
-    height: Annotated[
-        float,
-        typer.Option(help="Stature of the common body every skeleton is put on, cm."),
-    ] = 170.0,
-    metric: Annotated[
-        str,
-        typer.Option(
-            help="Pose distance to learn: GPDR+LOGIT or GPDR+LMS (the GPD with the root's speed "
-            "and turn rate), GPD+LOGIT, GPD+LMS or GPD+RDSR (docs/performance.md)."
-        ),
-    ] = DEFAULT_METRIC,
-    rank: Annotated[int, typer.Option(help="Dimensions of RDSR's projection W.")] = 50,
-    unlabeled: Annotated[int, typer.Option(help="Unlabeled poses for RDSR.")] = 5000,
-    pairs: Annotated[
-        int, typer.Option(help="Transition pairs wanted (similar, and as many dissimilar for LMS).")
-    ] = 500,
-    seed: Annotated[int, typer.Option(help="Random seed (0 or more).")] = 0,
-    fit_poses: Annotated[
-        int, typer.Option(help="Poses (of clips drawn at random) the distance is learned on.")
-    ] = 20_000,
+    fps: FpsOption = 30.0,
+    height: HeightOption = 170.0,
+    metric: MetricOption = DEFAULT_METRIC,
+    rank: RankOption = 50,
+    unlabeled: UnlabeledOption = 5000,
+    pairs: PairsOption = 500,
+    seed: SeedOption = 0,
+    fit_poses: FitPosesOption = 20_000,
     workers: WorkersOption = None,
-    index_threads: Annotated[
-        int,
-        typer.Option(
-            help="Threads inserting poses into the HNSW graph (1: the same file every run)."
-        ),
-    ] = 1,
+    index_threads: IndexThreadsOption = 1,
     scheduler: SchedulerOption = None,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
@@ -118,7 +126,7 @@ def index_command(
     skipped, and the command then exits with code 1 after writing the library of the others.
     """
     from quatmotion.io import find_motion_files
-    from quatmotion.parallel import resolve_scheduler
+    from quatmotion.parallel import Runner
     from quatmotion.pose.library import PoseLibrary
 
     with user_errors(output):
@@ -127,20 +135,19 @@ def index_command(
             n_pairs=pairs, seed=seed, fit_poses=fit_poses, index_threads=index_threads,
             skeleton=skeleton, units=units, joint_map=joint_map, take=take,
         )  # fmt: skip
-        where = resolve_scheduler(scheduler, workers=workers)
+        runner = Runner.resolve(scheduler, workers=workers)
         files = find_motion_files(paths)
         check_outputs([output], [*files, skeleton], force=force)
         from quatmotion.cli._kernels import ensure_kernels
 
         ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
-        _echo(f"{len(files)} clips, prepared on {where.describe()}")
+        _echo(f"{len(files)} clips, prepared on {runner.describe()}")
         with progress_bar(error_console) as bar:
             report = PoseLibrary.build(
                 paths,
                 output,
                 settings,
-                runner=where,
-                workers=workers,
+                runner=runner,
                 progress=_StageBars(bar),
                 log=lambda message: bar.console.print(message, markup=False, highlight=False),
                 on_doubt=doubt_reporter(bar),
@@ -159,9 +166,7 @@ def index_command(
 @pose_app.command("add")
 def add_command(
     library_path: Annotated[Path, typer.Argument(help="Pose library file (.npz) to add to.")],
-    paths: Annotated[
-        list[Path], typer.Argument(help="Folders (searched recursively) or .amc/.bvh files.")
-    ],
+    paths: PathsArgument,
     workers: WorkersOption = None,
     scheduler: SchedulerOption = None,
     skeleton: SkeletonOption = None,
@@ -171,7 +176,7 @@ def add_command(
 ) -> None:
     """Add clips to a pose library with its stored settings and distance (nothing learned
     again); clips it already holds are skipped. Exits with code 1 if a clip failed."""
-    from quatmotion.parallel import resolve_scheduler
+    from quatmotion.parallel import Runner
     from quatmotion.pose.library import PoseLibrary
 
     with user_errors(library_path):
@@ -180,16 +185,16 @@ def add_command(
         check_units(units)
         if skeleton is not None and not skeleton.exists():
             raise CliInputError(f"{skeleton}: no such skeleton file or folder")
-        where = resolve_scheduler(scheduler, workers=workers)
+        stored = PoseLibrary.stored_settings(library_path)
+        settings = _read_over(stored, skeleton, units, joint_map, take)
+        runner = Runner.resolve(scheduler, workers=workers)
         from quatmotion.cli._kernels import ensure_kernels
 
         ensure_kernels("read", "pose", workers=workers, scheduler=scheduler)
         with progress_bar(error_console) as bar:
             report = PoseLibrary.add(
-                library_path, paths, skeleton=skeleton, units=units,
-                joint_map=joint_map_entries(joint_map) or None, runner=where,
-                workers=workers, take=take,
-                progress=_StageBars(bar), on_doubt=doubt_reporter(bar),
+                library_path, paths, settings, runner=runner, progress=_StageBars(bar),
+                on_doubt=doubt_reporter(bar),
             )  # fmt: skip
     library = report.details["library"]
     report_skipped(report.failures)
@@ -201,6 +206,20 @@ def add_command(
     )
     if report.failures:
         raise typer.Exit(code=1)
+
+
+def _read_over(
+    stored, skeleton: Path | None, units: str | None, joint_map: Path | None, take: str | None
+):
+    """The stored settings of a library (None: a version-2 library, which ``add`` refuses
+    saying why) with the reading options given over their ``read``."""
+    entries = joint_map_entries(joint_map)
+    given = {"skeleton": None if skeleton is None else str(skeleton), "units": units,
+             "joint_map": tuple(entries) if entries else None, "take": take}  # fmt: skip
+    given = {k: v for k, v in given.items() if v is not None}
+    if stored is None or not given:
+        return stored
+    return stored.replace(read=stored.read.replace(**given))
 
 
 _OPTION_OF = {
@@ -308,33 +327,41 @@ class _StageBars:
         self.bar.update(self.tasks[stage], completed=done, total=total)
 
 
+LibraryArgument = Annotated[Path, typer.Argument(help="A library written by 'pose index'.")]
+FrameOption = Annotated[
+    int, typer.Option("--frame", "-f", help=f"Frame number in the clip's file ({FRAMES_HELP}).")
+]
+ClipOption = Annotated[
+    str | None,
+    typer.Option("--clip", "-c", help="Indexed clip: its name, file name, stem or number."),
+]
+FileOption = Annotated[
+    Path | None, typer.Option("--file", help="Query from a clip not in the library.")
+]
+KOption = Annotated[int, typer.Option("-k", help="Number of results (1 to the library's poses).")]
+OtherClipsOption = Annotated[
+    bool, typer.Option(help="Leave out results from the query's own clip.")
+]
+EfOption = Annotated[int, typer.Option(help="HNSW search breadth (higher: slower, more exact).")]
+TransitionsOption = Annotated[
+    bool,
+    typer.Option(
+        help="Rank the nearest poses by the library's transition judge: the probability "
+        "that a jump from the query pose into each plays badly (shown as the distance)."
+    ),
+]
+
+
 @pose_app.command("search")
 def search_command(
-    library_path: Annotated[Path, typer.Argument(help="A library written by 'pose index'.")],
-    frame: Annotated[
-        int, typer.Option("--frame", "-f", help=f"Frame number in the clip's file ({FRAMES_HELP}).")
-    ],
-    clip: Annotated[
-        str | None,
-        typer.Option("--clip", "-c", help="Indexed clip: its name, file name, stem or number."),
-    ] = None,
-    file: Annotated[
-        Path | None, typer.Option("--file", help="Query from a clip not in the library.")
-    ] = None,
-    k: Annotated[
-        int, typer.Option("-k", help="Number of results (1 to the library's poses).")
-    ] = 10,
-    other_clips: Annotated[
-        bool, typer.Option(help="Leave out results from the query's own clip.")
-    ] = False,
-    ef: Annotated[int, typer.Option(help="HNSW search breadth (higher: slower, more exact).")] = 64,
-    transitions: Annotated[
-        bool,
-        typer.Option(
-            help="Rank the nearest poses by the library's transition judge: the probability "
-            "that a jump from the query pose into each plays badly (shown as the distance)."
-        ),
-    ] = False,
+    library_path: LibraryArgument,
+    frame: FrameOption,
+    clip: ClipOption = None,
+    file: FileOption = None,
+    k: KOption = 10,
+    other_clips: OtherClipsOption = False,
+    ef: EfOption = 64,
+    transitions: TransitionsOption = False,
     as_json: JsonOption = False,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,
@@ -346,7 +373,6 @@ def search_command(
     import numpy as np
 
     from quatmotion.pose.library import PoseLibrary
-    from quatmotion.pose.skeleton16 import skeleton_kind
 
     with user_errors():
         if (clip is None) == (file is None):
@@ -359,31 +385,9 @@ def search_command(
         at_least("--ef", ef, 1)
         library = PoseLibrary.open(library_path, ef_search=ef)
         if file is not None:
-            entries = joint_map_entries(joint_map)
-            motion = read_clip(file, skeleton, units, strict=True, joint_map=entries, take=take)
-            stored = library.settings.read.joint_map if library.settings else ()
-            if not entries and stored:
-                from quatmotion.collection import with_joint_map
-
-                motion = with_joint_map(motion, stored, if_fits=True)
-            check_frame(frame, motion.n_frames, str(file))
-            kinds = library.meta.get("skeletons")
-            if kinds and skeleton_kind(motion.skeleton) not in kinds:
-                warn(
-                    f"{file}: a {skeleton_kind(motion.skeleton)} skeleton, the library's are "
-                    f"{', '.join(kinds)}: poses are compared on one common body, but distances "
-                    "between skeletons run larger than within one"
-                )
-            with np.errstate(all="ignore"):
-                query, found = library.motion_query(motion, frame)
-                start = library.transition_start(frame, motion=motion) if transitions else None
-            # a file of an indexed clip is that clip (its content hash), as --clip names it
-            from quatmotion.collection.reading import file_hash
-
-            sha256 = file_hash(file, skeleton, take)
-            same = [i for i, ref in enumerate(library.clips()) if ref.sha256 == sha256]
-            own_clip = same[0] if same else -1
-            query_doc = {"clip": file.stem, "path": str(file), "frame": found}
+            query, start, own_clip, query_doc = _file_query(
+                library, file, frame, skeleton, units, joint_map, take, transitions
+            )
         else:
             query, own_clip, found = library.pose_query(clip, frame)
             start = library.transition_start(frame, clip=clip) if transitions else None
@@ -401,9 +405,24 @@ def search_command(
             query, k, exclude_clip=own_clip if other_clips else None, transition_from=start
         )
         elapsed = time.perf_counter() - t0
+    results = _results(matches, [ref.name for ref in library.refs])
+    if as_json:
+        doc = {
+            "query": query_doc,
+            "method": library.metric + (" re-ranked by PAIR-GBT" if transitions else ""),
+            "search_ms": 1e3 * elapsed,
+            "results": results,
+        }
+        print_json(doc)
+        return
+    _print_matches(query_doc, frame, file is None, transitions, elapsed, results)
+
+
+def _results(matches: list, names: list[str]) -> list[dict]:
+    """The matches of a search as its JSON document lists them (with their catalogue labels),
+    each clip by the collection's name (``names``; none in a version-2 library: its stem)."""
     labels = _labels([m.name for m in matches])
-    names = [ref.name for ref in library.refs]  # the collection's names (none in version 2)
-    results = [
+    return [
         {
             "rank": m.rank,
             "clip": names[m.clip] if names else Path(m.name).stem,
@@ -415,19 +434,51 @@ def search_command(
         }
         for m in matches
     ]
-    if as_json:
-        doc = {
-            "query": query_doc,
-            "method": library.metric + (" re-ranked by PAIR-GBT" if transitions else ""),
-            "search_ms": 1e3 * elapsed,
-            "results": results,
-        }
-        print_json(doc)
-        return
+
+
+def _file_query(library, file: Path, frame: int, skeleton: Path | None, units: str | None,
+                joint_map: Path | None, take: str | None, transitions: bool):  # fmt: skip
+    """The query of ``pose search --file``: its vector, where a transition leaves from (with
+    ``--transitions``), the library's clip of the same content (-1: none) and the query as
+    the JSON document names it."""
+    import numpy as np
+
+    from quatmotion.collection.reading import file_hash
+    from quatmotion.pose.skeleton16 import skeleton_kind
+
+    entries = joint_map_entries(joint_map)
+    motion = read_clip(file, skeleton, units, strict=True, joint_map=entries, take=take)
+    stored = library.settings.read.joint_map if library.settings else ()
+    if not entries and stored:
+        from quatmotion.collection import with_joint_map
+
+        motion = with_joint_map(motion, stored, if_fits=True)
+    check_frame(frame, motion.n_frames, str(file))
+    kinds = library.meta.get("skeletons")
+    if kinds and skeleton_kind(motion.skeleton) not in kinds:
+        warn(
+            f"{file}: a {skeleton_kind(motion.skeleton)} skeleton, the library's are "
+            f"{', '.join(kinds)}: poses are compared on one common body, but distances "
+            "between skeletons run larger than within one"
+        )
+    with np.errstate(all="ignore"):
+        query, found = library.motion_query(motion, frame)
+        start = library.transition_start(frame, motion=motion) if transitions else None
+    # a file of an indexed clip is that clip (its content hash), as --clip names it
+    sha256 = file_hash(file, skeleton, take)
+    same = [i for i, ref in enumerate(library.clips()) if ref.sha256 == sha256]
+    own_clip = same[0] if same else -1
+    return query, start, own_clip, {"clip": file.stem, "path": str(file), "frame": found}
+
+
+def _print_matches(
+    query_doc: dict, frame: int, indexed: bool, transitions: bool, elapsed: float, results: list
+) -> None:
+    """``pose search``'s answer as a line about the query and a table of the matches."""
     from rich.table import Table
 
     used = query_doc["frame"]
-    nearest = f", the nearest {'indexed' if file is None else 'sampled'} to {frame}"
+    nearest = f", the nearest {'indexed' if indexed else 'sampled'} to {frame}"
     what = "poses to jump to from" if transitions else "poses like"
     console.print(
         f"{what} {query_doc['path']} frame {used}{nearest if used != frame else ''} "

@@ -1,6 +1,6 @@
 """The collection surface as a type: :class:`Kind`, what every file kind of clips implements
-(:class:`quatmotion.codec.Archive`, :class:`quatmotion.retrieval.ClipIndex`; the pose library
-is still to come to it).
+(:class:`quatmotion.codec.Archive`, :class:`quatmotion.retrieval.ClipIndex`,
+:class:`quatmotion.pose.library.PoseLibrary`).
 
 Every kind builds, opens and extends its file with one signature: the sources and the
 output, the kind's settings object (None: its defaults), then keyword-only where the batch runs

@@ -4,7 +4,9 @@ sample of clips; step 1, the distance learned on it by
 :func:`~quatmotion.pose.library.transitions.learn_transitions`), :func:`index_pass` (step 2:
 every clip prepared and projected in batch workers) into a :class:`Graph` (the HNSW graph grown
 in input order) and a :class:`Catalogue` (what the library records of each clip).
-:func:`build_fields` runs them all and returns the library's fields.
+:func:`build_fields` runs them all and returns the library's fields; :func:`index_more` runs
+step 2 for clips added to a library. Where each batch runs is the caller's
+:class:`~quatmotion.parallel.Runner`.
 """
 
 from __future__ import annotations
@@ -20,13 +22,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion.io import Doubt
-from quatmotion.parallel import Failure, Scheduler, imap_batch
+from quatmotion.parallel import Failure, Runner
 from quatmotion.pose import labels
 from quatmotion.pose.data import PoseClip
 from quatmotion.pose.index import HNSWIndex
 from quatmotion.pose.library.clips import ProjectedClip, projected_clip
 from quatmotion.pose.library.learn import learn_projection
-from quatmotion.pose.library.settings import DEFAULT_METRIC
+from quatmotion.pose.library.settings import PoseSettings
 from quatmotion.pose.library.transitions import learn_transitions
 
 __all__ = [
@@ -35,7 +37,9 @@ __all__ = [
     "as_given",
     "build_fields",
     "draw_sample",
+    "index_more",
     "index_pass",
+    "learn_model",
     "none_read",
 ]
 
@@ -45,85 +49,111 @@ FloatArray = NDArray[np.float64]
 def build_fields(
     sources: Sequence[Any],
     load: Callable[[Any], PoseClip],
+    settings: PoseSettings,
     *,
-    fit_poses: int = 20_000,
-    rank: int = 50,
-    n_unlabeled: int = 5000,
-    n_pairs: int = 500,
-    seed: int = 0,
-    M: int = 16,
-    ef_construction: int = 100,
-    metric: Any = None,
-    metric_name: str = DEFAULT_METRIC,
-    workers: int | None = None,
-    scheduler: str | Scheduler | None = None,
-    chunk_size: int | None = None,
-    flush_poses: int = 4096,
-    index_threads: int = 1,
+    runner: Runner,
     progress: Callable[[str, int, int], None] | None = None,
     log: Callable[[str], None] | None = None,
     on_doubt: Callable[[str, Doubt], None] | None = None,
+    estimator: Any = None,
 ) -> tuple[dict[str, Any], list[Failure]]:
-    """The fields of the library of ``sources`` and the clips that failed
-    (:meth:`quatmotion.pose.library.PoseLibrary.build_streamed` says what each parameter is)."""
+    """The fields of the library of ``sources`` and the clips that failed, in input order
+    (:meth:`quatmotion.pose.library.PoseLibrary.build_streamed` says what each parameter is;
+    ``settings`` are trusted: :class:`PoseSettings` checked them)."""
     say = log or (lambda _msg: None)
     sources = list(sources)
     if not sources:
         raise ValueError("no clips to index")
-    for name, value in (
-        ("fit_poses", fit_poses),
-        ("flush_poses", flush_poses),
-        ("index_threads", index_threads),
-    ):
-        if value < 1:
-            raise ValueError(f"{name} must be at least 1, got {value}")
-    batch = {"workers": workers, "scheduler": scheduler}
-
-    def stage(name: str) -> Callable[[int, int], None] | None:
-        return None if progress is None else functools.partial(progress, name)
-
-    sample = draw_sample(sources, load, fit_poses, seed, batch, stage("learn"))
+    stage = _stages(progress)
+    sample = draw_sample(sources, load, settings.fit_poses, settings.seed, runner, stage("learn"))
     say(f"learning the distance on {len(sample.clips)} clips ({sample.n_poses} poses)")
-    model, meta, sample_poses = learn_projection(
-        sample.clips,
-        rank=rank,
-        n_unlabeled=n_unlabeled,
-        n_pairs=n_pairs,
-        seed=seed,
-        metric=metric,
-        metric_name=metric_name,
-        say=say,
-    )
-    judge, judged = learn_transitions(
-        sample.clips, n_pairs=n_pairs, n_unlabeled=n_unlabeled, seed=seed, say=say,
-        poses=sample_poses,
-    )  # fmt: skip
-    del sample_poses
-    model, meta = {**model, **judge}, {**meta, **judged}
+    model, meta = learn_model(sample.clips, settings, estimator=estimator, say=say)
     fps, height = sample.clips[0].fps, sample.clips[0].height
     failed = sample.failed
     kept = [i for i in range(len(sources)) if i not in failed]
-    graph = Graph(
-        HNSWIndex(M=M, ef_construction=ef_construction, n_threads=index_threads, random_state=seed),
-        flush_poses=flush_poses,
-        capacity=int(1.05 * sample.n_poses / len(sample.clips) * len(kept)),
-    )
-    n_fit_clips, n_fit_poses = len(sample.clips), sample.n_poses
+    index = HNSWIndex(
+        M=settings.M, ef_construction=settings.ef_construction,
+        n_threads=settings.index_threads, random_state=settings.seed,
+    )  # fmt: skip
+    capacity = int(1.05 * sample.n_poses / len(sample.clips) * len(kept))
+    graph = Graph(index, flush_poses=settings.flush_poses, capacity=capacity)
+    meta = {**meta, "fit_clips": len(sample.clips), "fit_poses": sample.n_poses}
     del sample
     t0 = time.perf_counter()
     catalogue = index_pass(
         sources, kept, load, model, fps=fps, height=height, graph=graph, failed=failed,
-        chunk_size=chunk_size, batch=batch, progress=stage("index"), on_doubt=on_doubt,
-        metric=meta["metric"],
+        chunk_size=settings.chunk_size, runner=runner, progress=stage("index"),
+        on_doubt=on_doubt, metric=meta["metric"],
     )  # fmt: skip
     index = graph.close()
     if not catalogue.names:
         raise ValueError(none_read(len(sources), failed))
     seconds = time.perf_counter() - t0
     say(f"indexed {index.n_items_} poses of {len(catalogue.names)} clips: {seconds:.1f} s")
-    meta = {**meta, "fit_clips": n_fit_clips, "fit_poses": n_fit_poses}
     fields = {"index": index, "model": model, **catalogue.library_fields(fps, meta)}
     return fields, [failed[i] for i in sorted(failed)]
+
+
+def learn_model(
+    clips: Sequence[PoseClip],
+    settings: PoseSettings,
+    *,
+    estimator: Any = None,
+    say: Callable[[str], None],
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Step 1 of the build on the sample's ``clips``: the distance's projection
+    (:func:`~quatmotion.pose.library.learn.learn_projection`) and the transition judge
+    (:func:`~quatmotion.pose.library.transitions.learn_transitions`, on the same poses), as the
+    library's ``model`` arrays and what its ``meta`` records of them."""
+    model, meta, poses = learn_projection(clips, settings, estimator=estimator, say=say)
+    judge, judged = learn_transitions(
+        clips, n_pairs=settings.n_pairs, n_unlabeled=settings.n_unlabeled, seed=settings.seed,
+        say=say, poses=poses,
+    )  # fmt: skip
+    return {**model, **judge}, {**meta, **judged}
+
+
+def index_more(
+    index: HNSWIndex,
+    model: dict[str, Any],
+    meta: dict[str, Any],
+    n_clips: int,
+    sources: list[Any],
+    load: Callable[[Any], PoseClip],
+    settings: PoseSettings,
+    *,
+    runner: Runner,
+    progress: Callable[[str, int, int], None] | None,
+    on_doubt: Callable[[str, Doubt], None] | None,
+) -> tuple[Catalogue, dict[int, Failure]]:
+    """Step 2 of the build for clips added to a library of ``n_clips`` clips: each projected
+    with the stored ``model`` into the stored graph ``index``; the clips indexed and those
+    that failed (by position in ``sources``)."""
+    failed: dict[int, Failure] = {}
+    capacity = index.n_items_ * (n_clips + len(sources)) // max(1, n_clips)
+    graph = Graph(index, flush_poses=settings.flush_poses, capacity=capacity)
+    catalogue = index_pass(
+        sources, list(range(len(sources))), load, model, fps=meta["fps"],
+        height=meta["height_cm"], graph=graph, failed=failed, chunk_size=settings.chunk_size,
+        runner=runner, progress=_stages(progress)("index"), on_doubt=on_doubt,
+        metric=str(meta.get("metric", "GPD+RDSR")),
+    )  # fmt: skip
+    graph.close()
+    if not catalogue.names:
+        raise ValueError(none_read(len(sources), failed))
+    return catalogue, failed
+
+
+def _stages(
+    progress: Callable[[str, int, int], None] | None,
+) -> Callable[[str], Callable[[int, int], None] | None]:
+    """``stage(name)``: the ``progress(done, total)`` of one stage of ``progress(stage, done,
+    total)``."""
+
+    def stage(name: str) -> Callable[[int, int], None] | None:
+        return None if progress is None else functools.partial(progress, name)
+
+    return stage
 
 
 def as_given(clip: PoseClip) -> PoseClip:
@@ -145,7 +175,7 @@ def draw_sample(
     load: Callable[[Any], PoseClip],
     fit_poses: int,
     seed: int,
-    batch: dict[str, Any],
+    runner: Runner,
     progress: Callable[[int, int], None] | None,
 ) -> _Sample:
     """Step 1 of the build: clips loaded in a seeded order until they hold ``fit_poses``
@@ -154,7 +184,7 @@ def draw_sample(
     failed: dict[int, Failure] = {}
     drawn: list[tuple[int, PoseClip]] = []
     n_poses = 0
-    with imap_batch(load, [sources[i] for i in order], progress=progress, **batch) as stream:
+    with runner.map(load, [sources[i] for i in order], progress=progress) as stream:
         for outcome in stream:
             where = int(order[outcome.index])
             if outcome.failure is not None:
@@ -243,7 +273,7 @@ def index_pass(
     graph: Graph,
     failed: dict[int, Failure],
     chunk_size: int | None,
-    batch: dict[str, Any],
+    runner: Runner,
     progress: Callable[[int, int], None] | None,
     on_doubt: Callable[[str, Doubt], None] | None,
     metric: str,
@@ -255,7 +285,8 @@ def index_pass(
         chunk_size = 8 if len(kept) >= 64 else 1
     catalogue = Catalogue()
     items = [sources[i] for i in kept]
-    with imap_batch(job, items, progress=progress, chunk_size=chunk_size, **batch) as stream:
+    runner = dataclasses.replace(runner, chunk_size=chunk_size)
+    with runner.map(job, items, progress=progress) as stream:
         for outcome in stream:
             where = kept[outcome.index]
             if outcome.failure is not None:

@@ -8,12 +8,14 @@ anything is searched, raising :class:`~quatmotion.FormatError`.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
 import os
 import pathlib
 import zipfile
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -29,7 +31,7 @@ from quatmotion.pose.library.settings import PoseSettings
 from quatmotion.pose.library.transitions import TRANSITION_PREFIX
 from quatmotion.pose.transition import TransitionClassifier
 
-__all__ = ["FORMAT", "derived_refs", "read_library", "write_library"]
+__all__ = ["FORMAT", "derived_refs", "read_library", "read_settings", "write_library"]
 
 FORMAT = FileFormat("quatmotion-pose-library", 4, 2, "a quatmotion pose library")
 """4: a clip's reference carries its take (``take``: one take of a file of several); 3 (0.4.0,
@@ -52,11 +54,9 @@ def read_library(path: str | os.PathLike[str], ef_search: int = 64) -> dict[str,
     FormatError
         Not a quatmotion pose library, or a version this code does not read.
     """
-    try:
+    with _reading(path):
         arrays = _load_arrays(path)
-        meta = load_json(str(arrays.get("meta", "null")), path, "meta")
-        if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
-            raise FormatError(_NOT_A_LIBRARY, path)
+        meta = _meta(arrays, path)
         version = FORMAT.check(meta.get("format"), meta.get("version"), path)
         refs = [ClipRef.from_dict(r, path) for r in meta.pop("clips", [])]
         stored = meta.pop("settings", None)
@@ -79,6 +79,29 @@ def read_library(path: str | os.PathLike[str], ef_search: int = 64) -> dict[str,
             version=version,
             path=pathlib.Path(path),
         )
+
+
+def read_settings(path: str | os.PathLike[str]) -> PoseSettings | None:
+    """The settings stored in the library at ``path`` (None for a version-2 library), its
+    ``meta`` alone read and checked.
+
+    Raises
+    ------
+    FormatError
+        Not a quatmotion pose library, or a version this code does not read.
+    """
+    with _reading(path):
+        meta = _meta(_load_arrays(path, only="meta"), path)
+        stored = meta.get("settings")
+        return None if stored is None else PoseSettings.from_dict(stored, path)
+
+
+@contextlib.contextmanager
+def _reading(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Reading the library at ``path``: what goes wrong is a :class:`FormatError` saying what
+    the file should have been (a missing or unreadable file stays an ``OSError``)."""
+    try:
+        yield
     except FormatError:
         raise
     except (IsADirectoryError, FileNotFoundError, PermissionError):
@@ -89,6 +112,15 @@ def read_library(path: str | os.PathLike[str], ef_search: int = 64) -> dict[str,
         # np.load's own message (pickled data, a bad zip...) says nothing about what the
         # file should have been.
         raise FormatError(_NOT_A_LIBRARY, path) from exc
+
+
+def _meta(arrays: dict[str, np.ndarray], path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A library's ``meta`` record, its format and version checked."""
+    meta = load_json(str(arrays.get("meta", "null")), path, "meta")
+    if not isinstance(meta, dict) or meta.get("format") != _FORMAT:
+        raise FormatError(_NOT_A_LIBRARY, path)
+    FORMAT.check(meta.get("format"), meta.get("version"), path)
+    return meta
 
 
 def write_library(
@@ -154,9 +186,9 @@ class _MalformedError(ValueError):
     """A pose library whose arrays disagree (the message says which)."""
 
 
-def _load_arrays(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
-    """A library's arrays, each member's declared size checked (against the limits and its
-    header's shape) before NumPy allocates it; no objects."""
+def _load_arrays(path: str | os.PathLike[str], only: str | None = None) -> dict[str, np.ndarray]:
+    """A library's arrays (``only``: that one), each member's declared size checked (against
+    the limits and its header's shape) before NumPy allocates it; no objects."""
     with zipfile.ZipFile(path) as archive:
         for info in archive.infolist():
             check("file_bytes", info.file_size, path, f"member {info.filename}")
@@ -168,7 +200,7 @@ def _load_arrays(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
             ):
                 raise _MalformedError(f"member {info.filename} declares more data than it holds")
     with np.load(path, allow_pickle=False) as data:
-        return {k: data[k] for k in data.files}
+        return {k: data[k] for k in data.files if only is None or k == only}
 
 
 def _check_catalogue(

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from quatmotion.pose import labels
 from quatmotion.pose.data import PoseClip, PoseData
-from quatmotion.pose.library.settings import METRICS
+from quatmotion.pose.library.settings import PoseSettings
 from quatmotion.pose.library.transitions import MIN_PAIRS
 from quatmotion.pose.methods import METHODS, pose_features
 
@@ -109,25 +109,19 @@ def training_set(
 
 def learn_projection(
     clips: Sequence[PoseClip],
+    settings: PoseSettings,
     *,
-    rank: int,
-    n_unlabeled: int,
-    n_pairs: int,
-    seed: int,
-    metric: Any,
-    metric_name: str,
+    estimator: Any = None,
     say: Callable[[str], None],
 ) -> tuple[dict[str, FloatArray], dict[str, Any], PoseData]:
-    """The GPD scaling and the metric's projection learned on ``clips``.
+    """The GPD scaling and the projection of ``settings.metric`` learned on ``clips``
+    (``estimator``: RDSR's, unfitted, for a ``+RDSR`` metric; default
+    ``RDSR(n_components=rank)``).
 
     Returns the model (``scale``, ``offset``, ``W``), the settings for the library's ``meta``
     and the clips' poses joined (their GPD computed, for the next step to reuse).
     """
-    if metric_name not in METRICS:
-        raise ValueError(f"unknown pose metric {metric_name!r}; choose from {', '.join(METRICS)}")
-    for name, value in (("rank", rank), ("n_unlabeled", n_unlabeled), ("n_pairs", n_pairs)):
-        if value < 1:
-            raise ValueError(f"{name} must be at least 1, got {value}")
+    metric_name, seed = settings.metric, settings.seed
     fps, height = clips[0].fps, clips[0].height
     if any(c.fps != fps or c.height != height for c in clips):
         raise ValueError("every clip must be prepared at the same frame rate and height")
@@ -138,12 +132,12 @@ def learn_projection(
     # The metric is the registered method of that name (one implementation with the benchmark).
     options: dict[str, Any] = {"random_state": seed}
     if metric_name.endswith("+RDSR"):
-        options["n_components"] = min(rank, raw.shape[1])
-        if metric is not None:
-            options = {"estimator": metric}
+        options["n_components"] = min(settings.rank, raw.shape[1])
+        if estimator is not None:
+            options = {"estimator": estimator}
     method = METHODS[metric_name](**options)
     unlabeled, pairs, similar, pairs_from = training_set(
-        clips, n_unlabeled=n_unlabeled, n_pairs=n_pairs, seed=seed,
+        clips, n_unlabeled=settings.n_unlabeled, n_pairs=settings.n_pairs, seed=seed,
         dissimilar=method.uses_dissimilar, say=say,
     )  # fmt: skip
     t0 = time.perf_counter()

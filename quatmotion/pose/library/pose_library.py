@@ -48,7 +48,7 @@ import errno
 import functools
 import os
 import pathlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,17 +70,22 @@ from quatmotion.motion import Motion
 from quatmotion.parallel import Failure, Runner, Scheduler
 from quatmotion.pose.data import PoseClip, PoseData
 from quatmotion.pose.index import HNSWIndex
-from quatmotion.pose.library.build import (
-    Catalogue,
-    Graph,
-    as_given,
-    build_fields,
-    index_pass,
-    none_read,
+from quatmotion.pose.library._old_names import (
+    old_add,
+    old_build,
+    old_build_in_memory,
+    old_build_streamed,
 )
+from quatmotion.pose.library.build import Catalogue, as_given, build_fields, index_more
 from quatmotion.pose.library.clips import load_pose_source, project_gpd
-from quatmotion.pose.library.file import FORMAT, derived_refs, read_library, write_library
-from quatmotion.pose.library.settings import DEFAULT_METRIC, PoseSettings
+from quatmotion.pose.library.file import (
+    FORMAT,
+    derived_refs,
+    read_library,
+    read_settings,
+    write_library,
+)
+from quatmotion.pose.library.settings import PoseSettings
 from quatmotion.pose.library.transitions import transition_judge
 from quatmotion.pose.methods import pose_features
 from quatmotion.pose.transition import TransitionClassifier
@@ -172,6 +177,12 @@ class PoseLibrary:
             return tuple(self.refs)
         return derived_refs(self.clip_names, self.path)
 
+    def __enter__(self) -> PoseLibrary:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        """Nothing to release: a library is read whole into memory."""
+
     @classmethod
     def open(cls, path: str | os.PathLike[str], ef_search: int = 64) -> PoseLibrary:
         """Read a library (any version from :data:`FORMAT`'s ``oldest_readable``).
@@ -183,29 +194,44 @@ class PoseLibrary:
         """
         return cls(**read_library(path, ef_search))
 
+    # -- building: the collection surface (collection.kind.Kind) ------------------------------
     @classmethod
-    def _build_file(
+    @old_build
+    def build(
         cls,
-        sources: Sequence[Any],
+        sources: Iterable[Any],
         out: str | os.PathLike[str],
         settings: PoseSettings | None = None,
         *,
         runner: Runner | str | Scheduler | None = None,
-        workers: int | None = None,
         progress: Callable[[str, int, int], None] | None = None,
-        log: Callable[[str], None] | None = None,
         on_doubt: Callable[[str, Doubt], None] | None = None,
+        log: Callable[[str], None] | None = None,
     ) -> BuildReport:
-        """Build the library of ``sources`` (files, folders, motions in memory) into ``out``
-        (:meth:`build_streamed` on the clips :func:`quatmotion.collection.find_clips` finds,
-        each read by :func:`quatmotion.collection.read_clip`); the settings and the clips'
+        """Build the library of ``sources`` (files, folders, motions in memory) into ``out``:
+        :meth:`build_streamed` on the clips :func:`quatmotion.collection.find_clips` finds,
+        each read by :func:`quatmotion.collection.read_clip`; the settings and the clips'
         references are stored in the file.
+
+        Parameters
+        ----------
+        sources : iterable
+            Files, folders (searched recursively), motions or clip sources.
+        out : str or Path
+            The library file to write (temporary file, then rename).
+        settings : PoseSettings, optional
+            How the library is built (None: the defaults); checked once, when made.
+        runner : Runner, optional
+            Where the clips are prepared (a scheduler name or :class:`Scheduler` is read by
+            :meth:`Runner.resolve`; None: ``QUATMOTION_SCHEDULER``, else a local pool).
+        progress, on_doubt, log : callable, optional
+            As for :meth:`build_streamed`.
 
         Returns
         -------
         BuildReport
             ``added`` the clips indexed, ``failures`` the others; ``details["library"]`` the
-            library written.
+            :class:`PoseLibrary` written.
 
         Raises
         ------
@@ -214,28 +240,15 @@ class PoseLibrary:
         """
         settings = settings or PoseSettings()
         report = BuildReport(path=pathlib.Path(out), settings=settings)
-        errors: list[tuple[str, str]] = []
-        found = find_clips(sources, settings.read, on_error=errors)
-        report.failures += [Failure(i, p, reason) for i, (p, reason) in enumerate(errors)]
+        found = _find(sources, settings, report)
         load = functools.partial(
             load_pose_source, fps=settings.fps, height=settings.height, read=settings.read
         )
         library, failures = cls.build_streamed(
             found,
             load,
-            fit_poses=settings.fit_poses,
-            rank=settings.rank,
-            n_unlabeled=settings.n_unlabeled,
-            n_pairs=settings.n_pairs,
-            seed=settings.seed,
-            M=settings.M,
-            ef_construction=settings.ef_construction,
-            metric_name=settings.metric,
-            workers=workers,
-            scheduler=runner.scheduler if isinstance(runner, Runner) else runner,
-            chunk_size=settings.chunk_size,
-            flush_poses=settings.flush_poses,
-            index_threads=settings.index_threads,
+            settings,
+            runner=_runner(runner),
             progress=progress,
             log=log,
             on_doubt=on_doubt,
@@ -250,103 +263,86 @@ class PoseLibrary:
         return report
 
     @classmethod
+    @old_add
     def add(
         cls,
         path: str | os.PathLike[str],
-        sources: Sequence[Any],
+        sources: Iterable[Any],
+        settings: PoseSettings | None = None,
         *,
-        skeleton: str | os.PathLike[str] | None = None,
-        units: str | float | None = None,
-        joint_map: Sequence[str] | None = None,
         runner: Runner | str | Scheduler | None = None,
-        workers: int | None = None,
         progress: Callable[[str, int, int], None] | None = None,
-        log: Callable[[str], None] | None = None,
         on_doubt: Callable[[str, Doubt], None] | None = None,
-        take: str | None = None,
+        log: Callable[[str], None] | None = None,
     ) -> BuildReport:
-        """Add ``sources`` to the library at ``path`` with its stored settings and distance
-        (nothing is learned again): each new clip is read, projected and inserted into the
-        graph; a clip whose content the library already holds is skipped; a new clip whose
-        name a stored clip of another file has is named by the collection's rule
+        """Add ``sources`` to the library at ``path`` with its stored distance (nothing is
+        learned again): each new clip is read, projected and inserted into the graph; a clip
+        whose content the library already holds is skipped; a new clip whose name a stored
+        clip of another file has is named by the collection's rule
         (:func:`~quatmotion.collection.unique_names` over the two paths). The file is
-        rewritten whole (temporary file, then rename). ``skeleton``, ``units``, ``joint_map``
-        (``"Canonical=joint"`` entries) and ``take`` replace the stored
-        :class:`~quatmotion.collection.ReadSettings`' for the new clips.
+        rewritten whole (temporary file, then rename).
+
+        ``settings`` (None: the stored ones, :meth:`stored_settings`) say how the new clips
+        are read (``read``) and batched (``chunk_size``, ``flush_poses``); what shaped the
+        library (its rate, body, distance, sample, graph) must be the stored values.
 
         Raises
         ------
         FileNotFoundError
             No library at ``path``.
         ValueError
-            A version-2 library (it stored no settings: rebuild it), or no clip could be read.
+            A version-2 library (it stored no settings: rebuild it), settings that would
+            change what the library was built with, or no clip could be read.
         """
         path = pathlib.Path(path)
         if not path.is_file():
             raise FileNotFoundError(errno.ENOENT, "no pose library", str(path))
         library = cls.open(path)
-        settings = library.settings
-        if settings is None:
-            raise ValueError(f"{path}: a version-{library.version} library stores no settings; "
-                             "build it again to add clips")  # fmt: skip
-        given = {
-            "skeleton": None if skeleton is None else os.fspath(skeleton),
-            "units": units,
-            "joint_map": None if joint_map is None else tuple(joint_map),
-            "take": take,
-        }
-        given = {k: v for k, v in given.items() if v is not None}
-        if given:  # how the new clips are read, over the stored reading settings
-            read = dataclasses.replace(settings.read, **given)
-            settings = dataclasses.replace(settings, read=read)
+        settings = _settings_to_add(library, settings)
         report = BuildReport(path=path, settings=settings, details={"resumed": True})
         report.details["clips_before"] = len(library.clip_names)
-        errors: list[tuple[str, str]] = []
-        found = find_clips(sources, settings.read, on_error=errors)
-        report.failures += [Failure(i, p, reason) for i, (p, reason) in enumerate(errors)]
-        held = {r.sha256 for r in library.clips()}
-        refs = list(library.clips())
-        new: list[ClipSource] = []
-        for source in found:
-            if source.sha256 in held:
-                report.skipped.append(source.ref())
-                continue
-            ref = name_apart(source.ref(), refs, path)
-            refs.append(ref)
-            held.add(source.sha256)
-            new.append(dataclasses.replace(source, name=ref.name))
+        report.details["library"] = library
+        new = library._new_sources(_find(sources, settings, report), report)
         if not new:
-            report.details["library"] = library
             return report
         load = functools.partial(
             load_pose_source, fps=settings.fps, height=settings.height, read=settings.read
         )
-        scheduler = runner.scheduler if isinstance(runner, Runner) else runner
-        failed: dict[int, Failure] = {}
-        n_old = len(library.clip_names)
-        capacity = library.index.n_items_ * (n_old + len(new)) // max(1, n_old)
-        graph = Graph(library.index, flush_poses=settings.flush_poses, capacity=capacity)
-        catalogue = index_pass(
-            new, list(range(len(new))), load, library.model,
-            fps=library.meta["fps"], height=library.meta["height_cm"], graph=graph,
-            failed=failed, chunk_size=settings.chunk_size,
-            batch={"workers": workers, "scheduler": scheduler},
-            progress=None if progress is None else functools.partial(progress, "index"),
-            on_doubt=on_doubt, metric=library.metric,
+        catalogue, failed = index_more(
+            library.index, library.model, library.meta, len(library.clip_names), new, load,
+            settings, runner=_runner(runner), progress=progress, on_doubt=on_doubt,
         )  # fmt: skip
-        graph.close()
-        if not catalogue.names:
-            raise ValueError(none_read(len(new), failed))
         library._extend(catalogue)
         added = [s.ref() for i, s in enumerate(new) if i not in failed]
         library.refs = list(library.clips()) + added
         library.save(path)
         report.added = added
         report.failures += [dataclasses.replace(failed[i], item=new[i]) for i in sorted(failed)]
-        report.details["library"] = library
         say = log or (lambda _msg: None)
         say(f"added {len(added)} clips to {path} ({len(report.skipped)} already there)")
         return report
+
+    @staticmethod
+    def stored_settings(path: str | os.PathLike[str]) -> PoseSettings | None:
+        """The settings the library at ``path`` was built with (None for a version-2 library),
+        read without reading its graph."""
+        return read_settings(path)
+
+    def _new_sources(self, found: list[ClipSource], report: BuildReport) -> list[ClipSource]:
+        """The clips of ``found`` this library does not hold (the others into
+        ``report.skipped``), named apart from its clips."""
+        held = {r.sha256 for r in self.clips()}
+        refs = list(self.clips())
+        new: list[ClipSource] = []
+        for source in found:
+            if source.sha256 in held:
+                report.skipped.append(source.ref())
+                continue
+            ref = name_apart(source.ref(), refs, report.path)
+            refs.append(ref)
+            held.add(source.sha256)
+            new.append(dataclasses.replace(source, name=ref.name))
+        return new
 
     def _extend(self, catalogue: Catalogue) -> None:
         """Append the catalogue's clips (their vectors already in the graph)."""
@@ -365,140 +361,83 @@ class PoseLibrary:
         }
 
     @classmethod
-    def build(
-        cls,
-        sources: Sequence[Any],
-        out: str | os.PathLike[str] | None = None,
-        settings: PoseSettings | None = None,
-        **options: Any,
-    ) -> Any:
-        """Build a library: ``build(sources, out, settings, *, runner, workers, progress, log,
-        on_doubt) -> BuildReport`` writes the file (the collection surface); without ``out``,
-        ``build(clips, *, rank, ...)`` learns on prepared :class:`PoseClip` items in memory
-        and returns the :class:`PoseLibrary` (:meth:`build_in_memory`)."""
-        if out is None:
-            if settings is not None:
-                options = {
-                    "rank": settings.rank, "n_unlabeled": settings.n_unlabeled,
-                    "n_pairs": settings.n_pairs, "seed": settings.seed, "M": settings.M,
-                    "ef_construction": settings.ef_construction,
-                    "metric_name": settings.metric, **options,
-                }  # fmt: skip
-            return cls.build_in_memory(sources, **options)
-        return cls._build_file(sources, out, settings, **options)
-
-    @classmethod
+    @old_build_in_memory
     def build_in_memory(
         cls,
         clips: Sequence[PoseClip],
+        settings: PoseSettings | None = None,
         *,
-        rank: int = 50,
-        n_unlabeled: int = 5000,
-        n_pairs: int = 500,
-        seed: int = 0,
-        M: int = 16,
-        ef_construction: int = 100,
-        metric: Any = None,
-        metric_name: str = DEFAULT_METRIC,
         log: Callable[[str], None] | None = None,
+        estimator: Any = None,
     ) -> PoseLibrary:
-        """Learn a pose distance on the clips' own poses, project every pose and index it.
+        """Learn a pose distance on the clips' own poses, project every pose and index it,
+        in this process (the build of :meth:`build_streamed` with every clip the sample).
 
-        The steps: GPD of every pose; positive pairs (good transitions by Kovar's windowed
-        point-cloud distance, :func:`~quatmotion.pose.labels.transition_labels`, or
-        consecutive frames when the clips yield fewer than 10); the min-max (clipped) + unit-length
-        scaling fitted on the unlabeled sample and the pairs; the metric learned from them;
-        every pose projected by it into an HNSW index.
+        The steps: the features of every pose; positive pairs (good transitions by Kovar's
+        windowed point-cloud distance, :func:`~quatmotion.pose.labels.transition_labels`, or
+        consecutive frames when the clips yield fewer than 10); the min-max (clipped) +
+        unit-length scaling fitted on the unlabeled sample and the pairs; the metric learned
+        from them; every pose projected by it into an HNSW index.
 
         Parameters
         ----------
         clips : sequence of PoseClip
             All prepared at the same frame rate and height (:meth:`PoseClip.from_motion`).
-        rank : int
-            Rank of the projection ``W`` (its dimensions).
-        n_unlabeled : int
-            Unlabeled poses for the metric's sparse-representation term.
-        n_pairs : int
-            Positive transition pairs wanted.
-        seed : int
-        M, ef_construction : int
-            HNSW graph parameters.
-        metric : estimator, optional
-            For ``"GPD+RDSR"``: unfitted, with ``fit(X_unlabeled, positive_pairs)`` and
-            ``components_`` of shape ``(rank, D)`` after fitting; default
-            ``RDSR(n_components=rank)``.
-        metric_name : {"GPDR+LOGIT", "GPDR+LMS", "GPD+LOGIT", "GPD+LMS", "GPD+RDSR"}
-            The pose distance to learn (module docstring); ``rank`` applies to RDSR only.
+        settings : PoseSettings, optional
+            How the library is built (``fps``, ``height``, ``read`` and ``fit_poses`` apart:
+            the clips are prepared and all of them learned on).
         log : callable, optional
             Called with progress messages.
+        estimator : estimator, optional
+            For a ``+RDSR`` metric: unfitted, with ``fit(X_unlabeled, positive_pairs)`` and
+            ``components_`` of shape ``(rank, D)`` after fitting; default
+            ``RDSR(n_components=rank)``.
 
         Returns
         -------
         PoseLibrary
         """
+        settings = settings or PoseSettings()
         if not clips:
             raise ValueError("no clips to index")
-        # The in-memory case of the streamed build: every clip is the sample (fit_poses is all
-        # their poses, so the distance is learned on all clips in input order) and the index
-        # pass runs inline on the clips as given.
-        library, failures = cls.build_streamed(
-            list(clips),
-            as_given,
-            fit_poses=max(1, sum(len(c) for c in clips)),
-            rank=rank,
-            n_unlabeled=n_unlabeled,
-            n_pairs=n_pairs,
-            seed=seed,
-            M=M,
-            ef_construction=ef_construction,
-            metric=metric,
-            metric_name=metric_name,
-            scheduler="inline",
-            log=log,
+        # Every clip is the sample (fit_poses is all their poses, so the distance is learned on
+        # all clips in input order) and the index pass runs inline on the clips as given.
+        settings = settings.replace(fit_poses=max(1, sum(len(c) for c in clips)))
+        fields, failures = build_fields(
+            list(clips), as_given, settings, runner=Runner.inline(), log=log, estimator=estimator
         )
         if failures:
             first = failures[0]
             raise ValueError(f"clip {clips[first.index].name!r}: {first.message}")
-        return library
+        return cls(**fields)
 
     @classmethod
+    @old_build_streamed
     def build_streamed(
         cls,
         sources: Sequence[Any],
         load: Callable[[Any], PoseClip],
+        settings: PoseSettings | None = None,
         *,
-        fit_poses: int = 20_000,
-        rank: int = 50,
-        n_unlabeled: int = 5000,
-        n_pairs: int = 500,
-        seed: int = 0,
-        M: int = 16,
-        ef_construction: int = 100,
-        metric: Any = None,
-        metric_name: str = DEFAULT_METRIC,
-        workers: int | None = None,
-        scheduler: str | Scheduler | None = None,
-        chunk_size: int | None = None,
-        flush_poses: int = 4096,
-        index_threads: int = 1,
+        runner: Runner | str | Scheduler | None = None,
         progress: Callable[[str, int, int], None] | None = None,
-        log: Callable[[str], None] | None = None,
         on_doubt: Callable[[str, Doubt], None] | None = None,
+        log: Callable[[str], None] | None = None,
+        estimator: Any = None,
     ) -> tuple[PoseLibrary, list[Failure]]:
-        """Build a library of any size in bounded memory, the clips prepared in parallel.
+        """Build a library of any size in bounded memory, the clips prepared in parallel
+        (not written: :meth:`save`; :meth:`build` reads files and writes the library).
 
-        Two passes over ``sources``, each a batch of :mod:`quatmotion.parallel` (local process
-        pool, or Dask with ``scheduler``):
+        Two passes over ``sources``, each a batch of ``runner``:
 
-        1. *Learn*: clips are loaded in a seeded random order until they hold ``fit_poses``
-           poses (at least two clips); the distance is learned on that sample exactly as
-           :meth:`build` learns it on all clips (in input order), so a library smaller than
-           ``fit_poses`` gets the model :meth:`build` would give it.
+        1. *Learn*: clips are loaded in a seeded random order until they hold
+           ``settings.fit_poses`` poses (at least two clips); the distance is learned on that
+           sample exactly as :meth:`build_in_memory` learns it on all clips (in input order),
+           so a library smaller than ``fit_poses`` gets the model it would give.
         2. *Index*: every clip is loaded again in a worker, described and projected there; the
            vectors (float32, ``rank`` per pose) come back in input order and go into the
            HNSW graph ``flush_poses`` at a time, on ``index_threads`` threads: with one (the
-           default) the library is the same bytes whatever the scheduler and the number of
-           workers.
+           default) the library is the same bytes whatever the runner.
 
         Memory holds the sample, a window of projected clips and the index itself; neither
         all poses nor their GPD features are ever in one array.
@@ -510,31 +449,21 @@ class PoseLibrary:
         load : callable
             ``load(source) -> PoseClip``, module-level (picklable), every clip at the same
             frame rate and height; an exception skips that clip (reported, never fatal).
-        fit_poses : int
-            Poses the distance is learned on (the sample grows a clip at a time to this).
-        rank, n_unlabeled, n_pairs, seed, M, ef_construction, metric, metric_name
-            As for :meth:`build`.
-        workers, scheduler
-            Where the clips are prepared: :func:`quatmotion.parallel.imap_batch`.
-        chunk_size : int, optional
-            Clips per task of the index pass. Each task carries the projection model (its
-            size: docs/performance.md), so by default eight clips share one once there are
-            at least 64 clips, else every clip is a task. The learn pass sends clips one by one.
-        flush_poses : int
-            Vectors per insertion into the HNSW graph.
-        index_threads : int
-            Threads inserting into the graph, in this process. One keeps the library the
-            same bytes whatever the scheduler; more insert faster (the insertion is the part
-            of the build that does not spread over workers), but the graph then depends on
-            thread timing (its search results barely).
+        settings : PoseSettings, optional
+            How the library is built (None: the defaults; ``fps``, ``height`` and ``read``
+            are ``load``'s to apply).
+        runner : Runner, optional
+            Where the clips are prepared (as for :meth:`build`).
         progress : callable, optional
             ``progress(stage, done, total)`` with stage ``"learn"`` (clips loaded for the
             sample, out of all clips; stops when the sample is complete) or ``"index"``.
-        log : callable, optional
-            Called with progress messages.
         on_doubt : callable, optional
             ``on_doubt(clip name, doubt)`` for each of a clip's :attr:`PoseClip.doubts`, once,
             in the index pass.
+        log : callable, optional
+            Called with progress messages.
+        estimator : estimator, optional
+            As for :meth:`build_in_memory`.
 
         Returns
         -------
@@ -546,14 +475,11 @@ class PoseLibrary:
         Raises
         ------
         ValueError
-            No clip could be read, or the parameters are out of range.
+            No clip could be read.
         """
         fields, failures = build_fields(
-            sources, load, fit_poses=fit_poses, rank=rank, n_unlabeled=n_unlabeled,
-            n_pairs=n_pairs, seed=seed, M=M, ef_construction=ef_construction, metric=metric,
-            metric_name=metric_name, workers=workers, scheduler=scheduler,
-            chunk_size=chunk_size, flush_poses=flush_poses, index_threads=index_threads,
-            progress=progress, log=log, on_doubt=on_doubt,
+            sources, load, settings or PoseSettings(), runner=_runner(runner),
+            progress=progress, log=log, on_doubt=on_doubt, estimator=estimator,
         )  # fmt: skip
         return cls(**fields), failures
 
@@ -777,3 +703,42 @@ class PoseLibrary:
         """:meth:`open` (the name before 0.4.0; warns)."""
         warn_renamed("PoseLibrary.load", "PoseLibrary.open")
         return cls.open(path, ef_search)
+
+
+def _find(sources: Iterable[Any], settings: PoseSettings, report: BuildReport) -> list[ClipSource]:
+    """The clips of ``sources`` (:func:`~quatmotion.collection.find_clips`), those that could
+    not be found or read into ``report.failures``."""
+    errors: list[tuple[str, str]] = []
+    found = find_clips(sources, settings.read, on_error=errors)
+    report.failures += [Failure(i, p, reason) for i, (p, reason) in enumerate(errors)]
+    return found
+
+
+# What shaped a library: an add cannot change it (how new clips are read and batched can).
+_SHAPING = ("fps", "height", "metric", "rank", "n_unlabeled", "n_pairs", "seed", "fit_poses",
+            "M", "ef_construction")  # fmt: skip
+
+
+def _settings_to_add(library: PoseLibrary, settings: PoseSettings | None) -> PoseSettings:
+    """The settings an add to ``library`` runs with: ``settings``, or the stored ones."""
+    stored = library.settings
+    if stored is None:
+        raise ValueError(f"{library.path}: a version-{library.version} library stores no "
+                         "settings; build it again to add clips")  # fmt: skip
+    if settings is None:
+        return stored
+    changed = [f for f in _SHAPING if getattr(settings, f) != getattr(stored, f)]
+    if changed:
+        shown = ", ".join(f"{f}={getattr(stored, f)!r}" for f in changed)
+        raise ValueError(
+            f"{library.path}: the library was built with {shown}; an add keeps what the "
+            "library was built with (give its stored settings, PoseLibrary.stored_settings, "
+            "with another read)"
+        )
+    return settings
+
+
+def _runner(runner: Runner | str | Scheduler | None) -> Runner:
+    """Where a batch runs: ``runner``, or the :class:`Runner` of a scheduler name or
+    :class:`Scheduler` (None: ``QUATMOTION_SCHEDULER``, else a local pool)."""
+    return runner if isinstance(runner, Runner) else Runner.resolve(runner)

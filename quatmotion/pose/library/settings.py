@@ -50,9 +50,14 @@ class PoseSettings(Settings):
     flush_poses : int
         Vectors per insertion into the graph.
     index_threads : int
-        Threads inserting into the graph (1: the same bytes whatever ran the jobs).
+        Threads inserting into the graph, in the building process. One keeps the library the
+        same bytes whatever ran the jobs; more insert faster (the insertion is the part of the
+        build that does not spread over workers), but the graph then depends on thread
+        timing (its search results barely).
     chunk_size : int or None
-        Clips per task of the index pass (None: :meth:`PoseLibrary.build_streamed` chooses).
+        Clips per task of the index pass. Each task carries the projection model (its size:
+        docs/performance.md), so by default (None) eight clips share one once there are at
+        least 64 clips, else every clip is a task. The learn pass sends clips one by one.
     read : ReadSettings
         How the clips are read (``strict``: a clip beyond a kilometre is refused).
     """
