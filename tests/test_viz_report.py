@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from quatmotion.bench import _pose_figures, provenance
 from quatmotion.bench import io as io_bench
 from quatmotion.bench import pose as pose_bench
-from quatmotion.bench import provenance
 from quatmotion.bench import qssd as qssd_bench
 from quatmotion.cli import app
 from quatmotion.errors import FormatError
@@ -169,7 +169,7 @@ def benchmark_runs(tmp_path_factory) -> tuple[list[Path], list[tuple[str, list]]
     folder = tmp_path_factory.mktemp("bench")
     paths = []
     with pytest.MonkeyPatch.context() as patch:
-        for module in (io_bench, qssd_bench, pose_bench):
+        for module in (io_bench, qssd_bench, _pose_figures):
             patch.setattr(module, "save_figure", record)
         for name, result in (
             ("io", _io_result()),

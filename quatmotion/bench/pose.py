@@ -33,6 +33,7 @@ or reader is missing is skipped and listed in ``skipped``.
 
 from __future__ import annotations
 
+import functools
 import pathlib
 import time
 import traceback
@@ -44,13 +45,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion._atomic import atomic_write_json
+from quatmotion.bench._pose_figures import figures
 from quatmotion.bench._provenance import provenance
 from quatmotion.bench._tables import get, table
 from quatmotion.datasets import ClipEntry, catalogue, data_root
 from quatmotion.pose import evaluate, labels
 from quatmotion.pose.data import PoseClip, PoseData
 from quatmotion.pose.index import HNSWIndex, exact_knn, recall_at_k
-from quatmotion.viz import pyplot, save_figure
 
 TARGET_FPS = 30.0
 BODY_HEIGHT = 170.0  # cm: every subject is scaled to this standing height
@@ -256,20 +257,7 @@ def _transition_experiment(
     )
     n_unl = 1500 if quick else 5000
     unlabeled = rng.permutation(train_pose_ids)[:n_unl]
-    tr_pairs = np.stack(
-        [
-            clip_offsets(tr.pairs[:, 0], tr.pairs[:, 1]),
-            clip_offsets(tr.pairs[:, 2], tr.pairs[:, 3]),
-        ],
-        1,
-    )
-    te_pairs = np.stack(
-        [
-            clip_offsets(te.pairs[:, 0], te.pairs[:, 1]),
-            clip_offsets(te.pairs[:, 2], te.pairs[:, 3]),
-        ],
-        1,
-    )
+    tr_pairs, te_pairs = _pose_pairs(clip_offsets, tr.pairs), _pose_pairs(clip_offsets, te.pairs)
     task = _Task(all_poses, unlabeled, tr_pairs, tr.labels)
     default_unl = min(5000, len(unlabeled))
     # Fill the GPD cache once (timed) so no method's timing pays for the shared features.
@@ -316,53 +304,70 @@ def _transition_experiment(
     log(f"  transition {INDEX_DEFAULT}: {result['methods'][INDEX_DEFAULT].get('precision')}")
 
     if sweeps and "GPD+RDSR" in methods:
-        sweep = {}
-        for r in RANKS[:3] if quick else RANKS:
-            try:
-                method, fit_s = task.fit(methods["GPD+RDSR"], default_unl, n_components=r)
-                d = method.distances(test_a, test_b)
-                sweep[str(r)] = {
-                    "precision": evaluate.transition_precision(d, te.labels)[0],
-                    "fit_seconds": fit_s,
-                }
-            except Exception as exc:
-                sweep[str(r)] = {"error": f"{type(exc).__name__}: {exc}"}
-            log(f"  rank {r}: {sweep[str(r)]}")
-        result["rank_sweep"] = sweep
-        unl_sweep: dict[str, dict[str, Any]] = {}
-        for name in ("GPD+RDSR", "GPD+SDA" if "GPD+SDA" in methods else "SDA"):
-            if name not in methods:
-                continue
-            unl_sweep[name] = {}
-            for n in UNLABELED_COUNTS:
-                if n > len(unlabeled) or (quick and n > 1000):
-                    continue
-                try:
-                    method, fit_s = task.fit(methods[name], n)
-                    d = method.distances(test_a, test_b)
-                    unl_sweep[name][str(n)] = {
-                        "precision": evaluate.transition_precision(d, te.labels)[0],
-                        "fit_seconds": fit_s,
-                    }
-                except Exception as exc:
-                    unl_sweep[name][str(n)] = {"error": f"{type(exc).__name__}: {exc}"}
-                log(f"  unlabeled {name} {n}: {unl_sweep[name][str(n)]}")
-        result["unlabeled_sweep"] = unl_sweep
-        # RDSR's label weight: alpha scales S_W against the sparse-representation term
-        alpha_sweep: dict[str, dict[str, Any]] = {}
-        for alpha in ALPHAS[1:3] if quick else ALPHAS:
-            try:
-                method, fit_s = task.fit(methods["GPD+RDSR"], default_unl, alpha=alpha)
-                d = method.distances(test_a, test_b)
-                alpha_sweep[str(alpha)] = {
-                    "precision": evaluate.transition_precision(d, te.labels)[0],
-                    "fit_seconds": fit_s,
-                }
-            except Exception as exc:
-                alpha_sweep[str(alpha)] = {"error": f"{type(exc).__name__}: {exc}"}
-            log(f"  alpha {alpha}: {alpha_sweep[str(alpha)]}")
-        result["alpha_sweep"] = alpha_sweep
+        scored = functools.partial(
+            _scored, task, test_a=test_a, test_b=test_b, test_labels=te.labels
+        )
+        result.update(_sweeps(methods, scored, default_unl, len(unlabeled), quick, log))
     return result
+
+
+def _pose_pairs(clip_offsets: labels.ClipOffsets, pairs: np.ndarray) -> np.ndarray:
+    """Transition pairs ``(clip, frame, clip, frame)`` as pose pairs (P, 2) into the clips
+    joined."""
+    return np.stack(
+        [clip_offsets(pairs[:, 0], pairs[:, 1]), clip_offsets(pairs[:, 2], pairs[:, 3])], 1
+    )
+
+
+def _scored(
+    task: _Task,
+    factory: Callable[..., Any],
+    n_unlabeled: int,
+    *,
+    test_a: PoseData,
+    test_b: PoseData,
+    test_labels: np.ndarray,
+    **params: Any,
+) -> dict[str, Any]:
+    """One fit of a sweep scored on the test pairs: its precision and fit time, or the error."""
+    try:
+        method, fit_s = task.fit(factory, n_unlabeled, **params)
+        d = method.distances(test_a, test_b)
+        precision = evaluate.transition_precision(d, test_labels)[0]
+        return {"precision": precision, "fit_seconds": fit_s}
+    except Exception as exc:  # one broken setting must not sink the benchmark
+        return {"error": f"{type(exc).__name__}: {exc}"}
+
+
+def _sweeps(
+    methods: dict[str, Callable[..., Any]],
+    scored: Callable[..., dict[str, Any]],
+    default_unl: int,
+    n_unlabeled: int,
+    quick: bool,
+    log: Callable[[str], None],
+) -> dict[str, Any]:
+    """RDSR's rank and label weight swept, and RDSR's and SDA's unlabeled poses."""
+    rank_sweep = {}
+    for r in RANKS[:3] if quick else RANKS:
+        rank_sweep[str(r)] = scored(methods["GPD+RDSR"], default_unl, n_components=r)
+        log(f"  rank {r}: {rank_sweep[str(r)]}")
+    unl_sweep: dict[str, dict[str, Any]] = {}
+    for name in ("GPD+RDSR", "GPD+SDA" if "GPD+SDA" in methods else "SDA"):
+        if name not in methods:
+            continue
+        unl_sweep[name] = {}
+        for n in UNLABELED_COUNTS:
+            if n > n_unlabeled or (quick and n > 1000):
+                continue
+            unl_sweep[name][str(n)] = scored(methods[name], n)
+            log(f"  unlabeled {name} {n}: {unl_sweep[name][str(n)]}")
+    # RDSR's label weight: alpha scales S_W against the sparse-representation term
+    alpha_sweep: dict[str, dict[str, Any]] = {}
+    for alpha in ALPHAS[1:3] if quick else ALPHAS:
+        alpha_sweep[str(alpha)] = scored(methods["GPD+RDSR"], default_unl, alpha=alpha)
+        log(f"  alpha {alpha}: {alpha_sweep[str(alpha)]}")
+    return {"rank_sweep": rank_sweep, "unlabeled_sweep": unl_sweep, "alpha_sweep": alpha_sweep}
 
 
 def _retrieval_experiment(
@@ -502,146 +507,8 @@ def _ann_benchmark(quick: bool, seed: int, log: Callable[[str], None]) -> dict[s
 
 
 def _figures(out: pathlib.Path, results: dict[str, Any]) -> list[str]:
-    plt = pyplot()
-    from matplotlib.patches import Patch
-
-    written: list[str] = []
-    quick = " (quick run)" if results.get("quick") else ""
-    ours = "GPD+RDSR"  # the paper's method, drawn in red in every figure
-
-    def save(fig: Any, suffix: str) -> None:
-        written.append(save_figure(fig, out.with_name(f"{out.stem}_{suffix}.png")).name)
-
-    for ds, res in results["datasets"].items():
-        tr = res.get("transition")
-        if tr:
-            pairs = f"{tr['test']['pairs']} test pose pairs from {tr['test']['clips']} clips"
-            names = [n for n, e in tr["methods"].items() if "precision" in e]
-            if names:
-                fig, ax = plt.subplots(figsize=(max(7, 0.45 * len(names)), 4.5))
-                vals = [tr["methods"][n]["precision"] for n in names]
-                colors = ["tab:red" if n == ours else "tab:blue" for n in names]
-                ax.bar(range(len(names)), vals, color=colors)
-                eq35 = tr.get("baseline_eq35_precision")
-                handles = [
-                    Patch(color="tab:red", label=f"{ours} (the paper's method)"),
-                    Patch(color="tab:blue", label="baselines"),
-                ]
-                if eq35 is not None:
-                    handles.append(
-                        ax.axhline(
-                            eq35, color="k", ls=":", lw=1, label="Eq. 35 mean joint distance"
-                        )
-                    )
-                ax.set_xticks(range(len(names)), names, rotation=70, fontsize=8)
-                ax.set_ylim(min([*vals, eq35 or 1.0]) - 0.05, 1.0)
-                ax.set_xlabel("pose distance (feature + learner, or a fixed distance)")
-                ax.set_ylabel("transition precision (Eq. 37)")
-                ax.set_title(
-                    f"{ds}: which pose pairs make smooth transitions (paper Fig. 5){quick}\n"
-                    f"{pairs}; higher is better",
-                    fontsize=10,
-                )
-                ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-                save(fig, f"{ds}_fig5_transition")
-                grid = np.full((len(LEARNERS), len(FEATURES)), np.nan)
-                for i, lrn in enumerate(LEARNERS):
-                    for j, feat in enumerate(FEATURES):
-                        e = tr["methods"].get(f"{feat}+{lrn}", {})
-                        if "precision" in e:
-                            grid[i, j] = e["precision"]
-                if np.isfinite(grid).any():
-                    fig, ax = plt.subplots(figsize=(5.5, 4.5))
-                    im = ax.imshow(grid, cmap="viridis")
-                    ax.set_xticks(range(len(FEATURES)), FEATURES)
-                    ax.set_yticks(range(len(LEARNERS)), LEARNERS)
-                    ax.set_xlabel("pose feature")
-                    ax.set_ylabel("metric learner")
-                    mid = 0.5 * (np.nanmin(grid) + np.nanmax(grid))
-                    for (i, j), v in np.ndenumerate(grid):
-                        if np.isfinite(v):
-                            ink = "k" if v > mid else "w"  # readable on viridis
-                            ax.text(
-                                j, i, f"{v:.3f}", ha="center", va="center", color=ink, fontsize=8
-                            )
-                    fig.colorbar(im, label="transition precision (Eq. 37)")
-                    ax.set_title(
-                        f"{ds}: features x learners (paper Fig. 6){quick}\n{pairs}", fontsize=10
-                    )
-                    save(fig, f"{ds}_fig6_features_learners")
-            sweep = tr.get("rank_sweep", {})
-            pts = [(int(r), e["precision"]) for r, e in sweep.items() if "precision" in e]
-            if pts:
-                fig, ax = plt.subplots(figsize=(6, 4))
-                ranks, precisions = zip(*sorted(pts), strict=True)
-                ax.plot(ranks, precisions, "o-", color="tab:red", label=ours)
-                ax.set_xscale("log")
-                ax.set_xticks(ranks, [str(r) for r in ranks])
-                ax.minorticks_off()
-                ax.set_xlabel("rank of W (dimension of the learned projection, log scale)")
-                ax.set_ylabel("transition precision (Eq. 37)")
-                ax.set_title(f"{ds}: {ours} against its rank (paper Fig. 4){quick}", fontsize=10)
-                ax.legend(fontsize=8)
-                ax.grid(True, alpha=0.3)
-                save(fig, f"{ds}_fig4_rank")
-            us = tr.get("unlabeled_sweep", {})
-            if any(us.values()):
-                fig, ax = plt.subplots(figsize=(6, 4))
-                for name, ent in us.items():
-                    pts = [(int(n), e["precision"]) for n, e in ent.items() if "precision" in e]
-                    if pts:
-                        color = "tab:red" if name == ours else "tab:blue"
-                        ax.plot(*zip(*sorted(pts), strict=True), "o-", label=name, color=color)
-                ax.set_xlabel("unlabeled poses N' used in training")
-                ax.set_ylabel("transition precision (Eq. 37)")
-                ax.legend(fontsize=8)
-                ax.grid(True, alpha=0.3)
-                ax.set_title(f"{ds}: effect of unlabeled data (paper Fig. 7){quick}", fontsize=10)
-                save(fig, f"{ds}_fig7_unlabeled")
-        rt = res.get("retrieval")
-        if rt and rt["methods"]:
-            curves = {
-                name: e["precision_at"] for name, e in rt["methods"].items() if "precision_at" in e
-            }
-            if curves:
-                fig, ax = plt.subplots(figsize=(7, 4.5))
-                # 27 curves cannot each have a readable colour: the paper's method, the best
-                # other method (mean precision over scopes) and the oracle stand out; the rest
-                # are grey.
-                others = {n: np.mean(list(c.values())) for n, c in curves.items() if n != ours}
-                best = max(others, key=others.get) if others else None
-                grey_label = f"other methods ({max(0, len(others) - 1)})"
-                for name, curve in curves.items():
-                    xs = [int(s) for s in curve]
-                    if name == ours:
-                        ax.plot(xs, list(curve.values()), "o-", color="tab:red", lw=2.2, label=name)
-                    elif name == best:
-                        label = f"{name} (best other)"
-                        ax.plot(
-                            xs, list(curve.values()), "s-", color="tab:blue", lw=1.8, label=label
-                        )
-                    else:
-                        ax.plot(
-                            xs, list(curve.values()), "-", color="0.7", lw=0.8, label=grey_label
-                        )
-                        grey_label = "_nolegend_"
-                if "oracle" in rt:
-                    ax.plot(
-                        rt["scopes"], rt["oracle"], "k--", lw=1, label="oracle (all correct first)"
-                    )
-                if "chance" in rt:
-                    ax.axhline(rt["chance"], color="k", ls=":", lw=1, label="chance")
-                ax.set_xlabel("scope s (number of poses retrieved)")
-                ax.set_ylabel("precision@s (fraction of the s poses that are correct)")
-                ax.legend(fontsize=8)
-                ax.grid(True, alpha=0.3)
-                ax.set_title(
-                    f"{ds}: pose retrieval (paper Fig. 8){quick}\n"
-                    f"{rt['test_poses']} query poses; higher is better",
-                    fontsize=10,
-                )
-                save(fig, f"{ds}_fig8_retrieval")
-    return written
+    """The paper's Figs. 4 to 8 of ``results`` beside ``out`` (:mod:`._pose_figures`)."""
+    return figures(out, results, FEATURES, LEARNERS)
 
 
 def summary_tables(data: Mapping[str, Any]) -> list[dict[str, Any]]:
@@ -757,39 +624,10 @@ def run(
     methods = _methods()
     results["methods"] = list(methods)
     for kind in datasets:
-        rng = np.random.default_rng(seed)
-        try:
-            clips = _load(kind, root, quick)
-        except Exception as exc:
-            results["skipped"][kind] = f"{type(exc).__name__}: {exc}"
-            log(f"skip {kind}: {exc}")
+        res = _dataset(kind, root, methods, quick, seed, kind in sweep_datasets, log)
+        if isinstance(res, str):
+            results["skipped"][kind] = res
             continue
-        if len(clips) < 4:
-            results["skipped"][kind] = f"only {len(clips)} clips found under {root}"
-            continue
-        train, test = _split(clips)
-        log(f"{kind}: {len(clips)} clips ({len(train)} train, {len(test)} test)")
-        res: dict[str, Any] = {
-            "clips": len(clips),
-            "poses": int(sum(len(c.local) for c in clips)),
-            "train_groups": sorted({clips[i].group for i in train}),
-            "test_groups": sorted({clips[i].group for i in test}),
-        }
-        try:
-            res["transition"] = _transition_experiment(
-                clips, train, test, methods, quick, rng, log, sweeps=kind in sweep_datasets
-            )
-        except Exception as exc:
-            res["transition_error"] = f"{type(exc).__name__}: {exc}"
-            log(f"  transition failed: {exc}")
-        if all(c.cls for c in clips):
-            try:
-                res["retrieval"] = _retrieval_experiment(
-                    clips, train, test, methods, quick, seed, rng, log
-                )
-            except Exception as exc:
-                res["retrieval_error"] = f"{type(exc).__name__}: {exc}"
-                log(f"  retrieval failed: {exc}")
         results["datasets"][kind] = res
         atomic_write_json(out, results)  # partial results survive a later failure
     if ann:
@@ -799,3 +637,47 @@ def run(
     results["tables"] = summary_tables(results)
     atomic_write_json(out, results)
     return results
+
+
+def _dataset(
+    kind: str,
+    root: pathlib.Path,
+    methods: dict[str, Callable[..., Any]],
+    quick: bool,
+    seed: int,
+    sweeps: bool,
+    log: Callable[[str], None],
+) -> dict[str, Any] | str:
+    """The transition and retrieval experiments on one dataset, or why it was skipped."""
+    rng = np.random.default_rng(seed)
+    try:
+        clips = _load(kind, root, quick)
+    except Exception as exc:
+        log(f"skip {kind}: {exc}")
+        return f"{type(exc).__name__}: {exc}"
+    if len(clips) < 4:
+        return f"only {len(clips)} clips found under {root}"
+    train, test = _split(clips)
+    log(f"{kind}: {len(clips)} clips ({len(train)} train, {len(test)} test)")
+    res: dict[str, Any] = {
+        "clips": len(clips),
+        "poses": int(sum(len(c.local) for c in clips)),
+        "train_groups": sorted({clips[i].group for i in train}),
+        "test_groups": sorted({clips[i].group for i in test}),
+    }
+    try:
+        res["transition"] = _transition_experiment(
+            clips, train, test, methods, quick, rng, log, sweeps=sweeps
+        )
+    except Exception as exc:
+        res["transition_error"] = f"{type(exc).__name__}: {exc}"
+        log(f"  transition failed: {exc}")
+    if all(c.cls for c in clips):
+        try:
+            res["retrieval"] = _retrieval_experiment(
+                clips, train, test, methods, quick, seed, rng, log
+            )
+        except Exception as exc:
+            res["retrieval_error"] = f"{type(exc).__name__}: {exc}"
+            log(f"  retrieval failed: {exc}")
+    return res

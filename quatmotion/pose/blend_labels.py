@@ -58,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from quatmotion.pose.labels import TransitionPairs, candidate_pairs
+from quatmotion.pose.labels import TransitionPairs, balanced_sample, candidate_pairs
 from quatmotion.pose.skeleton16 import FEET_16, JOINTS_16, PARENTS_16
 
 __all__ = [
@@ -195,16 +195,30 @@ def synthesise(
     n_blend = max(1, int(round(settings.blend_s * fps)))
     before = _frames(A, i - c, c + 1)  # A_{i-c} .. A_i
     after = _frames(B, j, n_blend + c + 1)  # B_j .. (B_j is A_i: dropped below)
+    motion = _blend_one(before, after, _heading(A[i]) - _heading(B[j]), n_blend)
+    return _plant_one(motion, before, after, (_floor(A), _floor(B)), fps, settings)
+
+
+def _blend_weights(n_frames: int, n_blend: int) -> FloatArray:
+    """How much of A_i's bones a frame of B keeps, shape (n_frames,): 1 at B_j (= A_i), a
+    smoothstep down to 0 at ``n_blend`` frames, 0 after."""
+    k = np.arange(n_frames, dtype=np.float64) / n_blend
+    w = 1.0 - np.clip(3 * k**2 - 2 * k**3, 0.0, 1.0)
+    w[k >= 1] = 0.0
+    return w
+
+
+def _blend_one(before: FloatArray, after: FloatArray, turn: float, n_blend: int) -> FloatArray:
+    """Steps 1 and 2 of :func:`synthesise`: ``before`` (A up to A_i) then ``after`` (B from
+    B_j) turned by ``turn`` and placed at A_i, B's bones blended from A_i's over ``n_blend``
+    frames."""
     # 1. root: B's path relative to B_j, turned into A_i's heading and placed at A_i
-    turn = _heading(A[i]) - _heading(B[j])
     R = _rot_y(np.asarray(turn))
     centre = after[0, 0] * np.array([1.0, 0.0, 1.0])  # B_j's root on the floor plane
     out_after = (after - centre) @ R.T  # turned about B_j's root, B's own heights kept
     out_after[..., [0, 2]] += before[-1, 0, [0, 2]]
     # 2. blend of bone directions: B's bones offset onto A_i's, the offset decaying
-    k = np.arange(len(after), dtype=np.float64) / n_blend
-    w = 1.0 - np.clip(3 * k**2 - 2 * k**3, 0.0, 1.0)  # 1 at B_j (= A_i), 0 after the blend
-    w[k >= 1] = 0.0
+    w = _blend_weights(len(after), n_blend)
     bones_a = _unit(before[-1, 1:] - before[-1, _PARENTS[1:]])  # A_i's bones (15, 3)
     bones_b = _unit(out_after[:, 1:] - out_after[:, _PARENTS[1:]])  # (n, 15, 3)
     length = np.linalg.norm(before[-1, 1:] - before[-1, _PARENTS[1:]], axis=-1)
@@ -216,8 +230,21 @@ def synthesise(
     for joint in range(1, 16):  # parents come first
         blended[:, joint] = blended[:, _PARENTS[joint]] + bones[:, joint - 1] * length[joint - 1]
     motion = np.concatenate((before, blended[1:]))
+    return motion
+
+
+def _plant_one(
+    motion: FloatArray,
+    before: FloatArray,
+    after: FloatArray,
+    floor_ab: tuple[float, float],
+    fps: float,
+    settings: BlendSettings,
+) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
+    """Step 3 of :func:`synthesise`: the sources' foot contacts, planted by a horizontal root
+    offset, feet in contact at their source height and none below the floor."""
+    floor_a, floor_b = floor_ab
     # 3. contacts from the sources, planted by a root offset
-    floor_a, floor_b = _floor(A), _floor(B)
     src = np.concatenate((before, after[1:]))
     floors = np.r_[np.full(len(before), floor_a), np.full(len(after) - 1, floor_b)]
     speed = np.zeros((len(src), 2))
@@ -306,17 +333,22 @@ def _synthesise_batch(
     )
     before = flat[idx_a]  # (P, c+1, 16, 3)
     after = flat[idx_b]  # (P, n+c+1, 16, 3)
-    P = len(pairs)
-    # 1. root
     turn = _heading(flat[starts[ca] + fa]) - _heading(flat[starts[cb] + fb])
+    motion = _blend_many(before, after, turn, n_blend)
+    return _plant_many(motion, before, after, (floors_of[ca], floors_of[cb]), fps, settings)
+
+
+def _blend_many(
+    before: FloatArray, after: FloatArray, turn: FloatArray, n_blend: int
+) -> FloatArray:
+    """:func:`_blend_one` of many transitions at once (``before``, ``after``: (P, n, 16, 3))."""
+    # 1. root
     R = _rot_y(turn)  # (P, 3, 3)
     centre = after[:, 0, 0] * np.array([1.0, 0.0, 1.0])
     out_after = np.matmul(after - centre[:, None, None], np.swapaxes(R, 1, 2)[:, None])
     out_after[..., [0, 2]] += before[:, -1, 0, [0, 2]][:, None, None]
     # 2. blend of bone directions
-    k = np.arange(after.shape[1], dtype=np.float64) / n_blend
-    w = 1.0 - np.clip(3 * k**2 - 2 * k**3, 0.0, 1.0)
-    w[k >= 1] = 0.0
+    w = _blend_weights(after.shape[1], n_blend)
     last = before[:, -1]
     bones_a = _unit(last[:, 1:] - last[:, _PARENTS[1:]])  # (P, 15, 3)
     bones_b = _unit(out_after[:, :, 1:] - out_after[:, :, _PARENTS[1:]])  # (P, n, 15, 3)
@@ -332,11 +364,25 @@ def _synthesise_batch(
             + bones[:, :, joint - 1] * length[:, None, joint - 1, None]
         )
     motion = np.concatenate((before, blended[:, 1:]), axis=1)
+    return motion
+
+
+def _plant_many(
+    motion: FloatArray,
+    before: FloatArray,
+    after: FloatArray,
+    floor_ab: tuple[FloatArray, FloatArray],
+    fps: float,
+    settings: BlendSettings,
+) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
+    """:func:`_plant_one` of many transitions at once (``floor_ab``: each one's floors, (P,))."""
+    floor_a, floor_b = floor_ab
+    P = len(motion)
     # 3. contacts and the root-offset clean-up
     nb, na = before.shape[1], after.shape[1] - 1
     src = np.concatenate((before, after[:, 1:]), axis=1)
     floors = np.concatenate(
-        (np.repeat(floors_of[ca, None], nb, 1), np.repeat(floors_of[cb, None], na, 1)), axis=1
+        (np.repeat(floor_a[:, None], nb, 1), np.repeat(floor_b[:, None], na, 1)), axis=1
     )
     feet = list(_FEET)
     speed = np.zeros((P, src.shape[1], 2))
@@ -529,11 +575,6 @@ def blended_transition_labels(
     artefact, _ = judge(world, cand, fps, reference, settings)
     pos = np.flatnonzero(artefact <= GOOD_RATIO)
     neg = np.flatnonzero(artefact >= BAD_RATIO)
-    if n_positive == n_negative:
-        n_positive = n_negative = min(n_positive, len(pos), len(neg))
-    pos = rng.permutation(pos)[:n_positive]
-    neg = rng.permutation(neg)[:n_negative]
-    keep = np.r_[pos, neg]
-    labels = np.r_[np.ones(len(pos), bool), np.zeros(len(neg), bool)]
+    keep, labels = balanced_sample(pos, neg, n_positive, n_negative, rng)
     pairs = TransitionPairs(cand[keep], labels, artefact[keep], mean_d[keep])
     return pairs, np.asarray(reference, dtype=np.float64)

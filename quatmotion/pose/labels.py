@@ -448,13 +448,21 @@ def transition_labels(
     low, high = thresholds
     pos = np.flatnonzero(cloud < low)
     neg = np.flatnonzero(cloud > high)
+    keep, labels = balanced_sample(pos, neg, n_positive, n_negative, rng)
+    return TransitionPairs(cand[keep], labels, cloud[keep], mean_d[keep]), (low, high)
+
+
+def balanced_sample(
+    pos: IntArray, neg: IntArray, n_positive: int, n_negative: int, rng: np.random.Generator
+) -> tuple[IntArray, NDArray[np.bool_]]:
+    """Up to ``n_positive`` of the candidates ``pos`` and ``n_negative`` of ``neg``, drawn at
+    random (as many of each when the two are asked alike), and their labels (True: positive).
+    """
     if n_positive == n_negative:
         n_positive = n_negative = min(n_positive, len(pos), len(neg))
     pos = rng.permutation(pos)[:n_positive]
     neg = rng.permutation(neg)[:n_negative]
-    keep = np.r_[pos, neg]
-    labels = np.r_[np.ones(len(pos), bool), np.zeros(len(neg), bool)]
-    return TransitionPairs(cand[keep], labels, cloud[keep], mean_d[keep]), (low, high)
+    return np.r_[pos, neg], np.r_[np.ones(len(pos), bool), np.zeros(len(neg), bool)]
 
 
 # --------------------------------------------------------------------------------------------

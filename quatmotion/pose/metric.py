@@ -30,7 +30,7 @@ poses run in parallel (Numba ``prange``).
 from __future__ import annotations
 
 import time
-from typing import Literal
+from typing import Any, Literal
 
 import numba
 import numpy as np
@@ -278,6 +278,43 @@ def _bounds_and_start(A: FloatArray, B: FloatArray, rank: int) -> tuple[tuple[fl
     return (lower, upper), start
 
 
+def _bisection(
+    A: FloatArray, B: FloatArray, rank: int, lower: float, upper: float, tol: float, max_iter: int
+) -> tuple[FloatArray, list[float]]:
+    """Fig. 3: ``[lower, upper]`` halved by the sign of ``f`` (eigenvalues only) until its width
+    is below ``tol * upper``; the top eigenvectors at the midpoint and the eta tried per step."""
+    lo, hi = lower, upper
+    history: list[float] = []
+    while hi - lo > tol * max(abs(hi), 1e-300) and len(history) < max_iter:
+        eta = 0.5 * (lo + hi)
+        f_eta = float(np.sum(_top_eigen(A - eta * B, rank, vectors=False)[0]))
+        if f_eta > 0.0:
+            lo = eta
+        else:
+            hi = eta
+        history.append(eta)
+    _, W = _top_eigen(A - 0.5 * (lo + hi) * B, rank, vectors=True)
+    return W, history
+
+
+def _newton(
+    A: FloatArray, B: FloatArray, rank: int, start: float, tol: float, max_iter: int
+) -> tuple[FloatArray, list[float]]:
+    """The trace-ratio update ``eta <- ratio(W(eta))`` from ``start`` (Newton's method on
+    ``f``); the last eigenvectors and the ratio per iteration."""
+    eta = start
+    history: list[float] = []
+    _, W = _top_eigen(A - eta * B, rank, vectors=True)
+    while True:
+        new_eta = trace_ratio_objective(W, A, B)
+        history.append(new_eta)
+        done = abs(new_eta - eta) <= tol * max(abs(new_eta), 1e-300)
+        eta = max(eta, new_eta)  # the update never decreases eta; guard rounding
+        if done or len(history) >= max_iter:
+            return W, history
+        _, W = _top_eigen(A - eta * B, rank, vectors=True)
+
+
 def trace_ratio(
     A: ArrayLike,
     B: ArrayLike,
@@ -327,37 +364,13 @@ def trace_ratio(
     if not 1 <= rank <= d:
         raise ValueError(f"rank must be in [1, {d}], got {rank}")
     (lower, upper), start = _bounds_and_start(A, B, rank)
-    history: list[float] = []
     if solver == "bisection":
-        lo, hi = lower, upper
-        n_iter = 0
-        while hi - lo > tol * max(abs(hi), 1e-300) and n_iter < max_iter:
-            eta = 0.5 * (lo + hi)
-            f_eta = float(np.sum(_top_eigen(A - eta * B, rank, vectors=False)[0]))
-            if f_eta > 0.0:
-                lo = eta
-            else:
-                hi = eta
-            history.append(eta)
-            n_iter += 1
-        eta = 0.5 * (lo + hi)
-        _, W = _top_eigen(A - eta * B, rank, vectors=True)
+        W, history = _bisection(A, B, rank, lower, upper, tol, max_iter)
     elif solver == "newton":
-        eta = start
-        n_iter = 0
-        W = None
-        while n_iter < max_iter:
-            _, W = _top_eigen(A - eta * B, rank, vectors=True)
-            new_eta = trace_ratio_objective(W, A, B)
-            history.append(new_eta)
-            n_iter += 1
-            done = abs(new_eta - eta) <= tol * max(abs(new_eta), 1e-300)
-            eta = max(eta, new_eta)  # the update never decreases eta; guard rounding
-            if done:
-                break
+        W, history = _newton(A, B, rank, start, tol, max_iter)
     else:
         raise ValueError(f"solver must be 'newton' or 'bisection', got {solver!r}")
-    assert W is not None
+    n_iter = len(history)
     eta_w = trace_ratio_objective(W, A, B)
     f_eta = float(np.sum(W * ((A - eta_w * B) @ W)))
     info: dict[str, object] = {
@@ -482,6 +495,34 @@ class RDSR(TransformerMixin, BaseEstimator):
             codes, converged = scipy.sparse.csr_array((n, n)), np.ones(n, dtype=bool)
         timings["S_L"] = time.perf_counter() - t
 
+        basis, A, B = self._matrices(X, codes, diffs, timings)
+
+        t = time.perf_counter()
+        W_k, eta, info = self._optimise(A, B, n)
+        W = basis @ W_k
+        timings["optimisation"] = time.perf_counter() - t
+        timings["total"] = time.perf_counter() - t_total
+
+        self.basis_ = basis
+        self.components_ = np.ascontiguousarray(W.T)
+        self.eta_ = eta
+        self.eta_bounds_ = (float(info["eta_lower"]), float(info["eta_upper"]))  # type: ignore[arg-type]
+        self.n_iter_ = int(info["n_iter"])  # type: ignore[call-overload]
+        self.sparse_codes_ = codes
+        self.codes_converged_ = float(np.mean(converged)) if n else 1.0
+        self.A_ = A
+        self.B_ = B
+        self.timings_ = timings
+        self.n_features_in_ = d
+        return self
+
+    def _matrices(
+        self, X: FloatArray, codes: Any, diffs: FloatArray, timings: dict[str, float]
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The principal basis and, in it, the trace ratio's ``A`` (Eq. 23's centred scatter)
+        and ``B`` (the sparse-representation residuals plus the weighted ``S_W``, Eq. 13-18,
+        regularised); each step's seconds into ``timings``."""
+        n = len(X)
         t = time.perf_counter()
         centred = X - X.mean(axis=0) if n else X  # X S_C: S_C = I - 11^T / N (Eq. 23)
         timings["S_C"] = time.perf_counter() - t
@@ -508,32 +549,17 @@ class RDSR(TransformerMixin, BaseEstimator):
         k = basis.shape[1]
         B += (self.reg * max(np.trace(B), 1e-300) / k) * np.eye(k)
         timings["B"] = time.perf_counter() - t
+        return basis, A, B
 
-        t = time.perf_counter()
+    def _optimise(self, A: FloatArray, B: FloatArray, n: int) -> tuple[FloatArray, float, dict]:
+        """``W`` in the basis, the ratio reached and the solver's info."""
         if n < 2:
             # Eq. 46: with no unlabeled data only E_supervision is left; minimise it.
             w, W_k = _top_eigen(-B, self.n_components, vectors=True)
             assert W_k is not None
             eta = float(-np.sum(w))
-            info: dict[str, object] = {"eta_lower": eta, "eta_upper": eta, "n_iter": 0}
-        else:
-            W_k, eta, info = trace_ratio(A, B, self.n_components, self.solver, self.tol)
-        W = basis @ W_k
-        timings["optimisation"] = time.perf_counter() - t
-        timings["total"] = time.perf_counter() - t_total
-
-        self.basis_ = basis
-        self.components_ = np.ascontiguousarray(W.T)
-        self.eta_ = eta
-        self.eta_bounds_ = (float(info["eta_lower"]), float(info["eta_upper"]))  # type: ignore[arg-type]
-        self.n_iter_ = int(info["n_iter"])  # type: ignore[call-overload]
-        self.sparse_codes_ = codes
-        self.codes_converged_ = float(np.mean(converged)) if n else 1.0
-        self.A_ = A
-        self.B_ = B
-        self.timings_ = timings
-        self.n_features_in_ = d
-        return self
+            return W_k, eta, {"eta_lower": eta, "eta_upper": eta, "n_iter": 0}
+        return trace_ratio(A, B, self.n_components, self.solver, self.tol)
 
     def _principal_basis(self, centred: FloatArray, diffs: FloatArray) -> FloatArray:
         """Orthonormal (D, k) basis of the directions the training poses vary along."""
