@@ -13,11 +13,13 @@ import os
 import platform
 import shlex
 import subprocess
+import time
+from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-__all__ = ["command", "machine", "provenance"]
+__all__ = ["command", "machine", "progress_log", "provenance"]
 
 
 def command(name: str, out: str | Path, quick: bool, seed: int) -> str:
@@ -107,3 +109,15 @@ def _git_describe() -> str | None:
     if done.returncode != 0:
         return None
     return done.stdout.strip() or None
+
+
+def progress_log(verbose: bool = True) -> Callable[[str], None]:
+    """A benchmark's ``log(message)``: each message printed after the seconds since this call
+    (nothing printed unless ``verbose``)."""
+    start = time.perf_counter()
+
+    def log(message: str) -> None:
+        if verbose:
+            print(f"[{time.perf_counter() - start:7.1f}s] {message}", flush=True)
+
+    return log

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench._pose_figures import figures
-from quatmotion.bench._provenance import provenance
+from quatmotion.bench._provenance import progress_log, provenance
 from quatmotion.bench._tables import get, table
 from quatmotion.datasets import ClipEntry, catalogue, data_root
 from quatmotion.pose import evaluate, labels
@@ -276,24 +276,7 @@ def _transition_experiment(
         "methods": {},
     }
     for name, factory in methods.items():
-        entry: dict[str, Any] = {}
-        try:
-            method, fit_s = task.fit(factory, default_unl)
-            t0 = time.perf_counter()
-            d = np.asarray(method.distances(test_a, test_b), dtype=np.float64)
-            query_s = time.perf_counter() - t0
-            prec, thr = evaluate.transition_precision(d, te.labels)
-            entry = {
-                "precision": prec,
-                "threshold": thr,
-                "fit_seconds": fit_s,
-                "query_ms_per_pair": 1e3 * query_s / len(te),
-            }
-        except Exception as exc:  # one broken method must not sink the benchmark
-            entry = {
-                "error": f"{type(exc).__name__}: {exc}",
-                "trace": traceback.format_exc(limit=3),
-            }
+        entry = _method_entry(task, factory, default_unl, test_a, test_b, te.labels)
         log(f"  transition {name}: {entry.get('precision', entry.get('error'))}")
         result["methods"][name] = entry
 
@@ -309,6 +292,32 @@ def _transition_experiment(
         )
         result.update(_sweeps(methods, scored, default_unl, len(unlabeled), quick, log))
     return result
+
+
+def _method_entry(
+    task: _Task,
+    factory: Callable[..., Any],
+    n_unlabeled: int,
+    test_a: PoseData,
+    test_b: PoseData,
+    test_labels: np.ndarray,
+) -> dict[str, Any]:
+    """One method fitted on the task and scored on the test pairs: precision, threshold, fit
+    and query times, or the error."""
+    try:
+        method, fit_s = task.fit(factory, n_unlabeled)
+        t0 = time.perf_counter()
+        d = np.asarray(method.distances(test_a, test_b), dtype=np.float64)
+        query_s = time.perf_counter() - t0
+        prec, thr = evaluate.transition_precision(d, test_labels)
+        return {
+            "precision": prec,
+            "threshold": thr,
+            "fit_seconds": fit_s,
+            "query_ms_per_pair": 1e3 * query_s / len(test_labels),
+        }
+    except Exception as exc:  # one broken method must not sink the benchmark
+        return {"error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc(limit=3)}
 
 
 def _pose_pairs(clip_offsets: labels.ClipOffsets, pairs: np.ndarray) -> np.ndarray:
@@ -607,10 +616,7 @@ def run(
     """
     out = pathlib.Path(out)
     t_start = time.perf_counter()
-
-    def log(msg: str) -> None:
-        if verbose:
-            print(f"[{time.perf_counter() - t_start:7.1f}s] {msg}", flush=True)
+    log = progress_log(verbose)
 
     root = data_root()
     results: dict[str, Any] = {

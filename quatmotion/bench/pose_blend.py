@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from quatmotion._atomic import atomic_write_json
-from quatmotion.bench._provenance import provenance
+from quatmotion.bench._provenance import progress_log, provenance
 from quatmotion.bench.pose import (
     INDEX_DEFAULT,
     TARGET_FPS,
@@ -247,10 +247,7 @@ def run(
     """
     out = pathlib.Path(out)
     t_start = time.perf_counter()
-
-    def log(msg: str) -> None:
-        if verbose:
-            print(f"[{time.perf_counter() - t_start:7.1f}s] {msg}", flush=True)
+    log = progress_log(verbose)
 
     n_seeds = (1 if quick else 5) if n_seeds is None else n_seeds
     methods = _methods()

@@ -33,6 +33,7 @@ import numpy as np
 
 from quatmotion import io
 from quatmotion._atomic import atomic_write_json
+from quatmotion.bench._provenance import progress_log
 from quatmotion.datasets import data_root
 from quatmotion.motion import Motion
 from quatmotion.pose.data import PoseClip
@@ -192,10 +193,7 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0, verbose: bool = T
     """
     out = pathlib.Path(out)
     start = time.perf_counter()
-
-    def log(message: str) -> None:
-        if verbose:
-            print(f"[{time.perf_counter() - start:7.1f}s] {message}", flush=True)
+    log = progress_log(verbose)
 
     root = data_root()
     seeds = [seed] if quick else [seed, seed + 1, seed + 2]
