@@ -496,7 +496,7 @@ def test_pose_search_names_a_file_that_is_not_a_library(tmp_path):
     for path in (pickled, text, other):
         message = _assert_bad_input(
             _invoke("pose", "search", path, "--clip", "0", "--frame", "0"),
-            path.name, "not a quatmotion pose library", "versions 2 to 3",
+            path.name, "not a quatmotion pose library", "versions 2 to 4",
         )  # fmt: skip
         assert "pickle" not in message
     _assert_bad_input(_invoke("pose", "search", tmp_path, "--clip", "0", "--frame", "0"))
