@@ -230,11 +230,7 @@ class SparseMethod(Method):
         samples = quat.canonicalize(quat.exp(coarse.reshape(-1, n, 3) / _GAIN / 2.0))
         D = model["dictionary"]
         est = model.get("estimator") or self._coder(D, n)
-        if self.learner == "qssd":
-            W = self._code_qssd(est, D, samples)
-        else:
-            W = self._code_ksvd(est, D, samples)
-        W = sp.csr_matrix(W)
+        W = sp.csr_matrix(self._code(est, D, samples))
         wstep = quality / _WEIGHT_UNIT
         counts = np.diff(W.indptr)
         values = np.round(W.data / wstep).astype(np.int64)
@@ -267,7 +263,7 @@ class SparseMethod(Method):
 
     def _coder(self, D: NDArray[np.float64], n: int):
         """An estimator that codes on ``D`` (a dictionary read from a file, when appending):
-        the fitted state :meth:`_code_qssd` and :meth:`_code_ksvd` use, without learning."""
+        the fitted state :meth:`_code` uses, without learning."""
         K = D.shape[0]
         if self.learner == "qssd":
             est = QSSD(K, sparsity=self._sparsity_for(K))
@@ -282,22 +278,16 @@ class SparseMethod(Method):
     def _sparsity_for(self, K: int) -> int:
         return int(min(self.sparsity, K))
 
-    def _code_qssd(self, est, D, samples):
-        # Code with the quantised dictionary the decoder will see.
-        saved = est.dictionary_log_
-        est.dictionary_log_ = D
+    def _code(self, est, D, samples):
+        """The samples' sparse codes with the quantised dictionary ``D`` the decoder will see
+        (set in the estimator for the call: QSSD's in log space, K-SVD's flat)."""
+        attribute = "dictionary_log_" if self.learner == "qssd" else "dictionary_flat_"
+        saved = getattr(est, attribute)
+        setattr(est, attribute, D)
         try:
             return est.transform(samples)
         finally:
-            est.dictionary_log_ = saved
-
-    def _code_ksvd(self, est, D, samples):
-        saved = est.dictionary_flat_
-        est.dictionary_flat_ = D
-        try:
-            return est.transform(samples)
-        finally:
-            est.dictionary_flat_ = saved
+            setattr(est, attribute, saved)
 
     # ------------------------------------------------------------------ decoding
     def load_model(self, data: bytes, layout: LayoutInfo) -> Any:
