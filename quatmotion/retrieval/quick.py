@@ -4,7 +4,7 @@ Conventions
 -----------
 * What it answers: :func:`~quatmotion.retrieval.search.search` of ``dtw-fused`` (the default)
   for a clip of the index named by its name, a unique end of its path or its stem (rules 1-3
-  of :func:`quatmotion.io.names.match_clip`), on a version-2 index that stores the default's
+  of :func:`quatmotion.io.names.match_clip`), on a version-2 or 3 index that stores the default's
   model. Anything else (another method, a number, an unknown, ambiguous or damaged name or
   index, a model to refit) returns ``None``, and the caller takes the full path, which
   answers or says what is wrong.
@@ -48,8 +48,10 @@ METHOD = "dtw-fused"
 RADIUS = 8
 """:data:`quatmotion.retrieval.methods.FUSED_RADIUS` (a test checks)."""
 FORMAT_NAME = "quatmotion-retrieval-index"
-INDEX_VERSION = 2
-"""The index format answered (:data:`quatmotion.retrieval.index.FORMAT`; a test checks)."""
+INDEX_VERSION = 3
+"""The index format written (:data:`quatmotion.retrieval.index.FORMAT`; a test checks)."""
+_ANSWERED = ("2", str(INDEX_VERSION))  # the versions whose tables hold what _search reads
+# (version 3 adds the take of a clip, which a search by name does not need)
 _SUFFIXES = (".amc", ".bvh", ".glb", ".gltf", ".fbx")  # io.MOTION_SUFFIXES, without importing io
 _NPY_HEADER = re.compile(
     r"\{'descr': '([<>|][a-z]\d+)', 'fortran_order': False, 'shape': \(([\d, ]*)\), \}"
@@ -208,7 +210,7 @@ def _search(
     db: sqlite3.Connection, path: Path, query: str, k: int
 ) -> tuple[str, list[dict[str, object]]] | None:
     meta = dict(db.execute("SELECT key, value FROM meta").fetchall())
-    if str(meta.get("version")) != str(INDEX_VERSION):
+    if str(meta.get("version")) not in _ANSWERED:
         return None
     rows = db.execute("SELECT id, name, path, label FROM clips ORDER BY id").fetchall()
     arrays: dict[int, dict[str, np.ndarray]] = {int(r[0]): {} for r in rows}
