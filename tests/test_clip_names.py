@@ -70,3 +70,16 @@ def test_an_index_finds_one_clip_of_a_name_or_says_which_ones(tmp_path):
         assert len(index) == 3  # nothing removed
         assert index.remove(["a/walk.bvh", "run.bvh"]) == ["a/walk", "run"]
         assert [c.name for c in index.clips()] == ["b/walk"]
+
+
+def test_the_name_rule_knows_every_motion_suffix():
+    """``_names`` imports no ``io`` (the quick search path loads no Numba): its suffixes are
+    ``io.MOTION_SUFFIXES``, and a name loses any of them as ``match_clip`` reads it."""
+    from quatmotion import _names
+    from quatmotion.io import MOTION_SUFFIXES
+
+    assert set(_names.CLIP_SUFFIXES) == set(MOTION_SUFFIXES)
+    names = [f"clips/walk_{k}{suffix}" for k, suffix in enumerate(MOTION_SUFFIXES)]
+    for k in range(len(names)):
+        assert match_clip(f"walk_{k}", names) == k
+        assert _names.rule_matches(f"clips/walk_{k}", names) == [k]

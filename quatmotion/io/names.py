@@ -15,8 +15,9 @@ from __future__ import annotations
 import difflib
 import re
 from collections.abc import Sequence
-from pathlib import PurePath, PurePosixPath
+from pathlib import PurePosixPath
 
+from quatmotion._names import bare_parts, rule_matches
 from quatmotion.errors import ClipNameError
 
 __all__ = ["match_clip", "relative_path"]
@@ -47,24 +48,6 @@ def relative_path(name: str, suffix: str = "") -> PurePosixPath:
         raise ValueError(f"clip name {name!r} {why}: it cannot name a file")
     parts = [_NOT_IN_FILE_NAMES.sub("_", p) for p in parts]
     return PurePosixPath(*parts[:-1], parts[-1] + suffix)
-
-
-# io.files.MOTION_SUFFIXES (importing it here would be circular)
-_SUFFIXES = (".amc", ".bvh", ".glb", ".gltf", ".fbx")
-
-
-def _bare(text: str) -> tuple[str, ...]:
-    """Path components of ``text`` with a motion-file suffix removed from the last."""
-    parts = PurePath(text).parts
-    last = parts[-1].lower() if parts else ""
-    suffix = next((s for s in _SUFFIXES if last.endswith(s)), None)
-    if suffix is not None:
-        parts = (*parts[:-1], parts[-1][: -len(suffix)])
-    return parts
-
-
-def _ends(name: tuple[str, ...], query: tuple[str, ...]) -> bool:
-    return 0 < len(query) <= len(name) and name[-len(query) :] == query
 
 
 def match_clip(query: str | int, names: Sequence[str], where: str = "the collection") -> int:
@@ -102,28 +85,20 @@ def match_clip(query: str | int, names: Sequence[str], where: str = "the collect
         if not 0 <= int(query) < n:
             raise ClipNameError(f"clip number {query} is out of range: {where} has 0 to {n - 1}")
         return int(query)
-    paths = [PurePath(name).parts for name in names]
-    bare = [_bare(name) for name in names]
-    rules = (
-        lambda i: names[i] == query,
-        lambda i: _ends(paths[i], PurePath(query).parts),
-        lambda i: _ends(bare[i], _bare(query)),
-    )
-    for rule in rules:
-        matches = [i for i in range(n) if rule(i)]
-        if len(matches) == 1:
-            return matches[0]
-        if matches:
-            listed = ", ".join(names[i] for i in matches[:5])
-            more = f" and {len(matches) - 5} more" if len(matches) > 5 else ""
-            raise ClipNameError(
-                f"clip {query!r} is ambiguous in {where}: it matches {len(matches)} clips "
-                f"({listed}{more}); give more of the path"
-            )
+    matches = rule_matches(query, names)
+    if len(matches) == 1:
+        return matches[0]
+    if matches:
+        listed = ", ".join(names[i] for i in matches[:5])
+        more = f" and {len(matches) - 5} more" if len(matches) > 5 else ""
+        raise ClipNameError(
+            f"clip {query!r} is ambiguous in {where}: it matches {len(matches)} clips "
+            f"({listed}{more}); give more of the path"
+        )
     if query.isdigit():
         return match_clip(int(query), names, where)
-    stems = [parts[-1] if parts else "" for parts in bare]
-    key = _bare(query)[-1].lower() if _bare(query) else query.lower()
+    stems = [parts[-1] if parts else "" for parts in map(bare_parts, names)]
+    key = bare_parts(query)[-1].lower() if bare_parts(query) else query.lower()
     unique = list(dict.fromkeys(stems))
     close = [s for s in unique if key and key in s.lower()][:5]
     close = close or difflib.get_close_matches(key, unique, n=5, cutoff=0.5)

@@ -26,11 +26,12 @@ from __future__ import annotations
 
 import re
 import sqlite3
-from pathlib import Path, PurePath
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from quatmotion._names import rule_matches
 from quatmotion.retrieval.features_fused import MODEL_KEY, FusedModel
 from quatmotion.retrieval.stored import check_index, read_array
 
@@ -52,7 +53,6 @@ INDEX_VERSION = 3
 """The index format written (:data:`quatmotion.retrieval.index.FORMAT`; a test checks)."""
 _ANSWERED = ("2", str(INDEX_VERSION))  # the versions whose tables hold what _search reads
 # (version 3 adds the take of a clip, which a search by name does not need)
-_SUFFIXES = (".amc", ".bvh", ".glb", ".gltf", ".fbx")  # io.MOTION_SUFFIXES, without importing io
 _NPY_HEADER = re.compile(
     r"\{'descr': '([<>|][a-z]\d+)', 'fortran_order': False, 'shape': \(([\d, ]*)\), \}"
 )
@@ -130,34 +130,11 @@ def _array(data: bytes) -> np.ndarray:
     return read_array(data)
 
 
-def _bare(text: str) -> tuple[str, ...]:
-    parts = PurePath(text).parts
-    last = parts[-1].lower() if parts else ""
-    suffix = next((s for s in _SUFFIXES if last.endswith(s)), None)
-    if suffix is not None:
-        parts = (*parts[:-1], parts[-1][: -len(suffix)])
-    return parts
-
-
-def _ends(name: tuple[str, ...], query: tuple[str, ...]) -> bool:
-    return 0 < len(query) <= len(name) and name[-len(query) :] == query
-
-
 def _match(query: str, names: list[str]) -> int | None:
     """Rules 1-3 of ``match_clip``: the one clip the first rule with matches finds; None for
     none or several (the full path says which)."""
-    paths = [PurePath(name).parts for name in names]
-    asked, asked_bare = PurePath(query).parts, _bare(query)
-    rules = (
-        lambda i: names[i] == query,
-        lambda i: _ends(paths[i], asked),
-        lambda i: _ends(_bare(names[i]), asked_bare),
-    )
-    for rule in rules:
-        matches = [i for i in range(len(names)) if rule(i)]
-        if matches:
-            return matches[0] if len(matches) == 1 else None
-    return None
+    matches = rule_matches(query, names)
+    return matches[0] if len(matches) == 1 else None
 
 
 def _locate(stored: str | None, base: Path) -> str:
