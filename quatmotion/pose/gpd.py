@@ -239,6 +239,25 @@ def _clipped_acos(c: float) -> float:  # pragma: no cover - compiled
     return np.arccos(min(1.0, max(-1.0, c)))
 
 
+@numba.njit(cache=True, inline="always")
+def _angle(
+    u: NDArray[np.float64], i: int, v: NDArray[np.float64], j: int
+) -> float:  # pragma: no cover - compiled
+    """The angle between unit vectors ``u[i]`` and ``v[j]``."""
+    return _clipped_acos(u[i, 0] * v[j, 0] + u[i, 1] * v[j, 1] + u[i, 2] * v[j, 2])
+
+
+@numba.njit(cache=True, inline="always")
+def _put_unit(
+    out: NDArray[np.float64], i: int, x: float, y: float, z: float
+) -> None:  # pragma: no cover - compiled
+    """``out[i]`` = ``(x, y, z)`` made unit length (a zero vector stays near zero)."""
+    inv = 1.0 / max(np.sqrt(x * x + y * y + z * z), _EPS)
+    out[i, 0] = x * inv
+    out[i, 1] = y * inv
+    out[i, 2] = z * inv
+
+
 @numba.njit(cache=True, parallel=True)
 def _gpd_kernel(
     pos_all: NDArray[np.float64],
@@ -293,10 +312,7 @@ def _gpd_kernel(
             dx = pos[b, 0] - pos[a, 0]
             dy = pos[b, 1] - pos[a, 1]
             dz = pos[b, 2] - pos[a, 2]
-            inv = 1.0 / max(np.sqrt(dx * dx + dy * dy + dz * dz), _EPS)
-            line_dir[m, 0] = dx * inv
-            line_dir[m, 1] = dy * inv
-            line_dir[m, 2] = dz * inv
+            _put_unit(line_dir, m, dx, dy, dz)
         for f in range(joint_line.shape[0]):  # JL_d = |(J - J1) x u| (Eq. 4)
             j, m = joint_line[f, 0], joint_line[f, 1]
             a = lines[m, 0]
@@ -311,11 +327,7 @@ def _gpd_kernel(
         col += joint_line.shape[0]
         for f in range(line_pairs.shape[0]):  # LL_a
             a, b = line_pairs[f, 0], line_pairs[f, 1]
-            row[col + f] = _clipped_acos(
-                line_dir[a, 0] * line_dir[b, 0]
-                + line_dir[a, 1] * line_dir[b, 1]
-                + line_dir[a, 2] * line_dir[b, 2]
-            )
+            row[col + f] = _angle(line_dir, a, line_dir, b)
         col += line_pairs.shape[0]
         n_planes = planes.shape[0]
         normal = np.empty((n_planes, 3))
@@ -326,10 +338,7 @@ def _gpd_kernel(
             nx = ey * fz - ez * fy
             ny = ez * fx - ex * fz
             nz = ex * fy - ey * fx
-            inv = 1.0 / max(np.sqrt(nx * nx + ny * ny + nz * nz), _EPS)
-            normal[p, 0] = nx * inv
-            normal[p, 1] = ny * inv
-            normal[p, 2] = nz * inv
+            _put_unit(normal, p, nx, ny, nz)
         for f in range(joint_plane.shape[0]):  # JP_d, signed
             j, p = joint_plane[f, 0], joint_plane[f, 1]
             a = planes[p, 0]
@@ -341,19 +350,11 @@ def _gpd_kernel(
         col += joint_plane.shape[0]
         for f in range(line_plane.shape[0]):  # LP_a
             m, p = line_plane[f, 0], line_plane[f, 1]
-            row[col + f] = _clipped_acos(
-                line_dir[m, 0] * normal[p, 0]
-                + line_dir[m, 1] * normal[p, 1]
-                + line_dir[m, 2] * normal[p, 2]
-            )
+            row[col + f] = _angle(line_dir, m, normal, p)
         col += line_plane.shape[0]
         for f in range(plane_pairs.shape[0]):  # PP_a
             a, b = plane_pairs[f, 0], plane_pairs[f, 1]
-            row[col + f] = _clipped_acos(
-                normal[a, 0] * normal[b, 0]
-                + normal[a, 1] * normal[b, 1]
-                + normal[a, 2] * normal[b, 2]
-            )
+            row[col + f] = _angle(normal, a, normal, b)
         col += plane_pairs.shape[0]
         for j in range(1, n_joints):  # J_k
             for c in range(3):
