@@ -159,3 +159,17 @@ def test_add_takes_the_settings_whole_and_refuses_what_would_change_the_library(
         report = PoseLibrary.add(out, paths[2:], units="cm", runner=Runner.inline())
     assert len(report.added) == 1 and report.settings.read.units == "cm"
     assert PoseLibrary.stored_settings(out) == settings  # an add keeps what the file stores
+
+
+def test_pose_index_options_default_to_the_settings_defaults():
+    import inspect
+
+    from quatmotion.cli.pose import index_command
+
+    settings = PoseSettings()
+    field_of = {"unlabeled": "n_unlabeled", "pairs": "n_pairs"}
+    options = inspect.signature(index_command).parameters
+    named = ["fps", "height", "metric", "rank", "unlabeled", "pairs", "seed", "fit_poses",
+             "index_threads"]  # fmt: skip
+    for name in named:
+        assert options[name].default == getattr(settings, field_of.get(name, name)), name

@@ -60,7 +60,7 @@ pose_app = typer.Typer(
 )
 app.add_typer(pose_app, name="pose")
 
-from quatmotion.pose.ranges import DEFAULT_METRIC, FPS_RANGE  # noqa: E402  (the settings' ranges)
+from quatmotion.pose.ranges import DEFAULTS, FPS_RANGE  # noqa: E402  (the settings' ranges)
 
 
 def _echo(message: str) -> None:
@@ -103,16 +103,16 @@ IndexThreadsOption = Annotated[
 def index_command(
     paths: PathsArgument,
     output: Annotated[Path, typer.Option("-o", "--output", help="Library file to write.")],
-    fps: FpsOption = 30.0,
-    height: HeightOption = 170.0,
-    metric: MetricOption = DEFAULT_METRIC,
-    rank: RankOption = 50,
-    unlabeled: UnlabeledOption = 5000,
-    pairs: PairsOption = 500,
-    seed: SeedOption = 0,
-    fit_poses: FitPosesOption = 20_000,
+    fps: FpsOption = DEFAULTS["fps"],
+    height: HeightOption = DEFAULTS["height"],
+    metric: MetricOption = DEFAULTS["metric"],
+    rank: RankOption = DEFAULTS["rank"],
+    unlabeled: UnlabeledOption = DEFAULTS["n_unlabeled"],
+    pairs: PairsOption = DEFAULTS["n_pairs"],
+    seed: SeedOption = DEFAULTS["seed"],
+    fit_poses: FitPosesOption = DEFAULTS["fit_poses"],
     workers: WorkersOption = None,
-    index_threads: IndexThreadsOption = 1,
+    index_threads: IndexThreadsOption = DEFAULTS["index_threads"],
     scheduler: SchedulerOption = None,
     skeleton: SkeletonOption = None,
     units: UnitsOption = None,

@@ -9,7 +9,7 @@ from typing import Any, ClassVar
 
 from quatmotion._settings import Interval, Settings, StrOptions
 from quatmotion.collection import ReadSettings
-from quatmotion.pose.ranges import DEFAULT_METRIC, FPS_RANGE
+from quatmotion.pose.ranges import DEFAULT_METRIC, DEFAULTS, FPS_RANGE
 
 __all__ = ["DEFAULT_METRIC", "FPS_RANGE", "HEIGHT_RANGE", "METRICS", "PoseSettings"]
 
@@ -62,18 +62,18 @@ class PoseSettings(Settings):
         How the clips are read (``strict``: a clip beyond a kilometre is refused).
     """
 
-    fps: float = 30.0
-    height: float = 170.0
-    metric: str = DEFAULT_METRIC
-    rank: int = 50
-    n_unlabeled: int = 5000
-    n_pairs: int = 500
-    seed: int = 0
-    fit_poses: int = 20_000
+    fps: float = DEFAULTS["fps"]
+    height: float = DEFAULTS["height"]
+    metric: str = DEFAULTS["metric"]
+    rank: int = DEFAULTS["rank"]
+    n_unlabeled: int = DEFAULTS["n_unlabeled"]
+    n_pairs: int = DEFAULTS["n_pairs"]
+    seed: int = DEFAULTS["seed"]
+    fit_poses: int = DEFAULTS["fit_poses"]
     M: int = 16
     ef_construction: int = 100
     flush_poses: int = 4096
-    index_threads: int = 1
+    index_threads: int = DEFAULTS["index_threads"]
     chunk_size: int | None = None
     read: ReadSettings = dataclasses.field(default_factory=ReadSettings)
 
