@@ -42,7 +42,7 @@ from quatmotion.motion import Motion, angular_displacements, forward_kinematics,
 from quatmotion.viz import pyplot, save_figure
 
 if TYPE_CHECKING:
-    from quatmotion.collection import BuildReport
+    from quatmotion.collection import BuildReport, ReadSettings
 
 __all__ = [
     "BuiltLibrary",
@@ -494,6 +494,7 @@ def build_library(
     label_folders: bool = False,
     on_stage: StageReady | None = None,
     joint_map: Sequence[str] = (),
+    take: str | None = None,
 ) -> BuiltLibrary:
     """Index, compress (and pose-index) clips into ``folder``, ready to serve or search.
 
@@ -530,6 +531,9 @@ def build_library(
     joint_map : sequence of str
         A user's humanoid map for the index and the pose index, ``"Canonical=joint"``
         entries (:attr:`quatmotion.collection.ReadSettings.joint_map`).
+    take : str, optional
+        The take every FBX file is read at (:attr:`quatmotion.collection.ReadSettings.take`);
+        None: every take of an FBX file of several is a clip of its own.
 
     Returns
     -------
@@ -544,19 +548,22 @@ def build_library(
     folder.mkdir(parents=True, exist_ok=True)
     report = progress or (lambda _step, _done, _total: None)
     stage = on_stage or (lambda _library, _index, _poses: None)
+    from quatmotion.collection import ReadSettings
+
     files, labels = _clip_files(folder, sources, seed, labels, report)
-    index, indexed = _index_step(folder, files, labels, label_folders, joint_map, workers, report)
+    read = ReadSettings(joint_map=tuple(joint_map), take=take)
+    index, indexed = _index_step(folder, files, labels, label_folders, read, workers, report)
     failed = {str(f.item): f.message for f in indexed.failures}
     if indexed.added:
         stage(None, index, None)
-    library, good = _library_step(folder, files, seed, workers, report, failed)
+    library, good = _library_step(folder, files, seed, take, workers, report, failed)
     if not good:
         where = ", ".join(str(s) for s in sources) or "the generated library"
         raise ValueError(f"{where}: no clip could be read ({next(iter(failed.values()), '')})")
     stage(library, index if indexed.added else None, None)
     pose_path = None
     if poses:
-        pose_path = _pose_step(folder, good, seed, joint_map, workers, report, failed)
+        pose_path = _pose_step(folder, good, seed, read, workers, report, failed)
         stage(library, index if indexed.added else None, pose_path)
     failures = [f"{k}: {v}" for k, v in failed.items()]
     return BuiltLibrary(files, library, index, pose_path, failures, list(indexed.unmatched_labels))
@@ -593,12 +600,11 @@ def _index_step(
     files: list[Path],
     labels: Mapping[str, str] | None,
     label_folders: bool,
-    joint_map: Sequence[str],
+    read: ReadSettings,
     workers: int | None,
     report: BuildProgress,
 ) -> tuple[Path, BuildReport]:
     """The clip index (``folder/library.qidx``) and its build report."""
-    from quatmotion.collection import ReadSettings
     from quatmotion.retrieval.index import ClipIndex, IndexSettings
 
     index = folder / "library.qidx"
@@ -608,7 +614,7 @@ def _index_step(
         IndexSettings(
             kinds=("motion",),
             label_folders=label_folders,
-            read=ReadSettings(joint_map=tuple(joint_map)),
+            read=read,
         ),
         labels=labels,
         workers=workers,
@@ -621,6 +627,7 @@ def _library_step(
     folder: Path,
     files: list[Path],
     seed: int,
+    take: str | None,
     workers: int | None,
     report: BuildProgress,
     failed: dict[str, str],
@@ -630,9 +637,10 @@ def _library_step(
     ``failed``)."""
     from quatmotion.codec import Archive, CompressSettings
     from quatmotion.codec.writer import runner_of
+    from quatmotion.collection import ReadSettings
 
     library = folder / "library.qmz"
-    settings = CompressSettings(seed=seed, on_error="skip")
+    settings = CompressSettings(seed=seed, on_error="skip", read=ReadSettings(take=take))
     try:
         built = Archive.build(
             files, library, settings, runner=runner_of(workers), progress=_step(report, "compress")
@@ -649,7 +657,7 @@ def _pose_step(
     folder: Path,
     files: list[Path],
     seed: int,
-    joint_map: Sequence[str],
+    read: ReadSettings,
     workers: int | None,
     report: BuildProgress,
     failed: dict[str, str],
@@ -658,11 +666,10 @@ def _pose_step(
     a clip, with the clips' references); the clips it refused noted in ``failed``."""
     import functools
 
-    from quatmotion.collection import ReadSettings, find_clips
+    from quatmotion.collection import find_clips
     from quatmotion.parallel import Runner
     from quatmotion.pose.library import PoseLibrary, PoseSettings, load_pose_source
 
-    read = ReadSettings(joint_map=tuple(joint_map))
     clips = find_clips(files, read)
     pose_library, pose_failures = PoseLibrary.build_streamed(
         clips,

@@ -242,3 +242,26 @@ def test_every_collection_command_takes_every_take_or_the_one_named(tmp_path):
     poses = json.loads(runs["pose_search"].stdout)
     assert "cmu_bvh_names/walk_b" not in [r["clip"] for r in poses["results"]]
     assert "cmu_bvh_names/walk_a" in [r["clip"] for r in poses["results"]]
+
+
+def test_serve_reads_the_take_named_of_every_file(tmp_path):
+    from fastapi.testclient import TestClient
+    from typer.testing import CliRunner
+
+    from quatmotion.cli import app
+    from quatmotion.demo import build_library
+    from quatmotion.server import create_app
+
+    refused = CliRunner().invoke(app, ["serve", "--take", "walk_b"])
+    assert refused.exit_code == 2 and "--take applies to a folder" in refused.output
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    for name in (TWO_TAKES, FIXTURES / "cmu_unreal.fbx"):
+        shutil.copy(name, folder / name.name)
+    built = build_library(tmp_path / "served", [folder], workers=1, take="0")
+    assert not built.failed, built.failed
+    application = create_app(built.library, built.index, built.poses)
+    with TestClient(application, base_url="http://127.0.0.1") as client:
+        served = {c["name"]: c for c in client.get("/api/clips").json()["clips"]}
+    assert sorted(served) == ["cmu_bvh_names/walk_a", "cmu_unreal"]
+    assert all(c["in_library"] and c["in_index"] and c["in_poses"] for c in served.values())

@@ -24,6 +24,7 @@ from quatmotion.cli._common import (
     LABELS_HELP,
     CliInputError,
     JointMapOption,
+    TakeOption,
     at_least,
     console,
     error_console,
@@ -90,13 +91,14 @@ def serve(
     max_upload: MaxUploadOption = "50MB",
     upload_memory: UploadMemoryOption = "2GB",
     joint_map: JointMapOption = None,
+    take: TakeOption = None,
 ) -> None:
     """Serve a local web app to browse, play, compare and search a motion library."""
     from quatmotion.server import listen  # the application after the port: a busy one at once
 
     with contextlib.ExitStack() as stack, user_errors():
         given = [p for p in (library, index, poses) if p is not None]
-        _check_sources(folder, library, index, poses, labels, label_folders, joint_map)
+        _check_sources(folder, library, index, poses, labels, label_folders, joint_map, take)
         at_least("--port", port, 0, 65535)
         label_map = labels_option(labels)
         stack.enter_context(listen.sigterm_exits())  # SIGTERM, too, removes the temporary folder
@@ -114,7 +116,7 @@ def serve(
             )
             work = Path(stack.enter_context(temporary))
             build = _background_build(
-                work, folder, label_map, label_folders, labels, joint_map_entries(joint_map)
+                work, folder, label_map, label_folders, labels, joint_map_entries(joint_map), take
             )
             stack.callback(build.stop)  # before the folder is removed (the stack unwinds LIFO)
         application = create_app(
@@ -136,6 +138,7 @@ def _check_sources(
     labels: Path | None,
     label_folders: bool,
     joint_map: object,
+    take: str | None = None,
 ) -> None:
     """One ``error:`` line for options that do not go together or files that are not there."""
     given = [p for p in (library, index, poses) if p is not None]
@@ -143,6 +146,8 @@ def _check_sources(
         raise CliInputError("give a folder of clips, or --library/--index/--poses, not both")
     if joint_map is not None and folder is None:
         raise CliInputError("--joint-map applies to a folder of clips (an index stores its own)")
+    if take is not None and folder is None:
+        raise CliInputError("--take applies to a folder of clips (a library holds its clips)")
     if poses is not None and library is None and index is None:
         raise CliInputError("--poses needs --library or --index beside it")
     if given and (labels is not None or label_folders):
@@ -201,6 +206,7 @@ def _background_build(
     label_folders: bool,
     labels_file: Path | None,
     joint_map: tuple[str, ...] = (),
+    take: str | None = None,
 ) -> LibraryBuild:
     """The demo's library, or ``folder``'s clips, to be indexed, compressed and pose-indexed
     in ``work`` while the server answers; its progress on stderr (a bar, a line per stage)."""
@@ -233,6 +239,7 @@ def _background_build(
                 labels=labels,
                 label_folders=label_folders,
                 joint_map=joint_map,
+                take=take,
                 on_stage=publish,
             )
         finally:
