@@ -275,8 +275,9 @@ def _transition_experiment(
         "baseline_eq35_precision": evaluate.transition_precision(te.mean_distance, te.labels)[0],
         "methods": {},
     }
+    scored = functools.partial(_scored, task, test_a=test_a, test_b=test_b, test_labels=te.labels)
     for name, factory in methods.items():
-        entry = _method_entry(task, factory, default_unl, test_a, test_b, te.labels)
+        entry = scored(factory, default_unl, full=True)
         log(f"  transition {name}: {entry.get('precision', entry.get('error'))}")
         result["methods"][name] = entry
 
@@ -287,37 +288,8 @@ def _transition_experiment(
     log(f"  transition {INDEX_DEFAULT}: {result['methods'][INDEX_DEFAULT].get('precision')}")
 
     if sweeps and "GPD+RDSR" in methods:
-        scored = functools.partial(
-            _scored, task, test_a=test_a, test_b=test_b, test_labels=te.labels
-        )
         result.update(_sweeps(methods, scored, default_unl, len(unlabeled), quick, log))
     return result
-
-
-def _method_entry(
-    task: _Task,
-    factory: Callable[..., Any],
-    n_unlabeled: int,
-    test_a: PoseData,
-    test_b: PoseData,
-    test_labels: np.ndarray,
-) -> dict[str, Any]:
-    """One method fitted on the task and scored on the test pairs: precision, threshold, fit
-    and query times, or the error."""
-    try:
-        method, fit_s = task.fit(factory, n_unlabeled)
-        t0 = time.perf_counter()
-        d = np.asarray(method.distances(test_a, test_b), dtype=np.float64)
-        query_s = time.perf_counter() - t0
-        prec, thr = evaluate.transition_precision(d, test_labels)
-        return {
-            "precision": prec,
-            "threshold": thr,
-            "fit_seconds": fit_s,
-            "query_ms_per_pair": 1e3 * query_s / len(test_labels),
-        }
-    except Exception as exc:  # one broken method must not sink the benchmark
-        return {"error": f"{type(exc).__name__}: {exc}", "trace": traceback.format_exc(limit=3)}
 
 
 def _pose_pairs(clip_offsets: labels.ClipOffsets, pairs: np.ndarray) -> np.ndarray:
@@ -336,16 +308,27 @@ def _scored(
     test_a: PoseData,
     test_b: PoseData,
     test_labels: np.ndarray,
+    full: bool = False,
     **params: Any,
 ) -> dict[str, Any]:
-    """One fit of a sweep scored on the test pairs: its precision and fit time, or the error."""
+    """One method fitted on the task (``params`` to its factory) and scored on the test pairs:
+    its precision and fit time (``full``: also its threshold, its query time and, on an error,
+    the trace), or the error."""
     try:
         method, fit_s = task.fit(factory, n_unlabeled, **params)
-        d = method.distances(test_a, test_b)
-        precision = evaluate.transition_precision(d, test_labels)[0]
-        return {"precision": precision, "fit_seconds": fit_s}
-    except Exception as exc:  # one broken setting must not sink the benchmark
-        return {"error": f"{type(exc).__name__}: {exc}"}
+        t0 = time.perf_counter()
+        d = np.asarray(method.distances(test_a, test_b), dtype=np.float64)
+        query_s = time.perf_counter() - t0
+        prec, thr = evaluate.transition_precision(d, test_labels)
+    except Exception as exc:  # one broken method or setting must not sink the benchmark
+        error = {"error": f"{type(exc).__name__}: {exc}"}
+        return {**error, "trace": traceback.format_exc(limit=3)} if full else error
+    if not full:
+        return {"precision": prec, "fit_seconds": fit_s}
+    query_ms = 1e3 * query_s / len(test_labels)
+    return {
+        "precision": prec, "threshold": thr, "fit_seconds": fit_s, "query_ms_per_pair": query_ms,
+    }  # fmt: skip
 
 
 def _sweeps(

@@ -34,8 +34,7 @@ Names are loaded on first use, so ``import quatmotion.pose`` stays cheap.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from quatmotion._lazy import lazy_exports
 
 _EXPORTS = {
     "JOINTS_16": "skeleton16",
@@ -60,14 +59,4 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'quatmotion.pose' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"quatmotion.pose.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

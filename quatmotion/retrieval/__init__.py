@@ -30,8 +30,7 @@ export of the function would be a module or a function depending on what ran fir
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from quatmotion._lazy import lazy_exports
 
 _EXPORTS = {
     "clip_features": "features",
@@ -49,14 +48,4 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'quatmotion.retrieval' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"quatmotion.retrieval.{module}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
