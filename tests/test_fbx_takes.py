@@ -265,3 +265,12 @@ def test_serve_reads_the_take_named_of_every_file(tmp_path):
         served = {c["name"]: c for c in client.get("/api/clips").json()["clips"]}
     assert sorted(served) == ["cmu_bvh_names/walk_a", "cmu_unreal"]
     assert all(c["in_library"] and c["in_index"] and c["in_poses"] for c in served.values())
+
+
+def test_the_takes_of_a_file_share_its_bytes_in_the_ratio(tmp_path):
+    from quatmotion.codec import Archive, CompressSettings
+
+    report = Archive.build([TWO_TAKES], None, CompressSettings(), runner=Runner.inline())
+    sizes = report.details["source_bytes"]
+    assert len(sizes) == 2 and sum(sizes) <= TWO_TAKES.stat().st_size
+    assert sizes == [TWO_TAKES.stat().st_size // 2] * 2

@@ -90,6 +90,9 @@ def scan_clip(source: ClipSource, options: ScanOptions) -> ScannedClip | Unread:
     try:
         motion, ref, doubts = read_clip(source, options.read)
         size = (0, "") if source.path is None else _source_size(source.path)
+        if source.take is not None:  # a take's share of its file: no byte counted twice
+            takes = max(1, len(motion.skeleton.extras.get("fbx_takes") or ()))
+            size = (size[0] // takes, size[1])
         text = _text_bytes(motion) if options.text_bytes and not size[0] else 0
     except (FormatError, OSError, ValueError) as error:
         return Unread(one_line(error))
