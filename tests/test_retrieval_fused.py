@@ -7,7 +7,13 @@ import pytest
 
 from quatmotion.errors import FormatError
 from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
-from quatmotion.retrieval.features_fused import MODEL_KEY, FusedModel, fit_fused_model
+from quatmotion.retrieval.features_fused import (
+    FUSED_DIM,
+    MODEL_KEY,
+    ROUTE_WEIGHTS,
+    FusedModel,
+    fit_fused_model,
+)
 from quatmotion.retrieval.methods import (
     DEFAULT_METHOD,
     METHODS,
@@ -63,9 +69,14 @@ def test_model_round_trip_and_damage(library):
     data[len(data) // 2] ^= 0xFF
     with pytest.raises(FormatError):
         FusedModel.from_bytes(bytes(data))
-    other = fit_fused_model(library._need("frames"), library._need("path"), weights=(1, 1, 1, 1))
+    other = fit_fused_model(
+        library._need("frames"), library._need("path"), weights=(1, 1, 1, 1, 1, 1)
+    )
     with pytest.raises(ValueError, match="other parameters"):
         FusedModel.from_bytes(other.to_bytes())
+    # a model of other weights reads back with them (dtw-fused-route's)
+    route = fit_fused_model(library._need("frames"), library._need("path"), weights=ROUTE_WEIGHTS)
+    assert FusedModel.from_bytes(route.to_bytes(), ROUTE_WEIGHTS).dim == 48 + 4 + 48 + 3
 
 
 def test_a_damaged_stored_model_is_refitted(library):
@@ -107,7 +118,7 @@ def test_labels_learned_on_some_clips_rank_others(library):
         labels=[labels[i] for i in train],
     )
     learned = fused_model(labelled, learned=True)
-    assert learned.learned is not None and learned.learned.shape[0] == 103
+    assert learned.learned is not None and learned.learned.shape[0] == FUSED_DIM
     again = FusedModel.from_bytes(learned.to_bytes())
     np.testing.assert_array_equal(again.learned, learned.learned)
     held = Library(

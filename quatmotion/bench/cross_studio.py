@@ -10,7 +10,8 @@ query studio and over all queries: mAP, P@10 and the 1-NN hit rate (METRICS.md).
 Every method runs on two bodies (:data:`quatmotion.retrieval.features.BODIES`): ``scaled``
 (each rig's own 16 joints scaled to one stature) and ``canonical`` (every bone on one body),
 with the default (``dtw-fused``) beside the plain DTW over stature-scaled 16-joint positions
-(``dtw-positions``) and the path DTW (``dtw-heading``). ``--quick`` takes every other clip of
+(``dtw-positions``), the 0.4.0 default (``dtw-fused-route``) and the path DTW
+(``dtw-heading``). ``--quick`` takes every other clip of
 each studio.
 """
 
@@ -40,7 +41,7 @@ CONTENT: dict[str, tuple[str, ...]] = {
     "bow": ("bow",),
 }
 """Content classes the studios share, and each studio's labels for them."""
-METHODS = ("dtw-fused", "dtw-positions", "dtw-heading")
+METHODS = ("dtw-fused", "dtw-positions", "dtw-fused-route", "dtw-heading")
 DISTRACTORS = {"bandai1": ("bye", "guide", "call", "slash"), "hdm05": ("squat1Reps", "grabHighR")}
 """Labels kept in the library as content no other studio has (a query never wants them)."""
 

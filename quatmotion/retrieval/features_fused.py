@@ -4,7 +4,7 @@ Conventions
 -----------
 * Built from the stored motion frames and path frames
   (:mod:`quatmotion.retrieval.features`), so an index of the ``motion`` kind needs nothing
-  new. Four parts per frame (:data:`PARTS`):
+  new. Six parts per frame (:data:`PARTS`); a part of weight 0 is left out of the stream:
 
   - ``posture`` (48): the 16 joints in each frame's own body frame (the motion frames' first
     columns, cm): what the body does, blind to where it faces;
@@ -13,21 +13,39 @@ Conventions
   - ``body`` (48): the 16 joints relative to the Hip in the *first* frame's heading, in leg
     lengths (the path frames' first columns): the posture as it turns during the clip;
   - ``route`` (3): the Hip's trajectory from its first-frame position in that heading, in
-    leg lengths: the path travelled, a turn left against a turn right.
+    leg lengths: the path travelled, a turn left against a turn right;
+  - ``direction`` (2): the direction of travel relative to the body's facing: the Hip's
+    horizontal velocity in the body frame (the travel part's left and forward columns)
+    smoothed over :data:`DIRECTION_SIGMA_S`, divided by ``sqrt(speed^2 + v0^2)`` with ``v0 =``
+    :data:`DIRECTION_SPEED_CM_S` (a unit vector at walking speed, 0 standing still), times the
+    clip's locomotion gate ``min(1, R /`` :data:`LOCOMOTION_LEG_LENGTHS` ``)`` with ``R`` the
+    farthest the Hip gets from its first-frame position, in leg lengths (in-place motions that
+    shift their weight get no direction). Unitless: what a walk forward, backward or sideways
+    is, whatever the speed, the clip's length and the size of the stage;
+  - ``shape`` (3): the route over the farthest the Hip gets from its start, or over
+    :data:`LOCOMOTION_LEG_LENGTHS` when that is less: the shape of the path (straight, curving
+    left or right, diagonal) whatever its length; a motion in place keeps its small route.
 * Invariances: the clip's start heading and position (every part is relative to the first
   frame or to the body's own frame), body size (``body`` and ``route`` divided by the leg
-  length; ``posture`` and ``travel`` on a body scaled to one stature). *Not* invariant, on
-  purpose: left against right (a mirror changes the sign of the X coordinates), the sense of
-  a turn (the yaw rate's sign, the trajectory's X), the order and rhythm of frames (DTW).
-* The **fused stream** ``(T, 103)``: each part over its scale, times its weight
-  (:data:`WEIGHTS`). ``posture`` and ``travel`` (centimetres) are divided by a scale fixed
-  per library (:func:`fit_fused_model`): the median, over the frames of at most
-  :data:`FIT_CLIPS` clips drawn with a seeded generator, of the Euclidean norm of the part
-  minus its clip's mean (its spread within a clip; the raw norm is mostly the body's size).
-  ``body`` and ``route`` are in leg lengths already and keep scale 1: a library median of
-  the route measured unstable (how many clips stand still decides it: 0.04 to 0.9 leg
-  lengths on bandai1 by sample). Fixed scales make a distance independent of the query, and
-  one DTW compares the parts.
+  length; ``posture`` and ``travel`` on a body scaled to one stature; ``direction`` and
+  ``shape`` unitless). *Not* invariant, on purpose: left against right (a mirror changes the sign of
+  the X coordinates), the sense of a turn (the yaw rate's sign, the trajectory's X), the
+  order and rhythm of frames (DTW).
+* The **fused stream** ``(T, D)``: each part of non-zero weight over its scale, times its
+  weight (:data:`WEIGHTS`: ``D = 57``; :data:`ROUTE_WEIGHTS`, the 0.4.0 stream: ``D = 103``).
+  ``posture`` and ``travel`` (centimetres) are divided by a scale fixed per library
+  (:func:`fit_fused_model`): the median, over the frames of at most :data:`FIT_CLIPS` clips
+  drawn with a seeded generator, of the Euclidean norm of the part minus its clip's mean (its
+  spread within a clip; the raw norm is mostly the body's size). ``body`` and ``route`` are in
+  leg lengths already and ``direction`` and ``shape`` are unitless: scale 1 (a library median
+  of the route follows how many of the sampled clips stand still). Fixed scales make a
+  distance independent of the query, and one DTW compares the parts.
+* **Across studios** (issue 31): the default (:data:`WEIGHTS`) leaves out ``body`` and
+  ``route`` and takes ``direction`` and ``shape``. How far the Hip travels in leg lengths is
+  the stage's size and the clip's length as much as its content; the direction of travel
+  relative to the facing and the path's shape are the content alone. The 0.4.0 stream
+  (:data:`ROUTE_WEIGHTS`, the route at weight 2) is the method ``dtw-fused-route``, for a
+  library captured on one stage.
 * The model also holds :data:`N_COMPONENTS` principal directions of the fused frames
   (orthonormal rows): the projection on which the exact search's lower bounds are computed
   (an orthonormal projection never lengthens a difference, so a bound on the projection
@@ -57,6 +75,8 @@ from numpy.typing import NDArray
 from quatmotion.errors import FormatError
 
 __all__ = [
+    "DIRECTION_SIGMA_S",
+    "DIRECTION_SPEED_CM_S",
     "FIT_CLIPS",
     "FUSED_DIM",
     "LEARNED_WEIGHT",
@@ -64,6 +84,7 @@ __all__ = [
     "MODEL_KEY_LABELS",
     "N_COMPONENTS",
     "PARTS",
+    "ROUTE_WEIGHTS",
     "WEIGHTS",
     "FusedModel",
     "fit_fused_model",
@@ -77,28 +98,103 @@ LEARNED_WEIGHT = 0.5
 """Weight of the learned projection appended to the fused stream."""
 LABEL_FRAMES = 20_000
 """Frames the label projection is fitted on, at most (drawn with the seed)."""
-MODEL_VERSION = 1
+MODEL_VERSION = 2
+"""2: the direction and shape parts of issue 31 (a model of version 1 is refitted)."""
 FIT_CLIPS = 48
 """Clips the scales and the projection are fitted on, at most."""
 N_COMPONENTS = 16
 """Principal directions of the projection the lower bounds use."""
-PARTS: tuple[tuple[str, int], ...] = (("posture", 48), ("travel", 4), ("body", 48), ("route", 3))
+PARTS: tuple[tuple[str, int], ...] = (
+    ("posture", 48),
+    ("travel", 4),
+    ("body", 48),
+    ("route", 3),
+    ("direction", 2),
+    ("shape", 3),
+)
 """The fused stream's parts and their widths, in order."""
-WEIGHTS: tuple[float, ...] = (1.0, 0.3, 2.0, 2.0)
-"""Weight of each part after its scale (docs/performance.md, 0.4.0, gives the trials)."""
-FUSED_DIM = sum(w for _, w in PARTS)
-_FITTED = (True, True, False, False)
-"""Which parts get a library scale (the others are in leg lengths: scale 1)."""
+WEIGHTS: tuple[float, ...] = (1.0, 0.3, 0.0, 0.0, 4.0, 2.0)
+"""Weight of each part after its scale, the default's (docs/performance.md, 0.5.0, gives the
+trials across studios and within them)."""
+ROUTE_WEIGHTS: tuple[float, ...] = (1.0, 0.3, 2.0, 2.0, 0.0, 0.0)
+"""The 0.4.0 default's weights (``dtw-fused-route``): body and route, no direction or shape."""
+DIRECTION_SIGMA_S = 0.5
+"""Standard deviation of the Gaussian that smooths the Hip's velocity for the direction,
+seconds (about half a gait cycle: the sway of each step averages out)."""
+DIRECTION_SPEED_CM_S = 20.0
+"""Speed at which the direction's length is ``1/sqrt(2)``, cm/s on the scaled body (a slow
+walk is 50 or more)."""
+LOCOMOTION_LEG_LENGTHS = 3.0
+"""How far the Hip must get from where it started (leg lengths) for the direction to count
+in full: about two strides; less scales it down in proportion (a kick or a reach that shifts
+the weight is no walk)."""
+_FITTED = (True, True, False, False, False, False)
+"""Which parts get a library scale (the others are in leg lengths or unitless: scale 1)."""
+
+
+def stream_dim(weights: tuple[float, ...] = WEIGHTS) -> int:
+    """Columns of the fused stream with ``weights`` (parts of weight 0 are left out)."""
+    return sum(width for (_, width), w in zip(PARTS, weights, strict=True) if w != 0)
+
+
+FUSED_DIM = stream_dim(WEIGHTS)
+"""Columns of the default's fused stream (its first columns, with a learned projection)."""
+
+
+def _smoothed(x: NDArray[np.float64], sigma: float) -> NDArray[np.float64]:
+    """``x`` ``(T, c)`` convolved along axis 0 with a Gaussian of ``sigma`` frames (truncated
+    at 4 sigma, ends repeated), each output a sum over the taps in order (the same bits on
+    every processor)."""
+    radius = int(np.ceil(4.0 * sigma))
+    if radius == 0 or x.shape[0] < 2:
+        return x.copy()
+    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    taps /= taps.sum()
+    padded = np.concatenate((np.repeat(x[:1], radius, 0), x, np.repeat(x[-1:], radius, 0)))
+    out = np.zeros_like(x)
+    for k, t in enumerate(taps):
+        out += t * padded[k : k + x.shape[0]]
+    return out
+
+
+def _reach(route: NDArray[np.float64]) -> float:
+    """The farthest the Hip gets from its first-frame position (leg lengths), horizontally."""
+    return float(np.max(np.sqrt(route[:, 0] ** 2 + route[:, 2] ** 2))) if len(route) else 0.0
+
+
+def direction_part(travel: NDArray[np.float64], route: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The ``direction`` part ``(T, 2)`` (module conventions) of a clip's travel columns
+    ``(T, 4)`` (the motion frames' last four) and route ``(T, 3)`` (the path frames' last
+    three)."""
+    from quatmotion.retrieval.features import FEATURE_FPS, HORIZON_S
+
+    velocity = _smoothed(travel[:, [0, 2]] / HORIZON_S, DIRECTION_SIGMA_S * FEATURE_FPS)
+    speed2 = velocity[:, :1] ** 2 + velocity[:, 1:] ** 2
+    gate = min(1.0, _reach(route) / LOCOMOTION_LEG_LENGTHS)
+    return velocity / np.sqrt(speed2 + DIRECTION_SPEED_CM_S**2) * gate
+
+
+def shape_part(route: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The ``shape`` part ``(T, 3)`` (module conventions) of a clip's route ``(T, 3)``."""
+    return route / max(_reach(route), LOCOMOTION_LEG_LENGTHS)
 
 
 def stream_parts(
     frames: NDArray[np.floating], path: NDArray[np.floating]
 ) -> list[NDArray[np.float64]]:
-    """The four parts (:data:`PARTS`) of a clip's motion frames ``(T, 52)`` and path frames
+    """The six parts (:data:`PARTS`) of a clip's motion frames ``(T, 52)`` and path frames
     ``(T, 51)``."""
     f = np.asarray(frames, dtype=np.float64)
     p = np.asarray(path, dtype=np.float64)
-    return [f[:, :48], f[:, 48:], p[:, :48], p[:, 48:]]
+    route = p[:, 48:]
+    return [
+        f[:, :48],
+        f[:, 48:],
+        p[:, :48],
+        route,
+        direction_part(f[:, 48:], route),
+        shape_part(route),
+    ]
 
 
 def _ordered_product(x: NDArray[np.float64], w: NDArray[np.floating]) -> NDArray[np.float64]:
@@ -119,20 +215,25 @@ class FusedModel:
     """Scales and projection of the fused stream, fitted on one library."""
 
     scales: tuple[float, ...]
-    projection: NDArray[np.float32]  # (N_COMPONENTS, FUSED_DIM), orthonormal rows
+    projection: NDArray[np.float32]  # (N_COMPONENTS, dim), orthonormal rows
     fitted_clips: int
     weights: tuple[float, ...] = WEIGHTS
-    learned: NDArray[np.float32] | None = None  # (FUSED_DIM, c), from labels
+    learned: NDArray[np.float32] | None = None  # (dim, c), from labels
     labels_digest: str = ""  # of the labels it was learned from
 
     def stream(
         self, frames: NDArray[np.floating], path: NDArray[np.floating]
     ) -> NDArray[np.float32]:
-        """Fused stream ``(T, FUSED_DIM)`` float32 of a clip's motion and path frames (with a
-        learned projection: ``FUSED_DIM + c`` columns)."""
+        """Fused stream ``(T, dim)`` float32 of a clip's motion and path frames (with a
+        learned projection: ``dim + c`` columns)."""
         parts = stream_parts(frames, path)
         out = np.concatenate(
-            [x * (w / s) for x, w, s in zip(parts, self.weights, self.scales, strict=True)], axis=1
+            [
+                x * (w / s)
+                for x, w, s in zip(parts, self.weights, self.scales, strict=True)
+                if w != 0
+            ],
+            axis=1,
         )
         if self.learned is not None:
             out = np.concatenate(
@@ -140,11 +241,16 @@ class FusedModel:
             )
         return np.ascontiguousarray(out, dtype=np.float32)
 
+    @property
+    def dim(self) -> int:
+        """Columns of the stream before a learned projection (:func:`stream_dim`)."""
+        return stream_dim(self.weights)
+
     def project(self, stream: NDArray[np.float32]) -> NDArray[np.float32]:
-        """The stream's first ``FUSED_DIM`` columns on the principal directions
+        """The stream's first ``dim`` columns on the principal directions
         ``(T, N_COMPONENTS)`` (the rows padded with zeros stay orthonormal on a longer
         stream)."""
-        return np.ascontiguousarray(stream[:, :FUSED_DIM] @ self.projection.T, dtype=np.float32)
+        return np.ascontiguousarray(stream[:, : self.dim] @ self.projection.T, dtype=np.float32)
 
     def _header(self) -> dict[str, object]:
         return {
@@ -179,8 +285,8 @@ class FusedModel:
         return buf.getvalue()
 
     @classmethod
-    def from_bytes(cls, data: bytes) -> FusedModel:
-        """Read :meth:`to_bytes`'s bytes.
+    def from_bytes(cls, data: bytes, weights: tuple[float, ...] = WEIGHTS) -> FusedModel:
+        """Read :meth:`to_bytes`'s bytes of a model of ``weights``.
 
         Raises
         ------
@@ -210,10 +316,10 @@ class FusedModel:
         if model._digest() != digest:
             raise FormatError(f"{MODEL_KEY}: digest mismatch (damaged model)")
         if (
-            projection.shape != (N_COMPONENTS, FUSED_DIM)
+            projection.shape != (N_COMPONENTS, stream_dim(weights))
             or len(model.scales) != len(PARTS)
-            or model.weights != WEIGHTS
-            or (learned is not None and (learned.ndim != 2 or learned.shape[0] != FUSED_DIM))
+            or model.weights != tuple(weights)
+            or (learned is not None and (learned.ndim != 2 or learned.shape[0] != model.dim))
         ):
             raise ValueError(f"{MODEL_KEY}: fitted with other parameters than this code's")
         return model
@@ -227,14 +333,16 @@ def fit_fused_model(
 ) -> FusedModel:
     """Fit the scales and the projection on at most :data:`FIT_CLIPS` clips of a library
     (their motion ``frames`` and ``paths`` frames), drawn with ``seed``; an empty library
-    gives unit scales. Other ``weights`` than :data:`WEIGHTS` read back as mismatched."""
+    gives unit scales; ``weights`` (:data:`WEIGHTS`, :data:`ROUTE_WEIGHTS`) are the model's
+    (:meth:`FusedModel.from_bytes` reads it back with the same)."""
     rng = np.random.default_rng(seed)
     picks = (
         np.sort(rng.choice(len(paths), FIT_CLIPS, replace=False))
         if len(paths) > FIT_CLIPS
         else np.arange(len(paths))
     )
-    eye = np.eye(N_COMPONENTS, FUSED_DIM, dtype=np.float32)
+    dim = stream_dim(tuple(weights))
+    eye = np.eye(N_COMPONENTS, dim, dtype=np.float32)
     if not len(picks):
         return FusedModel((1.0,) * len(PARTS), eye, 0, tuple(weights))
     clips = [stream_parts(frames[int(i)], paths[int(i)]) for i in picks]
@@ -256,7 +364,7 @@ def fit_fused_model(
     )
     X = X - X.mean(axis=0)
     # principal directions; with fewer frames than components, completed to an orthonormal set
-    _, _, vt = np.linalg.svd(np.concatenate((X, np.zeros((N_COMPONENTS, FUSED_DIM)))), False)
+    _, _, vt = np.linalg.svd(np.concatenate((X, np.zeros((N_COMPONENTS, dim)))), False)
     return FusedModel(scales, vt[:N_COMPONENTS].astype(np.float32), len(picks), tuple(weights))
 
 

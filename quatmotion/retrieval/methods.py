@@ -18,10 +18,12 @@ features of every method it was built for.
   lengths), Euclidean frame cost, path cost divided by ``n + m``, every clip.
 - ``"pooled"``: Euclidean distance of the pooled embeddings (blind to temporal order).
 - ``"dtw-fused"`` (the default, :data:`DEFAULT_METHOD`): one DTW over the fused stream of
-  :mod:`quatmotion.retrieval.features_fused` (posture and travel in each frame's heading,
-  body and route in the first frame's, each part over a scale fixed per library), Euclidean
-  frame cost, band :data:`FUSED_RADIUS` frames
-  (:class:`FusedDTW`): it sees posture, rhythm, path and the sense of a turn. Exact over every
+  :mod:`quatmotion.retrieval.features_fused` (posture, travel and the direction of travel
+  in each frame's heading, the path's shape in the first frame's, posture and travel over a
+  scale fixed per library), Euclidean
+  frame cost, band :data:`FUSED_RADIUS` frames (:class:`FusedDTW`): it sees posture, rhythm,
+  a walk forward, backward or sideways and the sense of a turn, not how far the clip
+  travels (the stage's size: compared across studios). Exact over every
   clip: with ``k`` given, LB_Keogh on the model's projection and the projection's DTW prune
   clips that cannot be among the ``k`` nearest, the full DTW abandons early; ``k=None``
   computes every distance. The model (scales, projection) is stored in an index
@@ -31,6 +33,10 @@ features of every method it was built for.
   appended to its stream (:func:`quatmotion.retrieval.features_fused.fit_label_projection`);
   without labels, ``dtw-fused`` itself. Not the default: measured on actors and styles it was
   not trained on (docs/performance.md).
+- ``"dtw-fused-route"`` (the default of 0.4.0): ``dtw-fused`` with the body and the route
+  in the first frame's heading, in leg lengths, instead of the direction
+  (:data:`~quatmotion.retrieval.features_fused.ROUTE_WEIGHTS`): how far a clip travels
+  counts, which helps within a library captured on one stage and hurts across studios.
 - ``"pooled+dtw"`` (the default before 0.4.0): the pooled embedding shortlists
   ``K = 64`` clips, DTW over the motion frames (band 0.2, at most :data:`MAX_WARP_S`)
   re-ranks them, and the two distances, each
@@ -52,6 +58,8 @@ from quatmotion.retrieval.features import FEATURE_FPS, POSITION_DIM
 from quatmotion.retrieval.features_fused import (
     MODEL_KEY,
     MODEL_KEY_LABELS,
+    ROUTE_WEIGHTS,
+    WEIGHTS,
     FusedModel,
     fit_fused_model,
     fit_label_projection,
@@ -257,24 +265,31 @@ and 11 measured the same mAP, a smaller one is cheaper): at least half the lengt
 one, so that a path exists."""
 
 
-def fused_model(library: Library, learned: bool = False) -> FusedModel:
+def fused_model(
+    library: Library, learned: bool = False, weights: tuple[float, ...] = WEIGHTS
+) -> FusedModel:
     """The library's :class:`FusedModel`: the one its index stores, or (missing, damaged or of
     other parameters) fitted on the library, once per :class:`Library`. ``learned``: the
     model of ``dtw-fused-labels`` (learned from ``library.labels`` when fitted here; without
-    labels, the plain model)."""
+    labels, the plain model). ``weights`` other than the default's: fitted here, never
+    stored."""
     key = MODEL_KEY_LABELS if learned else MODEL_KEY
+    if tuple(weights) != WEIGHTS:
+        key = f"{key}@{','.join(f'{w:g}' for w in weights)}"
     if key not in library._cache:
         model = None
         data = library.stored.get(key)
         if data is not None:
             try:
-                model = FusedModel.from_bytes(data)
+                model = FusedModel.from_bytes(data, weights)
             except ValueError:  # FormatError included: refit
                 model = None
         if model is None and learned:
-            model = fit_labels(library, fused_model(library))
+            model = fit_labels(library, fused_model(library, weights=weights))
         elif model is None:
-            model = fit_fused_model(library._need("frames"), library._need("path"))
+            model = fit_fused_model(
+                library._need("frames"), library._need("path"), weights=tuple(weights)
+            )
         library._cache[key] = model
     return library._cache[key]  # type: ignore[return-value]
 
@@ -297,13 +312,14 @@ class FusedDTW:
     name: str
     radius: int = FUSED_RADIUS
     learned: bool = False
+    weights: tuple[float, ...] = WEIGHTS
     kinds: tuple[str, ...] = ("motion",)
     keys: tuple[str, ...] = ("frames", "path")
 
     def _packed(self, library: Library) -> tuple[np.ndarray, ...]:
-        key = f"fused:{self.radius}:{self.learned}"
+        key = f"fused:{self.radius}:{self.learned}:{self.weights}"
         if key not in library._cache:
-            model = fused_model(library, self.learned)
+            model = fused_model(library, self.learned, self.weights)
             streams = [
                 model.stream(f, p)
                 for f, p in zip(library._need("frames"), library._need("path"), strict=True)
@@ -326,7 +342,7 @@ class FusedDTW:
         """Every clip's distance (``inf``: pruned, never one of the ``k`` nearest, or
         ``exclude``) and the number of full DTWs computed."""
         frames_t, projected_t, upper, lower, offsets = self._packed(library)
-        model = fused_model(library, self.learned)
+        model = fused_model(library, self.learned, self.weights)
         q = dist._as_frames(model.stream(query.arrays["frames"], query.arrays["path"]), "query")
         kk = len(library) if k is None else max(1, int(k))
         qp = model.project(q)
@@ -435,6 +451,7 @@ METHODS: dict[str, RetrievalMethod] = {
     "pooled": PooledEmbedding("pooled"),
     DEFAULT_METHOD: FusedDTW(DEFAULT_METHOD),
     "dtw-fused-labels": FusedDTW("dtw-fused-labels", learned=True),
+    "dtw-fused-route": FusedDTW("dtw-fused-route", weights=ROUTE_WEIGHTS),
     "pooled+dtw": ShortlistThenDTW("pooled+dtw", max_radius=MAX_WARP_S * FEATURE_FPS),
 }
 """Name -> method; every method the benchmark scores."""
