@@ -33,7 +33,8 @@ def _frames(X: np.ndarray, fixes=((), (), ())) -> ClipRows:
     """A clip kept frame by frame: its rows are its channels."""
     T = len(X)
     segs = np.array([[0, T, 0, 0, 0, 0]], dtype=np.int64)
-    f, c, v = (np.asarray(a, dtype=t) for a, t in zip(fixes, (np.int64, np.int64, float), strict=True))
+    types = (np.int64, np.int64, float)
+    f, c, v = (np.asarray(a, dtype=t) for a, t in zip(fixes, types, strict=True))
     return ClipRows("clip", T, 30.0, segs, np.zeros(0), np.ascontiguousarray(X),
                     np.arange(C), np.ones(C), f, c, v)  # fmt: skip
 
