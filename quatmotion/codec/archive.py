@@ -540,6 +540,16 @@ class ArchiveReader:
         ValueError
             A time that is not finite, an unknown mode, or a joint that is not in the skeleton.
         """
+        if joints is None and mode == "clamp" and type(times) is float:
+            # one pose of a clip sampled before: its bound sampler, nothing resolved again
+            i = clip if type(clip) is int else None
+            if type(clip) is str and self._by_name is not None:
+                i = self._by_name.get(clip)  # a name held by one clip (index_of's table)
+            cached = None if i is None else self._samplers.get(i)
+            if cached is not None:
+                self._samplers.move_to_end(i)
+                root, rot = cached.bound().pose(times)
+                return root.copy(), rot.copy()
         return sampler_for(self, clip).sample(times, joints, mode=mode)
 
     def sampler(
