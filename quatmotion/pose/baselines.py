@@ -53,6 +53,7 @@ from sklearn.utils import check_random_state
 from threadpoolctl import threadpool_limits
 
 from quatmotion.pose.data import PoseData
+from quatmotion.pose.metric import pair_labels
 from quatmotion.pose.skeleton16 import JOINTS_16
 
 __all__ = [
@@ -325,9 +326,7 @@ class Xing(_Projection):
     def fit(
         self, X_unlabeled: FloatArray, X_a: FloatArray, X_b: FloatArray, labels: ArrayLike
     ) -> Xing:
-        labels = np.asarray(labels, dtype=bool)
-        if labels.all() or not labels.any():
-            raise ValueError("Xing needs both similar and dissimilar pairs")
+        labels = pair_labels(labels, "Xing")
         base = X_unlabeled if len(X_unlabeled) >= 2 else np.concatenate((X_a, X_b))
         k = int(min(self.n_pca, base.shape[1], base.shape[0]))
         pca = PCA(n_components=k, random_state=check_random_state(self.random_state)).fit(base)
@@ -410,9 +409,7 @@ class SDA(_Projection):
     def fit(
         self, X_unlabeled: FloatArray, X_a: FloatArray, X_b: FloatArray, labels: ArrayLike
     ) -> SDA:
-        labels = np.asarray(labels, dtype=bool)
-        if labels.all() or not labels.any():
-            raise ValueError("SDA needs both similar and dissimilar pairs")
+        labels = pair_labels(labels, "SDA")
         d = X_a.shape[1]
         diff = X_a - X_b
         S_D = diff[~labels].T @ diff[~labels]

@@ -45,6 +45,7 @@ from threadpoolctl import threadpool_limits
 
 __all__ = [
     "PairLogistic",
+    "pair_labels",
     "RDSR",
     "sparse_codes",
     "trace_ratio",
@@ -53,6 +54,21 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+
+def pair_labels(labels: ArrayLike, learner: str) -> NDArray[np.bool_]:
+    """Pair labels as booleans, shape (P,) (True: similar), for a ``learner`` that needs both
+    kinds.
+
+    Raises
+    ------
+    ValueError
+        The pairs are all similar or all dissimilar.
+    """
+    similar = np.asarray(labels, dtype=bool).reshape(-1)
+    if similar.all() or not similar.any():
+        raise ValueError(f"{learner} needs both similar and dissimilar pairs")
+    return similar
 
 
 # ------------------------------------------------------------------------------------------
@@ -669,9 +685,7 @@ class PairLogistic:
         """Fit on pairs ``(X_a[i], X_b[i])`` (P, D), labels True = similar (a good pair)."""
         from scipy.optimize import minimize
 
-        similar = np.asarray(labels, dtype=bool).reshape(-1)
-        if similar.all() or not similar.any():
-            raise ValueError("PairLogistic needs both similar and dissimilar pairs")
+        similar = pair_labels(labels, "PairLogistic")
         d2 = (np.asarray(X_a, dtype=np.float64) - np.asarray(X_b, dtype=np.float64)) ** 2
         unit = d2.mean(axis=0)
         unit = np.where(unit > 0, unit, 1.0)
