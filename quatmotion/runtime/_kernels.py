@@ -29,6 +29,8 @@ Conventions
 
 from __future__ import annotations
 
+import functools
+
 import numba
 import numpy as np
 from numpy.lib.stride_tricks import as_strided
@@ -595,11 +597,13 @@ def pose(t, B):  # pragma: no cover - compiled
     return True
 
 
+@functools.cache
 def pose_entry():  # type: ignore[no-untyped-def]
     """:func:`pose` as the function it compiles to for a packed clip's argument types (a
     float and a contiguous float64 array): called without the dispatcher's resolution of
     types, 0.31 -> 0.17 µs a call measured here. Its one caller, the Sampler, passes exactly
-    these (a ``float(t)`` and its own buffer)."""
+    these (a ``float(t)`` and its own buffer). Made once (``Dispatcher.compile`` costs about
+    100 µs even when the function is compiled: a Sampler's first pose would pay it)."""
     return pose.compile((numba.float64, numba.types.Array(numba.float64, 1, "C")))
 
 

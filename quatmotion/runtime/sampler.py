@@ -105,12 +105,12 @@ class ClipSampler:
     # ------------------------------------------------------------------ sampling
     def _tables(self, sel: NDArray[np.int64]) -> tuple:
         """The coefficient columns the joints ``sel`` need (cached per selection)."""
+        if sel is self._all:  # every joint: every decoded column, as decoded (no copy)
+            return self._P, self._cols, self._scale, sel
         key = sel.tobytes()
         cached = self._selections.get(key)
         if cached is not None:
             return cached
-        if sel is self._all:  # every joint: every decoded column, as decoded (no copy)
-            return self._P, self._cols, self._scale, sel
         at = np.flatnonzero(np.isin(self._cols, self._needed_columns(sel)))
         cached = (
             np.ascontiguousarray(self._P[:, at]),
@@ -184,22 +184,23 @@ class Sampler:
         compiled = kernels()
         head = np.zeros(compiled.PACK_HEAD, dtype=np.int64)
         ints = (head, segs, cols, sel, kinds, starts, counts, dof_axes)
-        n_ints = sum(np.size(a) for a in ints)
+        n_ints = sum(a.size for a in ints)
         head[:10] = (len(segs), len(cols), len(P), J, corr.shape[0], C, k, len(knots),
                      mode == "loop", n_ints)  # fmt: skip
-        floats = (
-            np.array([clip.fps]),
-            knots,
-            P,
-            scale,
-            corr,
-            pre,
-            ref,
-            np.zeros(2 * C + 9 * J + 4 * k + 3 + 4 * k),
-        )
-        self._B = np.empty(n_ints + sum(np.size(a) for a in floats))
-        self._B[:n_ints].view(np.int64)[:] = np.concatenate([np.ravel(a) for a in ints])
-        self._B[n_ints:] = np.concatenate([np.ravel(a) for a in floats])
+        floats = (knots, P, scale, corr, pre, ref)
+        scratch = 2 * C + 9 * J + 4 * k + 3 + 4 * k  # X, Y, angles, rotations; the output
+        self._B = np.zeros(n_ints + 1 + sum(a.size for a in floats) + scratch)
+        # each table written into its slot (one allocation: the clip's first pose pays this)
+        I = self._B[:n_ints].view(np.int64)  # noqa: E741 (the kernels' name)
+        o = 0
+        for a in ints:
+            I[o : o + a.size] = a.reshape(-1)
+            o += a.size
+        self._B[n_ints] = clip.fps
+        o = n_ints + 1
+        for a in floats:
+            self._B[o : o + a.size] = a.reshape(-1)
+            o += a.size
         out = len(self._B) - 3 - 4 * k
         self._root = self._B[out : out + 3]
         self._rot = self._B[out + 3 :].reshape(k, 4)
