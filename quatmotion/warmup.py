@@ -55,6 +55,7 @@ KERNEL_MODULES: tuple[str, ...] = (
     "quatmotion.sparse._linear_kernels",
     "quatmotion.codec.channels",
     "quatmotion.codec.entropy",
+    "quatmotion.codec.rans",
     "quatmotion.codec._decode_kernels",
     "quatmotion.runtime._kernels",
     "quatmotion.codec.spline",

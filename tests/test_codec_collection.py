@@ -152,7 +152,8 @@ def test_add_names_a_clip_apart_from_one_with_its_stem(takes, tmp_path):
 
 def test_version_3_header_bytes_are_as_docs_format_says(takes, tmp_path):
     """Parse the header by docs/format.md alone: the settings JSON, then each clip entry's
-    reference fields after `arms` (with version 3's take flag: 0, these files have one take)."""
+    reference fields after `arms` (with version 3's take flag: 0, these files have one take);
+    each clip chunk starts with the entry's frame count."""
     import io
     import zlib
 
@@ -162,7 +163,8 @@ def test_version_3_header_bytes_are_as_docs_format_says(takes, tmp_path):
     settings = CompressSettings(max_error=1.25, seed=2, read=ReadSettings(units="cm"))
     data = Archive.build([takes], None, settings, runner=INLINE).details["data"]
     assert data[:8] == MAGIC and int.from_bytes(data[8:10], "little") == 3
-    head = next(scan_chunks(io.BytesIO(data), tmp_path, len(data)))
+    chunks = list(scan_chunks(io.BytesIO(data), tmp_path, len(data)))
+    head = chunks[0]
     r = Reader(zlib.decompress(data[head.offset : head.offset + head.length], -15))
     assert r.string() == "best"
     assert json.loads(r.blob()) == settings.to_dict()
@@ -175,11 +177,13 @@ def test_version_3_header_bytes_are_as_docs_format_says(takes, tmp_path):
         r.uvarint()
     for _ in range(r.uvarint()):
         r.f64()
-    names = []
+    names, frames = [], []
     for _ in range(r.uvarint()):
         names.append(r.string())
-        for _ in range(5):
+        for _ in range(3):
             r.uvarint()
+        frames.append(r.uvarint())
+        r.uvarint()
         r.u8(), r.f32(), r.f32()
         sha, path = r.take(32).hex(), r.string()
         assert sha == content_hash(path) and path.endswith(names[-1] + ".bvh")
@@ -187,3 +191,5 @@ def test_version_3_header_bytes_are_as_docs_format_says(takes, tmp_path):
         assert r.u8() == 0  # no take
     r.end()
     assert names == ["s1/take_001", "s2/take_001"]
+    clips = [c for c in chunks if c.tag == b"C"]
+    assert [Reader(data[c.offset : c.offset + c.length]).uvarint() for c in clips] == frames

@@ -88,13 +88,9 @@ def test_clip_names_with_folders_are_written_in_sub_folders(qmz, tmp_path):
     assert (tmp_path / "out" / "takes" / "day 1" / "walk.bvh").is_file()
 
 
-CRAFTED_REFUSED = [
-    k
-    for k in mutants.QMZ_HEADERS
-    if (not k.startswith("name_") or k == "name_twice") and k != "frames_plus_one"
-]
-"""Every crafted header but the names a terminal or a folder makes safe, and a frame count one
-too high (the container binds no frame count to a clip's chunk: format 3's to do)."""
+CRAFTED_REFUSED = [k for k in mutants.QMZ_HEADERS if not k.startswith("name_") or k == "name_twice"]
+"""Every crafted header but the names a terminal or a folder makes safe (a frame count one too
+high included: format 3 binds each clip chunk to its frame count)."""
 
 
 @pytest.mark.parametrize("crafted", CRAFTED_REFUSED)
@@ -360,3 +356,16 @@ def test_names_are_printed_as_text_never_as_markup(qmz, tmp_path, name):
     result = _invoke("ls", bad)
     assert result.exit_code == 0, result.output
     assert name in result.output and "\x1b]8;" not in result.output
+
+
+@pytest.mark.parametrize("method", ["best", "naive"])
+def test_a_frame_count_one_too_high_is_refused_naming_the_clip(qmz, tmp_path, method):
+    from quatmotion.codec import Archive
+    from quatmotion.errors import FormatError
+
+    edit = mutants.QMZ_HEADERS["frames_plus_one"]
+    bad = mutants.rewrite_qmz(qmz[method], tmp_path / "bad.qmz", edit)
+    with Archive.open(qmz[method]) as archive:
+        name, frames = archive.entries[0].name, archive.entries[0].n_frames
+    with pytest.raises(FormatError, match=f"clip '{name}': its chunk holds {frames} frames"):
+        Archive.open(bad)

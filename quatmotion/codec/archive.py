@@ -25,9 +25,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from quatmotion._format import FileFormat
-from quatmotion.codec.binary import Reader, inflate
+from quatmotion.codec.binary import Reader, Writer, inflate
 from quatmotion.codec.channels import _kernel_tables, from_channels
 from quatmotion.codec.container import (
+    FORMAT_VERSION,
     QMZ_FORMAT,
     ChunkRef,
     ClipEntry,
@@ -40,7 +41,12 @@ from quatmotion.codec.container import (
 )
 from quatmotion.codec.library import LayoutInfo
 from quatmotion.codec.methods import ClipContext, get_method
-from quatmotion.codec.repair import Corrections, correction_lever, read_clip_prefix
+from quatmotion.codec.repair import (
+    Corrections,
+    check_frames,
+    correction_lever,
+    read_clip_prefix,
+)
 from quatmotion.codec.sampling import Sampler, sampler_for
 from quatmotion.codec.skeletons import (
     RECORD_BVH,
@@ -171,6 +177,7 @@ class ArchiveReader:
                     read_chunk(self._file, chunks[0], self._name), self._name, self.version
                 )
                 self._split(chunks[1:])
+                self._check_frames()
         except BaseException:
             self._file.close()
             raise
@@ -205,6 +212,22 @@ class ArchiveReader:
         self._record_chunks = chunks[:n_s]
         self._layout_chunks = chunks[n_s : n_s + n_l]
         self._clip_chunks = chunks[n_s + n_l :]
+
+    def _check_frames(self) -> None:
+        """Every clip chunk's frame count against its header entry (format 3 on): a header
+        that says one frame more than the data is refused when the file is opened, whatever
+        the command (recovering too: the checksums hold), naming the clip."""
+        if self.version < 3:
+            return
+        for entry, ref in zip(self.header.clips, self._clip_chunks, strict=True):
+            if ref is None:  # lost in a damaged file opened to recover
+                continue
+            self._file.seek(ref.offset)
+            head = self._file.read(min(10, ref.length))
+            try:
+                check_frames(Reader(head, self._name, "clip").uvarint(), entry.n_frames)
+            except FormatError as error:
+                raise FormatError(f"clip {entry.name!r}: {error.reason}", self._name) from None
 
     def _open_recovering(self) -> None:
         """Read what a damaged file still holds: every chunk whose CRC holds, placed by the
@@ -285,6 +308,7 @@ class ArchiveReader:
         self.damaged = tuple(
             DamagedClip(i, h.clips[i].name, reason) for i, reason in self._clip_damage.items()
         )
+        self._check_frames()  # a chunk whose checksum holds says what it says: not damage
 
     def _check_intact(self, i: int) -> None:
         if i in self._clip_damage:
@@ -403,9 +427,19 @@ class ArchiveReader:
 
     def clip_payloads(self) -> Iterator[bytes]:
         """The payloads of the ``C`` chunks in clip order, CRC checked, read one at a time
-        (streamed into a file appended to)."""
-        for ref in self._clip_chunks:
-            yield read_chunk(self._file, ref, self._name)
+        (streamed into a file appended to), in :data:`FORMAT_VERSION`: a clip of an older
+        file is re-coded by its method (:meth:`Method.upgrade_payload`, without loss)."""
+        for i, ref in enumerate(self._clip_chunks):
+            data = read_chunk(self._file, ref, self._name)
+            if self.version < FORMAT_VERSION:
+                parts = self.clip_parts(i)
+                try:
+                    new = self.method.upgrade_payload(parts.model, parts.payload, parts.context)
+                except FormatError as error:
+                    raise self.method_error(parts, error) from None
+                frames = Writer().uvarint(parts.entry.n_frames).bytes()
+                data = frames + data[: len(data) - len(parts.payload)] + new
+            yield data
 
     def _record_text(self, k: int) -> str:
         if k not in self._records:
@@ -471,14 +505,17 @@ class ArchiveReader:
         check("decompressed_bytes", n_bytes, self._name, f"clip {entry.name!r}: decoded size")
         data = read_chunk(self._file, self._clip_chunks[i], self._name)
         r = Reader(data, self._name, f"clip {entry.name!r}")
-        at_rest, corrections = read_clip_prefix(
-            r, len(layout.translation_joints), entry.n_frames, layout.n_channels
-        )
+        try:
+            at_rest, corrections = read_clip_prefix(
+                r, len(layout.translation_joints), entry.n_frames, layout.n_channels, self.version
+            )
+        except FormatError as error:
+            raise FormatError(f"clip {entry.name!r}: {error.reason}", self._name) from None
         active = np.ones(layout.n_channels, dtype=bool)
         for k in range(len(layout.translation_joints)):
             if at_rest[k]:
                 active[layout.translation_columns(k)] = False
-        context = ClipContext(info, skeleton, entry.n_frames, entry.fps, active)
+        context = ClipContext(info, skeleton, entry.n_frames, entry.fps, active, self.version)
         return ClipParts(i, entry, skeleton, info, model, r.take(r.remaining), context,
                          at_rest, corrections)  # fmt: skip
 

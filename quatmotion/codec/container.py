@@ -17,7 +17,9 @@ Conventions
   module writes :data:`FORMAT_VERSION` and keeps a reader of the header of every version from
   :data:`QMZ_FORMAT` ``.oldest_readable`` (version 1, 0.3.0: no clip references, no settings;
   version 2, 0.4.0: each clip's :class:`~quatmotion.collection.ClipRef` and the settings'
-  JSON; version 3: the reference's take, one take of a file of several).
+  JSON; version 3: the reference's take, one take of a file of several; and, not this
+  module's, every clip chunk starting with its frame count and the spline codecs' clip
+  payloads in groups of rows coded by static rANS, :mod:`quatmotion.codec.methods.spline`).
 * :func:`write_container` is the one writer of these bytes (the compressor assembles a
   :class:`Header` and the chunk payloads and hands them here).
 * Every error in reading is a :class:`~quatmotion.errors.FormatError` that names the file and

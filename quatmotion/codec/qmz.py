@@ -63,7 +63,8 @@ class Archive(ArchiveReader):
         labels: Any = None,
     ) -> BuildReport:
         """Add clips to an existing ``.qmz`` file (rewritten atomically), the clips already in
-        it kept byte for byte (:func:`quatmotion.codec.writer.add_to_library`)."""
+        it kept byte for byte (re-coded without loss from an older format version:
+        :meth:`ArchiveReader.clip_payloads`; :func:`quatmotion.codec.writer.add_to_library`)."""
         if labels is not None:
             raise ValueError("a .qmz library stores no labels (give them to the clip index)")
         from quatmotion.codec.writer import add_to_library

@@ -9,8 +9,9 @@ Conventions
   some frame still misses the bound with every channel corrected.
 * Per failing frame the channels are corrected greedily in order of ``|x - x_hat| lever`` (4,
   then 8, 16, ... channels) until forward kinematics of that frame meets ``0.98 bound``.
-* Stored in each clip chunk's shared prefix (:func:`write_clip_prefix`): a bitmask of the
-  translation joints at rest, the correction count, then ``quantum`` (f32) and each correction
+* Stored in each clip chunk's shared prefix (:func:`write_clip_prefix`): from format 3 the
+  clip's frame count (checked against the header's), then a bitmask of the translation
+  joints at rest, the correction count, then ``quantum`` (f32) and each correction
   as (frame delta, channel, value) varints.
 """
 
@@ -30,6 +31,7 @@ from quatmotion.motion import Skeleton, WorldTransforms
 
 __all__ = [
     "Corrections",
+    "check_frames",
     "correction_lever",
     "find_corrections",
     "read_clip_prefix",
@@ -150,9 +152,16 @@ def find_corrections(
     )
 
 
-def write_clip_prefix(at_rest: NDArray[np.bool_], corrections: Corrections) -> bytes:
-    """The shared start of a clip chunk: rest flags, then corrections."""
-    w = Writer().raw(np.packbits(np.asarray(at_rest, dtype=bool), bitorder="little").tobytes())
+def check_frames(stored: int, n_frames: int) -> None:
+    """Refuse a clip chunk whose frame count is not its header entry's."""
+    if stored != n_frames:
+        raise FormatError(f"its chunk holds {stored} frames, its header entry {n_frames}")
+
+
+def write_clip_prefix(at_rest: NDArray[np.bool_], corrections: Corrections, n_frames: int) -> bytes:
+    """The shared start of a clip chunk (format 3): frame count, rest flags, corrections."""
+    w = Writer().uvarint(n_frames)
+    w.raw(np.packbits(np.asarray(at_rest, dtype=bool), bitorder="little").tobytes())
     w.uvarint(len(corrections))
     if len(corrections):
         w.f32(corrections.quantum)
@@ -166,9 +175,12 @@ def write_clip_prefix(at_rest: NDArray[np.bool_], corrections: Corrections) -> b
 
 
 def read_clip_prefix(
-    r: Reader, n_translation_joints: int, n_frames: int, n_channels: int
+    r: Reader, n_translation_joints: int, n_frames: int, n_channels: int, version: int
 ) -> tuple[NDArray[np.bool_], Corrections]:
-    """Inverse of :func:`write_clip_prefix`; checks every index."""
+    """Inverse of :func:`write_clip_prefix` in format ``version`` (before 3: no frame
+    count); checks every index, and the frame count against the header's ``n_frames``."""
+    if version >= 3:
+        check_frames(r.uvarint(), n_frames)
     flags = np.frombuffer(r.take((n_translation_joints + 7) // 8), dtype=np.uint8)
     at_rest = np.unpackbits(flags, bitorder="little")[:n_translation_joints].astype(bool)
     n = r.uvarint(n_frames * max(n_channels, 1))

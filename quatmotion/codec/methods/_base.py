@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from quatmotion.codec.container import FORMAT_VERSION
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary
 from quatmotion.motion import Skeleton
 
@@ -34,6 +35,8 @@ class ClipContext:
     fps: float
     active: NDArray[np.bool_]
     """Which of the layout's channels the clip codes (translation joints at rest are not)."""
+    version: int = FORMAT_VERSION
+    """The file's format version (a method decodes the payload of each version it wrote)."""
 
 
 @dataclass(frozen=True)
@@ -117,3 +120,9 @@ class Method(ABC):
     @abstractmethod
     def decode(self, model: Any, payload: bytes, context: ClipContext) -> NDArray[np.float64]:
         """A clip's channels ``(T, C)`` (inactive channels may hold anything)."""
+
+    def upgrade_payload(self, model: Any, payload: bytes, context: ClipContext) -> bytes:
+        """A payload of format ``context.version`` in :data:`FORMAT_VERSION`, decoding to the
+        same channels (appending to an older file rewrites it in the current version). A
+        method whose payload no version changed returns it as it is."""
+        return payload

@@ -40,7 +40,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from quatmotion.codec import entropy
+from quatmotion.codec import entropy, rans
 from quatmotion.codec.binary import Reader, Writer
 from quatmotion.codec.channels import joint_channels, joint_rotations
 from quatmotion.codec.library import LayoutInfo, PreparedLibrary, decode_log2, encode_log2
@@ -59,13 +59,17 @@ from quatmotion.codec.spline import (
 from quatmotion.errors import FormatError
 from quatmotion.quat import conjugate, multiply
 
-__all__ = ["SplineMethod", "SplineSettings", "detect_breaks"]
+__all__ = ["GROUP_ROWS", "RowStreams", "SplineMethod", "SplineSettings", "detect_breaks"]
 
 _STEP_GRID = 8  # steps per octave
 _STEP_FLOOR = 2.0**-12
 _LPC_UNIT = 64.0
 _REFERENCE_FPS = 120.0
 _MEAN_UNIT = 16.0
+GROUP_ROWS = 64
+"""Format 3: coefficient rows per group, the unit that decodes alone (prediction restarts
+at each group's first row); the size each length costs is in docs/performance.md."""
+_MAX_OFFSET = 255  # a clip's scale-code offsets, 1/8 octaves
 
 
 def step_value(code: int) -> float:
@@ -250,6 +254,178 @@ def _unpredict_kernel(R, starts, mean, a1, a2, step):  # pragma: no cover - comp
     return P
 
 
+# ---------------------------------------------------------------------------- format 3
+def _row_starts(n_frames: int, plan: ClipPlan, group_rows: int) -> NDArray[np.bool_]:
+    """Format 3's start rows: each spline segment's first row and each group's first row."""
+    starts = _segment_starts(n_frames, plan)
+    starts[::group_rows] = True
+    return starts
+
+
+def _scale_codes(model: SplineModel, cols, step: int) -> tuple:
+    """The channels' rANS scale codes (1/8 octaves of symbol units) before the clip's offsets:
+    the layout's ``initial`` and ``start_scale`` (quarter-octave bytes) over the clip's step
+    (an eighth-octave code), ``2 byte - step - 160`` exactly."""
+    key = (id(model), np.asarray(cols).tobytes())
+    hit = _CODES.get(key)
+    if hit is None or hit[0] is not model:
+        main = 2 * encode_log2(model.initial[cols]).astype(np.int64) - 160
+        start = 2 * encode_log2(model.start_scale[cols]).astype(np.int64) - 160
+        if len(_CODES) > 256:
+            _CODES.clear()
+        hit = _CODES[key] = (model, main, start)
+    return hit[1] - step, hit[2] - step
+
+
+_CODES: dict[tuple, tuple] = {}
+
+
+def _best_offsets(R, starts, main, start) -> tuple[int, int]:
+    """The clip's offsets to the layout's scale codes (other rows, start rows) that code ``R``
+    smallest: each by a coarse search, then its neighbours."""
+    best = [0, 0]
+
+    def size(o: list[int]) -> int:
+        return rans.stream_bytes(R, starts, rans.model_of(main + o[0], start + o[1]))
+
+    for which in (0, 1):
+        for grid in (range(-32, 33, 8), range(-6, 7, 2), (-1, 1)):
+            centre = best[which]
+            trials = {}
+            for d in grid:
+                o = list(best)
+                o[which] = centre + d if grid != range(-32, 33, 8) else d
+                trials[o[which]] = size(o)
+            best[which] = min(trials, key=lambda v: (trials[v], abs(v)))
+    return best[0], best[1]
+
+
+def encode_rows_v3(
+    n_frames: int, plan: ClipPlan, Q: NDArray[np.int64], model: SplineModel, cols,
+    group_rows: int = GROUP_ROWS,
+) -> bytes:  # fmt: skip
+    """A clip's format 3 payload from its plan and quantised coefficient rows ``Q`` ``(n, c)``
+    (docs/format.md, *Clip payload, format 3*)."""
+    step = step_value(plan.step)
+    starts = _row_starts(n_frames, plan, group_rows)
+    R = _residuals(Q, starts, model, step, cols)
+    main, start = _scale_codes(model, cols, plan.step)
+    o_main, o_start = _best_offsets(R, starts, main, start)
+    coder = rans.model_of(main + o_main, start + o_start)
+    streams = [
+        rans.encode_rows(R[a : a + group_rows], starts[a : a + group_rows], coder)
+        for a in range(0, len(R), group_rows)
+    ]
+    w = Writer().raw(plan.to_bytes())
+    w.uvarint(group_rows).svarint(o_main).svarint(o_start)
+    for stream in streams[:-1]:
+        w.uvarint(len(stream))
+    return w.bytes() + b"".join(streams)
+
+
+@dataclass(frozen=True)
+class RowStreams:
+    """A format 3 clip payload parsed, its rows not yet decoded: what decoding any group of
+    rows needs (:meth:`decode`). Rows ``[g G, (g + 1) G)`` are group ``g``; its stream is
+    ``buf[ends[g] : ends[g + 1]]``."""
+
+    plan: ClipPlan
+    tables: Any  # quatmotion.codec.spline.SegmentTables
+    group_rows: int
+    buf: NDArray[np.uint8]
+    ends: NDArray[np.int64]
+    starts: NDArray[np.bool_]
+    coder: rans.Model
+    mean: NDArray[np.int64]
+    a1: NDArray[np.float64]
+    a2: NDArray[np.float64]
+    step: float
+
+    @property
+    def n_groups(self) -> int:
+        return len(self.ends) - 1
+
+    def decode(self, P: NDArray[np.float64], first: int = 0, stop: int | None = None) -> None:
+        """Groups ``first..stop - 1`` (all by default) into their rows of ``P`` ``(n, c)``,
+        weighted units.
+
+        Raises
+        ------
+        FormatError
+            A group's stream is corrupt (its words or final state).
+        """
+        tab = rans.load_tables()
+        stop = self.n_groups if stop is None else stop
+        status = _rows_v3_kernel(
+            self.buf, self.ends, self.group_rows, first, stop, self.starts, *self.coder.args(),
+            tab.M, tab.dec, self.mean, self.a1, self.a2, self.step, P,
+        )  # fmt: skip
+        if status:
+            raise FormatError(f"corrupt coefficient rows (group {status - 1})")
+
+
+def read_rows_v3(model: SplineModel, payload: bytes, context: ClipContext) -> tuple:
+    """A format 3 payload parsed: its :class:`RowStreams`, the ``c`` active channels and
+    their scales (channel = weighted / scale).
+
+    Raises
+    ------
+    FormatError
+        The payload is malformed.
+    """
+    r = Reader(payload, what="clip")
+    T = context.n_frames
+    plan = ClipPlan.read(r, T)
+    tables = segment_tables(T, plan.breaks, plan.spacing, plan.inserted)
+    G = r.uvarint(1 << 30)
+    if G < 1:
+        raise FormatError("0 rows per group")
+    o_main, o_start = r.svarint(), r.svarint()
+    if max(abs(o_main), abs(o_start)) > _MAX_OFFSET:
+        raise FormatError("a scale offset out of range")
+    n_groups = -(-tables.n_rows // G)
+    lengths = r.uvarints(n_groups - 1).astype(np.int64)
+    body = r.take(r.remaining)
+    ends = np.zeros(n_groups + 1, dtype=np.int64)
+    ends[1:-1] = np.cumsum(lengths)
+    ends[-1] = len(body)
+    if np.any(np.diff(ends) < 4):
+        raise FormatError("a group's stream is shorter than its state or past the payload")
+    starts = np.zeros(tables.n_rows, dtype=np.bool_)
+    starts[tables.rows[tables.length > 0]] = True
+    starts[::G] = True
+    cols, initial, start_scale, a1, a2, scale, start_mean = _columns(model, context.active)
+    main, start = _scale_codes(model, cols, plan.step)
+    coder = rans.model_of(main + o_main, start + o_start)
+    step = step_value(plan.step)
+    mean = np.round(start_mean / step).astype(np.int64)
+    buf = np.frombuffer(body, dtype=np.uint8)
+    streams = RowStreams(plan, tables, G, buf, ends, starts, coder, mean, a1, a2, step)
+    return streams, cols, scale
+
+
+@numba.njit(cache=True)
+def _rows_v3_kernel(
+    buf, ends, G, first, stop, starts, t_start, k_start, t_ctx, k_ctx, thr, M, dec, mean, a1,
+    a2, step, P,
+):  # pragma: no cover - compiled  # fmt: skip
+    """Decode groups ``first..stop - 1`` (entropy, then prediction: each group's first row
+    is a start row, so :func:`_unpredict_kernel` runs on it alone) into ``P``; 0, or ``1 + g``
+    for a corrupt group ``g``."""
+    n, c = P.shape
+    R = np.empty((min(G, n), c), dtype=np.int64)
+    for g in range(first, stop):
+        a = g * G
+        b = min(n, a + G)
+        Rg = R[: b - a]
+        status = rans.decode_span(buf, ends[g], ends[g + 1], Rg, 0, b - a, starts[a:b],
+                                  t_start, k_start, t_ctx, k_ctx, thr, M, dec)  # fmt: skip
+        if status:
+            return 1 + g
+        P[a:b] = _unpredict_kernel(Rg, starts[a:b], mean, a1, a2, step)
+    return 0
+
+
 class SplineMethod(Method):
     """The spline coder in one configuration."""
 
@@ -259,6 +435,7 @@ class SplineMethod(Method):
     def __init__(self, name: str, settings: SplineSettings):
         self.name = name
         self.settings = settings
+        self.group_rows = GROUP_ROWS
 
     # ---------------------------------------------------------------------------- model
     def _channel_scale(self, info: LayoutInfo) -> NDArray[np.float64]:
@@ -374,12 +551,7 @@ class SplineMethod(Method):
                     if refined is None:
                         break
                     plan = refined
-                starts = _segment_starts(T, plan)
-                R = _residuals(Q, starts, model, step, cols)
-                stream = entropy.encode_rows(
-                    R, model.initial[cols] / step, model.start_scale[cols] / step, starts
-                )
-                payload = plan.to_bytes() + stream
+                payload = encode_rows_v3(T, plan, Q, model, cols, self.group_rows)
                 # frames still over the bound go to the orchestrator's repair: about three
                 # bytes for each channel that moves a point by more than an eighth of the bound
                 lever = library.layouts[clip.layout].lever
@@ -496,6 +668,11 @@ class SplineMethod(Method):
         rows ``P`` ``(n, c)`` in weighted units, the ``c`` active channels and their scales
         (channel = weighted / scale): what the frames
         and the spline between them are evaluated from (no frame evaluated yet)."""
+        if context.version >= 3:
+            streams, cols, scale = read_rows_v3(model, payload, context)
+            P = np.empty((streams.tables.n_rows, len(cols)))
+            streams.decode(P)
+            return streams.plan, streams.tables, P, cols, scale
         r = Reader(payload, what=f"{self.name} clip")
         T = context.n_frames
         plan = ClipPlan.read(r, T)
@@ -513,6 +690,15 @@ class SplineMethod(Method):
         mean = np.round(start_mean / step).astype(np.int64)
         P = _unpredict_kernel(R, starts, mean, a1, a2, step)
         return plan, tables, P, cols, scale
+
+    def upgrade_payload(self, model: Any, payload: bytes, context: ClipContext) -> bytes:
+        """A format 1 or 2 payload re-coded in format 3: the same quantised rows, so the same
+        decoded channels to the bit."""
+        if context.version >= 3:
+            return payload
+        plan, _, P, cols, _ = self.decode_coefficients(model, payload, context)
+        Q = np.round(P / step_value(plan.step)).astype(np.int64)
+        return encode_rows_v3(context.n_frames, plan, Q, model, cols, self.group_rows)
 
     def decode_segments(
         self, model: Any, payload: bytes, context: ClipContext

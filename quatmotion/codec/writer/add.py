@@ -1,5 +1,6 @@
 """:func:`add_to_library` (:meth:`quatmotion.codec.Archive.add`): clips added to an existing
-file, the clips already in it copied byte for byte, the new ones coded with the file's method
+file, the clips already in it copied byte for byte (from an older format version, re-coded
+without loss), the new ones coded with the file's method
 and, where their skeleton structure is known, its models.
 """
 
@@ -47,8 +48,9 @@ def add_to_library(
     skeleton structure is known, and with ``settings`` (default: the file's own, else
     :class:`CompressSettings`; the method is always the file's). A clip whose content hash the
     file already holds is skipped (in ``report.skipped``); a new clip whose name the file
-    holds is an error. The file keeps the settings it was made with. A version 1 file is
-    rewritten in the current version. Another writer of ``path`` at the same time is refused
+    holds is an error. The file keeps the settings it was made with. A file of an older format
+    version is rewritten in the current one (its clips re-coded without loss by their method:
+    :meth:`ArchiveReader.clip_payloads`). Another writer of ``path`` at the same time is refused
     (:func:`quatmotion._atomic.output_lock`).
     """
     with output_lock(path):  # read, code and rewrite: no other writer between

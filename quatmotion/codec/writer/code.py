@@ -99,7 +99,9 @@ def code_clip(task: ClipTask, models: SharedModels) -> CodedClip:
         fix, errors = verify_clip(
             method, library, 0, payload, models.decoder_models[task.layout], max_error
         )
-    return CodedClip(write_clip_prefix(library.clips[0].at_rest, fix), payload, len(fix), errors)
+    clip = library.clips[0]
+    prefix = write_clip_prefix(clip.at_rest, fix, clip.motion.n_frames)
+    return CodedClip(prefix, payload, len(fix), errors)
 
 
 def clip_tasks(inputs: Inputs, plan: Plan, *, verify: bool) -> list[ClipTask]:
