@@ -261,7 +261,7 @@ def test_every_command_on_fbx_ends_by_itself(tmp_path):
         _ended_by_itself(result)
         expected = 2 if name == "bad" else 0
         assert result.returncode == expected, (name, result.stdout, result.stderr)
-    assert "'Armature|walk_b' of 2" in runs["info"].stdout
+    assert "'Armature|walk_b' (walk_b) of 2; also 'Armature|walk_a' (walk_a)" in runs["info"].stdout
     said = {name: result.stdout + result.stderr for name, result in runs.items()}
     assert "7 clips added, 0 already indexed, 0 failed" in said["index"]
     assert "130 poses of 7 clips; 0 of 7 clips failed" in said["pose"]

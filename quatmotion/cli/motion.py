@@ -116,10 +116,17 @@ def _take_text(skeleton: Skeleton) -> str | None:
         return None
     if not takes:
         return "none (the file holds no animation)"
+    from quatmotion.io.fbx import take_labels
+
     read = skeleton.extras.get("fbx_take")
-    others = [t for t in takes if t != read]
-    rest = f"; also {', '.join(map(repr, others))} (--take NAME)" if others else ""
-    return f"{read!r} of {len(takes)}{rest}"
+    short = dict(zip(takes, take_labels(takes), strict=True))  # what --take and clip names say
+
+    def named(take: str) -> str:
+        return repr(take) if short[take] == take else f"{take!r} ({short[take]})"
+
+    others = [named(t) for t in takes if t != read]
+    rest = f"; also {', '.join(others)} (--take NAME)" if others else ""
+    return f"{named(read)} of {len(takes)}{rest}"
 
 
 def _stature(skeleton: Skeleton) -> float | None:
