@@ -605,6 +605,7 @@ def _index_step(
     report: BuildProgress,
 ) -> tuple[Path, BuildReport]:
     """The clip index (``folder/library.qidx``) and its build report."""
+    from quatmotion.parallel import Runner
     from quatmotion.retrieval.index import ClipIndex, IndexSettings
 
     index = folder / "library.qidx"
@@ -617,7 +618,7 @@ def _index_step(
             read=read,
         ),
         labels=labels,
-        workers=workers,
+        runner=Runner.of(workers),
         progress=lambda done, total: report("index", done, total),
     )
     return index, indexed
@@ -636,14 +637,14 @@ def _library_step(
     compared), at the default bound: its path and the files it holds (the others noted in
     ``failed``)."""
     from quatmotion.codec import Archive, CompressSettings
-    from quatmotion.codec.writer import runner_of
     from quatmotion.collection import ReadSettings
+    from quatmotion.parallel import Runner
 
     library = folder / "library.qmz"
     settings = CompressSettings(seed=seed, on_error="skip", read=ReadSettings(take=take))
     try:
         built = Archive.build(
-            files, library, settings, runner=runner_of(workers), progress=_step(report, "compress")
+            files, library, settings, runner=Runner.of(workers), progress=_step(report, "compress")
         )
     except ValueError:  # nothing to compress: every clip failed
         return library, []

@@ -351,11 +351,12 @@ _DICTIONARY_CODECS = ("qssd", "ksvd")
 def _index_and_search(space: _Workspace, kinds: tuple[str, ...]) -> None:
     """Index the clips with feature ``kinds``, then search with every method they serve."""
     from quatmotion.io import read_motion
+    from quatmotion.parallel import Runner
     from quatmotion.retrieval import METHODS, ClipIndex, IndexSettings, search_within
     from quatmotion.retrieval.search import search
 
     out = space.folder / f"clips-{'-'.join(kinds)}.qidx"
-    ClipIndex.build(space.files, out, IndexSettings(kinds=kinds), workers=1)
+    ClipIndex.build(space.files, out, IndexSettings(kinds=kinds), runner=Runner.inline())
     query = read_motion(space.files[0])
     with ClipIndex.open(out) as index:
         for method in METHODS:

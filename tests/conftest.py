@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 
 from quatmotion.datasets import data_root
+from quatmotion.parallel import Runner
 
 
 def _quiet(handler: type) -> type:
@@ -242,7 +243,9 @@ def motion_library(tmp_path_factory) -> dict[str, Path]:
         write_motion(generate_clip(kind, int(seed), n_frames=120), clips / f"{name}.bvh")
     labels = {name: name.rsplit("_", 1)[0] for name in [*names, "kick_0"]}
     settings = IndexSettings(kinds=("motion",))
-    report = ClipIndex.build([clips], root / "lib.qidx", settings, labels=labels, workers=1)
+    report = ClipIndex.build(
+        [clips], root / "lib.qidx", settings, labels=labels, runner=Runner.inline()
+    )
     assert len(report.added) == 7 and not report.failures, report
     codec.Archive.build(
         [clips / f"{n}.bvh" for n in names], root / "lib.qmz", codec.CompressSettings(max_error=1.0)

@@ -12,6 +12,7 @@ import sys
 import pytest
 
 from quatmotion.io import write_motion
+from quatmotion.parallel import Runner
 from quatmotion.retrieval.index import ClipIndex
 from quatmotion.synthetic import generate_clip
 
@@ -57,7 +58,7 @@ def test_help_loads_no_kernel_numpy_or_package_metadata():
 def test_serve_says_a_busy_port_before_it_loads_the_web_app(tmp_path):
     clips = [generate_clip(kind, 0, n_frames=60) for kind in ("walk", "squat")]
     index = tmp_path / "a.qidx"
-    ClipIndex.build(clips, index, workers=1)
+    ClipIndex.build(clips, index, runner=Runner.inline())
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
@@ -76,7 +77,7 @@ def test_search_loads_no_scikit_learn_or_codec(tmp_path, as_file):
     for kind in ("walk", "squat", "punch"):
         write_motion(generate_clip(kind, 1, n_frames=90), folder / f"{kind}.bvh")
     index = tmp_path / "a.qidx"
-    ClipIndex.build([folder], index, workers=1)
+    ClipIndex.build([folder], index, runner=Runner.inline())
     query = str(folder / "walk.bvh") if as_file else "walk"
     code, modules, output = _modules("search", query, "--index", str(index), "--json")
     assert code == 0, output

@@ -24,6 +24,7 @@ from fastapi.testclient import TestClient
 
 from quatmotion.io import write_motion
 from quatmotion.motion import Motion
+from quatmotion.parallel import Runner
 from quatmotion.server import CSRF_HEADER, create_app
 from quatmotion.server.dependencies import CLIP_ID
 from quatmotion.server.routers.pages import PAGES
@@ -65,7 +66,7 @@ def hostile_index(tmp_path_factory) -> Path:
     labels = {name: LABEL for name in (*CLIP_NAMES, "plain")}
     out = root / "hostile.qidx"
     built = ClipIndex.build(
-        [clips], out, IndexSettings(kinds=("motion",)), labels=labels, workers=1
+        [clips], out, IndexSettings(kinds=("motion",)), labels=labels, runner=Runner.inline()
     )
     assert len(built.added) == len(CLIP_NAMES) + 1 and not built.failures, built
     return out

@@ -97,7 +97,7 @@ def test_every_collection_file_stores_the_take_and_adds_per_take(tmp_path):
     sources = [TWO_TAKES, FIXTURES / "cmu_unreal.fbx"]
     expected = {s.name: (s.take, s.sha256) for s in find_clips(sources)}
     Archive.build(sources, tmp_path / "l.qmz", CompressSettings(), runner=Runner.inline())
-    ClipIndex.build(sources, tmp_path / "x.qidx", IndexSettings(), workers=1)
+    ClipIndex.build(sources, tmp_path / "x.qidx", IndexSettings(), runner=Runner.inline())
     PoseLibrary.build(
         sources,
         tmp_path / "p.npz",
@@ -115,7 +115,7 @@ def test_every_collection_file_stores_the_take_and_adds_per_take(tmp_path):
         assert {r.name: (r.take, r.sha256) for r in refs} == expected, kind
     # re-adding the same file: every take already there; the index keeps both takes
     assert not Archive.add(tmp_path / "l.qmz", [TWO_TAKES], runner=Runner.inline()).added
-    assert len(ClipIndex.add(tmp_path / "x.qidx", [TWO_TAKES], workers=1).skipped) == 2
+    assert len(ClipIndex.add(tmp_path / "x.qidx", [TWO_TAKES], runner=Runner.inline()).skipped) == 2
     assert not PoseLibrary.add(tmp_path / "p.npz", [TWO_TAKES], runner=Runner.inline()).added
     with ClipIndex.open(tmp_path / "x.qidx") as index:
         assert len(index) == 3
@@ -152,7 +152,7 @@ def test_a_version_2_index_opened_for_writing_becomes_version_3(tmp_path):
     copy = tmp_path / "old.qidx"
     shutil.copyfile(OLD / "index_v040.qidx", copy)
     before = [r.to_dict() for r in ClipIndex.open(copy).clips()]
-    report = ClipIndex.add(copy, [TWO_TAKES], workers=1)
+    report = ClipIndex.add(copy, [TWO_TAKES], runner=Runner.inline())
     assert [r.name for r in report.added] == ["cmu_bvh_names/walk_a", "cmu_bvh_names/walk_b"]
     with ClipIndex.open(copy) as index:
         assert index.version == 3

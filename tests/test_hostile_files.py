@@ -26,6 +26,7 @@ from quatmotion.codec.binary import Reader, inflate
 from quatmotion.codec.container import Header
 from quatmotion.errors import FormatError
 from quatmotion.io import write_bvh
+from quatmotion.parallel import Runner
 from quatmotion.synthetic import generate_clip
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -255,7 +256,7 @@ def qidx(tmp_path_factory) -> Path:
 
     clips = [generate_clip(k, s, n_frames=60) for k in ("walk", "run", "jump") for s in (1, 2)]
     out = tmp_path_factory.mktemp("qidx") / "a.qidx"
-    ClipIndex.build(clips, out, workers=1)
+    ClipIndex.build(clips, out, runner=Runner.inline())
     return out
 
 

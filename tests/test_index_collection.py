@@ -16,6 +16,7 @@ from quatmotion.cli import app
 from quatmotion.collection import ClipRef, ReadSettings
 from quatmotion.errors import FormatError
 from quatmotion.io import write_motion
+from quatmotion.parallel import Runner
 from quatmotion.retrieval import ClipIndex, IndexSettings
 from quatmotion.synthetic import generate_clip
 
@@ -143,7 +144,7 @@ def test_class_folders_and_sidecars_label_clips(two_sessions, tmp_path):
     shutil.copytree(two_sessions, root)
     (root / "s1" / "punch.json").write_text(json.dumps({"content": "boxing", "style": "angry"}))
     settings = IndexSettings(kinds=("motion",), label_folders=True)
-    report = ClipIndex.build([root], tmp_path / "f.qidx", settings, workers=1)
+    report = ClipIndex.build([root], tmp_path / "f.qidx", settings, runner=Runner.inline())
     assert len(report.added) == 3 and not report.failures and not report.details["resumed"]
     with ClipIndex.open(tmp_path / "f.qidx") as index:
         labels = index.labels()
@@ -157,7 +158,7 @@ def test_build_report_failures_are_failures_and_settings_validate(tmp_path, two_
     shutil.copytree(two_sessions / "s2", folder)
     (folder / "broken.bvh").write_text("HIERARCHY\nROOT\n")
     report = ClipIndex.build(
-        [folder], tmp_path / "b.qidx", IndexSettings(kinds=("motion",)), workers=1
+        [folder], tmp_path / "b.qidx", IndexSettings(kinds=("motion",)), runner=Runner.inline()
     )
     assert [r.name for r in report.added] == ["take_001"]
     assert len(report.failures) == 1 and "broken.bvh" in str(report.failures[0])
@@ -168,7 +169,7 @@ def test_build_report_failures_are_failures_and_settings_validate(tmp_path, two_
     with pytest.raises(FileExistsError), pytest.warns(DeprecationWarning, match="ClipIndex.create"):
         ClipIndex.create(tmp_path / "b.qidx")
     again = ClipIndex.build(
-        [folder], tmp_path / "b.qidx", IndexSettings(kinds=("motion",)), workers=1
+        [folder], tmp_path / "b.qidx", IndexSettings(kinds=("motion",)), runner=Runner.inline()
     )
     assert again.details["resumed"] and [r.name for r in again.skipped] == ["take_001"]
 
@@ -176,7 +177,7 @@ def test_build_report_failures_are_failures_and_settings_validate(tmp_path, two_
 def test_search_k_and_the_reader_surface(two_sessions, tmp_path):
     out = tmp_path / "k.qidx"
     settings = IndexSettings(kinds=("motion",), read=ReadSettings(units="cm"))
-    ClipIndex.build([two_sessions], out, settings, workers=1)
+    ClipIndex.build([two_sessions], out, settings, runner=Runner.inline())
     with ClipIndex.open(out) as index:
         assert isinstance(index.clips()[0], ClipRef) and index.settings.read.units == "cm"
         hits = index.search("punch", k=1)

@@ -50,10 +50,38 @@ def test_build_index_warns_and_indexes_as_clip_index_build(tmp_path):
     files = sorted(tmp_path.glob("*.bvh"))
     with pytest.warns(DeprecationWarning, match="ClipIndex.build"):
         old = build_index(files, tmp_path / "old.qidx", workers=1)
-    new = ClipIndex.build(files, tmp_path / "new.qidx", IndexSettings(), workers=1)
+    new = ClipIndex.build(files, tmp_path / "new.qidx", IndexSettings(), runner=Runner.inline())
     assert old.added == new.added and not old.failures and not new.failures
     with ClipIndex.open(tmp_path / "old.qidx") as a, ClipIndex.open(tmp_path / "new.qidx") as b:
         assert [r.as_dict() for r in a.rows()] == [r.as_dict() for r in b.rows()]
+
+
+def test_clip_index_workers_keyword_warns_and_builds_as_its_runner(tmp_path):
+    files = _clips(tmp_path)
+    with pytest.warns(DeprecationWarning, match=r"runner=Runner\.local\(workers\)"):
+        old = ClipIndex.build(files[:2], tmp_path / "old.qidx", workers=1)
+    with pytest.warns(DeprecationWarning, match="ClipIndex.add"):
+        ClipIndex.add(tmp_path / "old.qidx", files[2:], workers=1)
+    new = ClipIndex.build(files[:2], tmp_path / "new.qidx", runner=Runner.inline())
+    ClipIndex.add(tmp_path / "new.qidx", files[2:], runner=Runner.inline())
+    assert old.added == new.added
+    with ClipIndex.open(tmp_path / "old.qidx") as a, ClipIndex.open(tmp_path / "new.qidx") as b:
+        assert [r.as_dict() for r in a.rows()] == [r.as_dict() for r in b.rows()]
+    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match="once"):
+        ClipIndex.build(files, tmp_path / "twice.qidx", runner=Runner.inline(), workers=2)
+    assert not (tmp_path / "twice.qidx").exists()
+
+
+def test_runner_of_is_runner_of_the_command_line(tmp_path):
+    from quatmotion.codec.writer import runner_of
+    from quatmotion.parallel import Scheduler
+
+    assert Runner.of() is None and Runner.of(None, None) is None
+    assert Runner.of(1).scheduler.kind == "inline"
+    assert Runner.of(2) == Runner.resolve("processes", workers=2)
+    assert Runner.of(scheduler=Scheduler("inline")) == Runner.inline()
+    with pytest.warns(DeprecationWarning, match="Runner.of"):
+        assert runner_of(2, "processes") == Runner.of(2, "processes")
 
 
 def _clips(folder: Path) -> list[Path]:

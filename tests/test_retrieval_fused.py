@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from quatmotion.errors import FormatError
+from quatmotion.parallel import Runner
 from quatmotion.retrieval.features import clip_features, skeleton_fingerprint
 from quatmotion.retrieval.features_fused import (
     FUSED_DIM,
@@ -93,7 +94,7 @@ def test_index_build_stores_the_model(tmp_path):
 
     clips = [generate_clip(k, 0) for k in KINDS[:3]]
     out = tmp_path / "a.qidx"
-    ClipIndex.build(clips, out, workers=1)
+    ClipIndex.build(clips, out, runner=Runner.inline())
     with ClipIndex.open(out) as index:
         model = FusedModel.from_bytes(index.blob(MODEL_KEY))
         assert model.fitted_clips == 3
@@ -148,7 +149,7 @@ def test_index_build_with_labels_stores_the_learned_model(tmp_path):
 
     clips = [generate_clip(k, s) for k in KINDS[:2] for s in range(2)]
     out = tmp_path / "b.qidx"
-    ClipIndex.build(clips, out, workers=1)
+    ClipIndex.build(clips, out, runner=Runner.inline())
     with ClipIndex.open(out, write=True) as index:
         names = [r.name for r in index.rows()]
         index.set_labels({n: KINDS[i // 2] for i, n in enumerate(names)})

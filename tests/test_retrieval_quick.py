@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from quatmotion.parallel import Runner
 from quatmotion.retrieval import _kernels, quick
 from quatmotion.retrieval.distances import pack_sequences
 from quatmotion.retrieval.index import FORMAT, ClipIndex
@@ -47,7 +48,7 @@ def test_fused_distances_are_the_kernels_dtw_bit_for_bit():
 def index(tmp_path_factory) -> Path:
     clips = [generate_clip(k, s) for k in KINDS for s in range(3)]
     out = tmp_path_factory.mktemp("quick") / "a.qidx"
-    ClipIndex.build(clips, out, workers=1)
+    ClipIndex.build(clips, out, runner=Runner.inline())
     return out
 
 

@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 
 from quatmotion.cli import app
 from quatmotion.io import write_motion
+from quatmotion.parallel import Runner
 from quatmotion.retrieval.index import ClipIndex
 from quatmotion.retrieval.search import query_row, search
 from quatmotion.synthetic import generate_clip
@@ -118,7 +119,7 @@ def test_a_file_of_an_indexed_clip_is_its_name_and_is_left_out(library):
 def test_the_library_leaves_out_a_clip_made_in_memory_it_indexed(tmp_path):
     clips = [generate_clip(kind, 0, n_frames=120) for kind in ("walk", "squat", "punch")]
     out = tmp_path / "memory.qidx"
-    ClipIndex.build(clips, out, workers=1)
+    ClipIndex.build(clips, out, runner=Runner.inline())
     with ClipIndex.open(out) as idx:
         results = search(idx, clips[1], k=5)
         assert query_row(idx, clips[1]).name == clips[1].name

@@ -23,6 +23,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from quatmotion.parallel import Runner
+
 
 def _free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
@@ -85,7 +87,7 @@ def real_library(real_clips, tmp_path_factory) -> dict[str, Path]:
     paths = list(real_clips.values())
     codec.Archive.build(paths, root / "real.qmz", codec.CompressSettings(max_error=1.0))
     settings = IndexSettings(kinds=("motion",))
-    report = ClipIndex.build(paths, root / "real.qidx", settings, workers=1)
+    report = ClipIndex.build(paths, root / "real.qidx", settings, runner=Runner.inline())
     assert len(report.added) == len(paths) and not report.failures, report
     return {"library": root / "real.qmz", "index": root / "real.qidx"}
 
@@ -222,7 +224,9 @@ def test_clip_names_and_labels_are_shown_as_text_never_as_html(browser, tmp_path
     write_motion(generate_clip("walk", 2, n_frames=60), clips / "plain.bvh")
     index = tmp_path / "x.qidx"
     settings = IndexSettings(kinds=("motion",))
-    ClipIndex.build([clips], index, settings, labels={name: hostile, "plain": hostile}, workers=1)
+    ClipIndex.build(
+        [clips], index, settings, labels={name: hostile, "plain": hostile}, runner=Runner.inline()
+    )
     with _serve(tmp_path / "serve.log", "--index", str(index)) as base:
         page = browser.new_page(viewport={"width": 1280, "height": 800})
         page.goto(f"{base}/")

@@ -96,14 +96,15 @@ def test_build_index_hears_the_doubts_its_workers_find(tmp_path, studio_walk):
     io.write_bvh(generate_clip("walk", 1, n_frames=60), folder / "walk.bvh")
     heard = []
     report = ClipIndex.build(
-        [folder], tmp_path / "x.qidx", IndexSettings(kinds=("motion",)), workers=2,
+        [folder], tmp_path / "x.qidx", IndexSettings(kinds=("motion",)), runner=Runner.local(2),
         on_doubt=lambda source, doubt: heard.append((source, doubt.kind)),
     )  # fmt: skip
     assert len(report.added) == 2 and heard == [(str(folder / "studio.bvh"), "unit")]
     heard.clear()
     settings = IndexSettings(kinds=("motion",), read=ReadSettings(units="cm"))
     ClipIndex.build(
-        [folder / "studio.bvh", folder / "walk.bvh"], tmp_path / "y.qidx", settings, workers=1,
+        [folder / "studio.bvh", folder / "walk.bvh"], tmp_path / "y.qidx", settings,
+        runner=Runner.inline(),
         on_doubt=lambda source, doubt: heard.append(source),
     )  # fmt: skip
     assert heard == [str(folder / "studio.bvh")]  # a unit given is checked too (issue 29)
@@ -162,7 +163,7 @@ def test_every_command_warns_of_a_unit_given_naming_the_likely_one(tmp_path, stu
     if command[0] == "search":
         other = tmp_path / "other.bvh"
         io.write_bvh(generate_clip("walk", 2, n_frames=60), other)
-        ClipIndex.build([other], index, IndexSettings(kinds=("motion",)), workers=1)
+        ClipIndex.build([other], index, IndexSettings(kinds=("motion",)), runner=Runner.inline())
     args = [a.format(clip=path, tmp=tmp_path, idx=index) for a in command]
     result = CliRunner().invoke(app, [*args, "--units", "cm"])
     assert result.exit_code == 0, result.output

@@ -50,7 +50,7 @@ from quatmotion.codec import Archive, CompressSettings
 from quatmotion.codec.methods import METHODS, SparseMethod
 from quatmotion.codec.methods.sparse import cached_fit_seconds, clear_fit_cache
 from quatmotion.codec.metrics import collection_errors
-from quatmotion.codec.writer import build_library, runner_of
+from quatmotion.codec.writer import build_library
 from quatmotion.collection import BuildReport
 from quatmotion.datasets import catalogue, data_root
 from quatmotion.io import read_motion
@@ -93,7 +93,7 @@ def compress_in_memory(motions, sources, scheduler=None, **settings: Any) -> Bui
         motions,
         None,
         CompressSettings(**{"max_error": None, **settings}),
-        runner=runner_of(None, scheduler),
+        runner=Runner.of(None, scheduler),
         source_sizes=sources,
     )
 

@@ -192,8 +192,8 @@ def compress(
     with exit code 1.
     """
     from quatmotion.codec import Archive, CompressSettings
-    from quatmotion.codec.writer import runner_of
     from quatmotion.collection import ReadSettings
+    from quatmotion.parallel import Runner
 
     with user_errors(out):
         check_units(units)
@@ -213,7 +213,7 @@ def compress(
         ensure_kernels(*groups, workers=workers, scheduler=scheduler)
         with progress_bar(error_console if as_json else console) as progress:
             report = Archive.build(
-                inputs, out, settings, runner=runner_of(workers, scheduler),
+                inputs, out, settings, runner=Runner.of(workers, scheduler),
                 progress=_reporter(progress),
                 on_doubt=doubt_reporter(progress, refuse_units=not force_units),
             )  # fmt: skip
@@ -393,7 +393,7 @@ def append(
 ) -> None:
     """Add clips to a .qmz file without re-encoding the clips already in it."""
     from quatmotion.codec import Archive
-    from quatmotion.codec.writer import runner_of
+    from quatmotion.parallel import Runner
 
     with user_errors(library):
         require_file(library)
@@ -408,7 +408,7 @@ def append(
         ensure_kernels("read", "codec", workers=workers, scheduler=scheduler)
         with progress_bar() as progress:
             report = Archive.add(
-                library, inputs, settings, runner=runner_of(workers, scheduler),
+                library, inputs, settings, runner=Runner.of(workers, scheduler),
                 progress=_reporter(progress),
                 on_doubt=doubt_reporter(progress, refuse_units=not force_units),
             )  # fmt: skip

@@ -158,8 +158,7 @@ def _build(
                 bar.update(task, completed=done, total=total)
 
             options = {
-                "runner": Runner.resolve(scheduler, workers=workers),
-                "workers": workers,
+                "runner": Runner.of(workers, scheduler),
                 "progress": advance,
                 "labels": label_map,
                 "on_doubt": doubt_reporter(bar),

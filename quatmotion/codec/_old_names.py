@@ -18,11 +18,11 @@ from quatmotion._deprecated import warn_renamed
 from quatmotion.codec.metrics import ClipErrors
 from quatmotion.codec.qmz import Archive
 from quatmotion.codec.settings import CompressSettings
-from quatmotion.codec.writer import add_to_library, build_library, runner_of
+from quatmotion.codec.writer import add_to_library, build_library
 from quatmotion.codec.writer.runner import OnDoubt, Progress
 from quatmotion.collection import BuildReport, ReadSettings
 from quatmotion.motion import Motion, Skeleton
-from quatmotion.parallel import Scheduler
+from quatmotion.parallel import Runner, Scheduler
 
 __all__ = ["CompressionResult", "append", "compress", "open", "open_archive"]
 
@@ -111,7 +111,7 @@ def compress(
         read=ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton)),
     )  # fmt: skip
     report = build_library(
-        clips, out, settings, runner=runner_of(workers, scheduler), progress=progress,
+        clips, out, settings, runner=Runner.of(workers, scheduler), progress=progress,
         on_doubt=on_doubt, source_sizes=sources,
     )  # fmt: skip
     return CompressionResult.from_report(report)
@@ -140,7 +140,7 @@ def append(
         read=ReadSettings(units=units, skeleton=None if skeleton is None else str(skeleton)),
     )  # fmt: skip
     report = add_to_library(
-        path, clips, settings, runner=runner_of(workers, scheduler), progress=progress,
+        path, clips, settings, runner=Runner.of(workers, scheduler), progress=progress,
         on_doubt=on_doubt,
     )  # fmt: skip
     if not report.added:

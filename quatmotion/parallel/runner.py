@@ -100,6 +100,19 @@ class Runner:
         inline)."""
         return cls(resolve_scheduler(scheduler, workers=workers), **options)
 
+    @classmethod
+    def of(
+        cls, workers: int | None = None, scheduler: str | Scheduler | None = None
+    ) -> Runner | None:
+        """The runner of the command line's ``--workers`` and ``--scheduler``: None when
+        neither is given (the caller's default, as a rule :meth:`resolve`'s), a
+        :class:`Scheduler` used as it is, else :meth:`resolve` of the name."""
+        if workers is None and scheduler is None:
+            return None
+        if isinstance(scheduler, Scheduler):
+            return cls(scheduler)
+        return cls.resolve(scheduler, workers=workers)
+
     def describe(self) -> str:
         """Where batches run, in words (:meth:`Scheduler.describe`)."""
         return self.scheduler.describe()

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import warnings
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -165,8 +166,7 @@ def _compute_and_write(
     labels: Mapping[str, str],
     report: BuildReport,
     *,
-    runner: Runner | str | Scheduler | None,
-    workers: int | None,
+    runner: Runner,
     progress: Callable[[int, int], None] | None,
     on_doubt: Callable[[str, Doubt], None] | None,
 ) -> None:
@@ -179,8 +179,6 @@ def _compute_and_write(
         report.added.extend(r.ref for r in pending)
         pending.clear()
 
-    if not isinstance(runner, Runner):
-        runner = Runner.resolve(runner, workers=workers)
     stream = runner.map(_index_clip, jobs, progress=progress)
     with stream:
         for outcome in stream:
@@ -242,8 +240,7 @@ def _run(
     report: BuildReport,
     *,
     labels: Mapping[str, str] | None,
-    runner: Runner | str | Scheduler | None,
-    workers: int | None,
+    runner: Runner,
     progress: Callable[[int, int], None] | None,
     on_doubt: Callable[[str, Doubt], None] | None,
 ) -> BuildReport:
@@ -253,14 +250,7 @@ def _run(
     assigned, report.unmatched_labels, changed = _relabel(index, found, todo, labels)
     jobs = [ClipJob(s, settings.kinds, settings.read) for s in todo]
     _compute_and_write(
-        index,
-        jobs,
-        assigned,
-        report,
-        runner=runner,
-        workers=workers,
-        progress=progress,
-        on_doubt=on_doubt,
+        index, jobs, assigned, report, runner=runner, progress=progress, on_doubt=on_doubt
     )
     report.labels_changed = changed
     if "motion" in settings.kinds:
@@ -270,6 +260,30 @@ def _run(
         report.labels_changed += sum(1 for r in report.added if given.get(r.name))
     report.settings = settings
     return report
+
+
+def _runner(runner: Runner | str | Scheduler | None, workers: int | None, where: str) -> Runner:
+    """Where a build runs: ``runner``, or the :class:`Runner` of a scheduler name or
+    :class:`Scheduler` (:meth:`Runner.resolve`; None: ``$QUATMOTION_SCHEDULER``, else a local
+    pool). ``workers`` is the keyword before 0.5.0: it warns, and names a local pool's size
+    (1: this process) as it did.
+
+    Raises
+    ------
+    ValueError
+        ``workers`` with a :class:`Runner`: where the batch runs is said twice.
+    """
+    if workers is None:
+        return runner if isinstance(runner, Runner) else Runner.resolve(runner)
+    warnings.warn(
+        f"{where}(..., workers=...) is the name before quatmotion 0.5.0 (removed in 0.6.0): "
+        f"use {where}(..., runner=Runner.local(workers)) (docs/migration-0.4.md)",
+        DeprecationWarning,
+        stacklevel=5,  # this function, build or add, ClipIndex's _write, ClipIndex, the caller
+    )
+    if isinstance(runner, Runner):
+        raise ValueError("say where the batch runs once: runner, or workers and a scheduler")
+    return Runner.resolve(runner, workers=workers)
 
 
 def store_models(index: IndexFile, seed: int = 0) -> list[str]:
@@ -332,12 +346,12 @@ def build(
     settings : IndexSettings, optional
         Defaults when None; stored in the file.
     runner : Runner, str or Scheduler, optional
-        Where the features are computed: a :class:`quatmotion.parallel.Runner`, or a
-        scheduler as :func:`quatmotion.parallel.resolve_scheduler` reads it (``None``:
-        ``$QUATMOTION_SCHEDULER``, else a local pool).
+        Where the features are computed: a :class:`quatmotion.parallel.Runner`
+        (``Runner.local(workers)``, ``Runner.inline()``, ``Runner.dask(...)``), or a scheduler
+        as :meth:`Runner.resolve` reads it (``None``: ``$QUATMOTION_SCHEDULER``, else a local
+        pool of every core).
     workers : int, optional
-        With a scheduler rather than a Runner: local processes (default: every core; 1
-        computes in this process).
+        The name before 0.5.0 (warns, removed in 0.6.0): ``runner=Runner.local(workers)``.
     progress : callable, optional
         ``progress(done, total)`` as clips finish.
     labels : mapping, optional
@@ -354,20 +368,14 @@ def build(
         ``added``/``skipped`` as clip references, ``failures`` as
         :class:`quatmotion.parallel.Failure`, ``labels_changed``.
     """
+    batch = _runner(runner, workers, "ClipIndex.build")
     settings = settings or IndexSettings()
     out = Path(out)
     report = BuildReport(path=out, settings=settings)
     found = _find(sources, settings.read, report)
     with _open(out, settings, report) as index:
         return _run(
-            index,
-            found,
-            report,
-            labels=labels,
-            runner=runner,
-            workers=workers,
-            progress=progress,
-            on_doubt=on_doubt,
+            index, found, report, labels=labels, runner=batch, progress=progress, on_doubt=on_doubt
         )
 
 
@@ -391,6 +399,7 @@ def add(
     FileNotFoundError
         No index at ``path``.
     """
+    batch = _runner(runner, workers, "ClipIndex.add")
     path = Path(path)
     with IndexFile.open(path, write=True) as index:
         settings = settings or index.settings
@@ -400,14 +409,7 @@ def add(
         report.details["clips_before"] = len(index)
         found = _find(sources, settings.read, report)
         return _run(
-            index,
-            found,
-            report,
-            labels=labels,
-            runner=runner,
-            workers=workers,
-            progress=progress,
-            on_doubt=on_doubt,
+            index, found, report, labels=labels, runner=batch, progress=progress, on_doubt=on_doubt
         )
 
 
@@ -434,13 +436,7 @@ def build_index(
         units=units, skeleton=None if skeletons is None else os.fspath(skeletons), strict=False
     )
     settings = IndexSettings(kinds=tuple(kinds), batch=batch, read=read)
+    runner = Runner.of(workers, scheduler)
     return build(
-        paths,
-        out,
-        settings,
-        runner=scheduler,
-        workers=workers,
-        progress=progress,
-        labels=labels,
-        on_doubt=on_doubt,
+        paths, out, settings, runner=runner, progress=progress, labels=labels, on_doubt=on_doubt
     )

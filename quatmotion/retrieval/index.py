@@ -72,18 +72,7 @@ class ClipIndex(IndexFile):
 
         See :func:`quatmotion.retrieval.build.build` for the parameters.
         """
-        from quatmotion.retrieval.build import build
-
-        return build(
-            sources,
-            out,
-            settings,
-            runner=runner,
-            workers=workers,
-            progress=progress,
-            labels=labels,
-            on_doubt=on_doubt,
-        )
+        return _write("build", out, sources, settings, runner, workers, progress, labels, on_doubt)
 
     @classmethod
     def add(
@@ -107,18 +96,7 @@ class ClipIndex(IndexFile):
         FileNotFoundError
             No index at ``path``.
         """
-        from quatmotion.retrieval.build import add
-
-        return add(
-            path,
-            sources,
-            settings=settings,
-            runner=runner,
-            workers=workers,
-            progress=progress,
-            labels=labels,
-            on_doubt=on_doubt,
-        )
+        return _write("add", path, sources, settings, runner, workers, progress, labels, on_doubt)
 
     def search(
         self, query: Motion | str, k: int = 10, *, method: str | None = None
@@ -127,3 +105,25 @@ class ClipIndex(IndexFile):
         from quatmotion.retrieval.search import search
 
         return search(self, query, method=method, k=k)
+
+
+def _write(
+    step: str,
+    where: Any,
+    sources: Iterable[Any],
+    settings: IndexSettings | None,
+    runner: Runner | str | Scheduler | None,
+    workers: int | None,
+    progress: Callable[[int, int], None] | None,
+    labels: Mapping[str, str] | None,
+    on_doubt: Callable[[str, Doubt], None] | None,
+) -> BuildReport:
+    """:meth:`ClipIndex.build` and :meth:`ClipIndex.add` as :mod:`~quatmotion.retrieval.build`
+    writes them (imported when called: opening an index to read it loads no build)."""
+    from quatmotion.retrieval import build
+
+    options = {"runner": runner, "workers": workers, "progress": progress}
+    options.update(labels=labels, on_doubt=on_doubt, settings=settings)
+    if step == "build":
+        return build.build(sources, where, **options)
+    return build.add(where, sources, **options)

@@ -26,6 +26,7 @@ HERE = Path(__file__).resolve().parent / "v0.4.0"
 def main() -> None:
     from quatmotion.codec import Archive, CompressSettings
     from quatmotion.io import write_motion
+    from quatmotion.parallel import Runner
     from quatmotion.pose.library import PoseLibrary, PoseSettings
     from quatmotion.retrieval.index import ClipIndex, IndexSettings
     from quatmotion.synthetic import generate_clip
@@ -43,7 +44,9 @@ def main() -> None:
         write_motion(generate_clip("walk", 0, n_frames=40, fps=30.0), clips[0])
         write_motion(generate_clip("squat", 1, n_frames=40, fps=30.0), clips[1])
         Archive.build(clips, outputs["qmz"], CompressSettings())
-        ClipIndex.build(clips, outputs["qidx"], IndexSettings(kinds=("motion",)), workers=1)
+        ClipIndex.build(
+            clips, outputs["qidx"], IndexSettings(kinds=("motion",)), runner=Runner.inline()
+        )
         PoseLibrary.build(
             clips,
             outputs["pose"],

@@ -1,10 +1,11 @@
 """Where the per-clip jobs of a build run (:class:`StepRunner`, over
-:class:`quatmotion.parallel.Runner`) and how its steps report progress; :func:`runner_of`,
-the runner of the command line's ``--workers`` and ``--scheduler``.
+:class:`quatmotion.parallel.Runner`) and how its steps report progress (the runner of the
+command line's ``--workers`` and ``--scheduler`` is :meth:`quatmotion.parallel.Runner.of`).
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -19,13 +20,14 @@ OnDoubt = Callable[[str, Doubt], None]
 def runner_of(
     workers: int | None = None, scheduler: str | Scheduler | None = None
 ) -> Runner | None:
-    """The :class:`~quatmotion.parallel.Runner` of the command line's ``--workers`` and
-    ``--scheduler`` (None for neither: the default, :meth:`Runner.resolve`)."""
-    if workers is None and scheduler is None:
-        return None
-    if isinstance(scheduler, Scheduler):
-        return Runner(scheduler)
-    return Runner.resolve(scheduler, workers=workers)
+    """:meth:`quatmotion.parallel.Runner.of`, its name before 0.5.0 (warns, removed in 0.6.0)."""
+    warnings.warn(
+        "codec.writer.runner_of is the name before quatmotion 0.5.0 (removed in 0.6.0): use "
+        "parallel.Runner.of (docs/migration-0.4.md)",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return Runner.of(workers, scheduler)
 
 
 @dataclass(frozen=True)
