@@ -41,10 +41,11 @@ from quatmotion.retrieval.features import (
     skeleton_fingerprint,
 )
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, Library, QueryFeatures, Ranking
+from quatmotion.retrieval.ranges import DEFAULT_TOP
 
 __all__ = ["neighbour_share", "run", "retrieval_scores"]
 
-TOP_N = 20
+TOP_N = DEFAULT_TOP  # as `search` asks for when no number is named
 PRECISION_K = 10
 KINDS = ("motion", "qssd", "ksvd")
 PAPER = "paper-qssd"

@@ -30,6 +30,7 @@ from quatmotion.cli._common import (
     TakeOption,
     UnitsOption,
     WorkersOption,
+    at_least,
     check_outputs,
     check_units,
     console,
@@ -49,6 +50,7 @@ from quatmotion.cli._common import (
     skeleton_mappings,
     user_errors,
 )
+from quatmotion.retrieval.ranges import DEFAULT_TOP
 
 index_app = typer.Typer(
     help="Build and maintain a clip index (.qidx) for `quatmotion search`.", no_args_is_help=True
@@ -368,7 +370,7 @@ def search_command(
         typer.Argument(help="An .amc/.bvh file, or an indexed clip's name, file name or stem."),
     ] = None,
     queries: Annotated[Path | None, typer.Option(help=_QUERIES_HELP)] = None,
-    top: Annotated[int, typer.Option(help="Results to show.")] = 20,
+    top: Annotated[int, typer.Option(help="Results to show (at least 1).")] = DEFAULT_TOP,
     method: Annotated[
         str | None, typer.Option(help="Retrieval method (default: the best measured).")
     ] = None,
@@ -388,6 +390,7 @@ def search_command(
     lists every query's results, in the order given.
     """
     with user_errors():
+        at_least("--top", top, 1)
         _check_search_options(query, queries, method, within, skeleton, units)
         entries = joint_map_entries(joint_map)
         quick = None

@@ -328,7 +328,7 @@ def fused_search(q, qp, frames_t, projected_t, upper, lower, offsets, radius, k,
             if band_radius(n, m, radius) <= radius:
                 lbs[c] = lb_keogh(qp, upper, lower, offsets[c], m, radius + 1)
         order = np.argsort(lbs)
-    best = np.full(max(k, 1), np.inf)  # the k smallest distances so far, ascending
+    best = np.full(k, np.inf)  # the k smallest distances so far, ascending (k >= 1: checked)
     full = 0
     slack = 1.0 + 1e-5
     for t in range(C):

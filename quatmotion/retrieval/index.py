@@ -26,6 +26,7 @@ from quatmotion.retrieval.index_file import (
     IndexSettings,
     content_hash,
 )
+from quatmotion.retrieval.ranges import DEFAULT_TOP
 
 if TYPE_CHECKING:
     from quatmotion.collection import BuildReport
@@ -99,7 +100,7 @@ class ClipIndex(IndexFile):
         return _write("add", path, sources, settings, runner, workers, progress, labels, on_doubt)
 
     def search(
-        self, query: Motion | str, k: int = 10, *, method: str | None = None
+        self, query: Motion | str, k: int = DEFAULT_TOP, *, method: str | None = None
     ) -> list[SearchResult]:
         """The ``k`` clips most like ``query`` (:func:`quatmotion.retrieval.search.search`)."""
         from quatmotion.retrieval.search import search

@@ -344,7 +344,7 @@ class FusedDTW:
         frames_t, projected_t, upper, lower, offsets = self._packed(library)
         model = fused_model(library, self.learned, self.weights)
         q = dist._as_frames(model.stream(query.arrays["frames"], query.arrays["path"]), "query")
-        kk = len(library) if k is None else max(1, int(k))
+        kk = len(library) if k is None else k  # checked at the public entry
         qp = model.project(q)
         return _kernels.fused_search(
             q, qp, frames_t, projected_t, upper, lower, offsets, self.radius, kk, exclude
@@ -405,8 +405,12 @@ class ShortlistThenDTW:
         n = int(np.isfinite(d_emb).sum())
         if n == 0:
             return Ranking(np.zeros(0, dtype=np.int64), np.zeros(0))
-        k = min(self.shortlist, n)
-        short = np.argpartition(d_emb, k - 1)[:k] if k < len(d_emb) else np.arange(len(d_emb))
+        # The ranking is the shortlist alone (the clips after it have no DTW to rank them by):
+        # its first k when k is given.
+        size = min(self.shortlist, n)
+        short = (
+            np.argpartition(d_emb, size - 1)[:size] if size < len(d_emb) else np.arange(len(d_emb))
+        )
         short = short[np.isfinite(d_emb[short])].astype(np.int64)
         frames, offsets = library.frames
         d_dtw = dist.dtw_to_library(
@@ -421,14 +425,7 @@ class ShortlistThenDTW:
             d_dtw / _positive_median(d_dtw)
         )
         order = np.argsort(fused, kind="stable")
-        rest_mask = np.isfinite(d_emb)
-        rest_mask[short] = False
-        rest = np.flatnonzero(rest_mask)
-        rest = rest[np.argsort(d_emb[rest], kind="stable")]
-        return Ranking(
-            np.concatenate((short[order], rest)).astype(np.int64)[:k],
-            np.concatenate((fused[order], np.full(rest.size, np.nan)))[:k],
-        )
+        return Ranking(short[order][:k], fused[order][:k])
 
 
 def _positive_median(x: FloatArray) -> float:

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from quatmotion._names import rule_matches
 from quatmotion.retrieval.features_fused import MODEL_KEY, FusedModel
+from quatmotion.retrieval.ranges import DEFAULT_TOP, check_top
 from quatmotion.retrieval.stored import check_index, read_array
 
 __all__ = [
@@ -152,21 +153,30 @@ def _locate(stored: str | None, base: Path) -> str:
     return stored
 
 
-def quick_search(index: str | Path, query: str, k: int = 20) -> list[dict[str, object]] | None:
+def quick_search(
+    index: str | Path, query: str, k: int = DEFAULT_TOP
+) -> list[dict[str, object]] | None:
     """The default method's ``k`` nearest clips to the indexed clip ``query`` names (left out),
     as :meth:`SearchResult.as_dict <quatmotion.retrieval.search.SearchResult.as_dict>`
-    documents, or ``None`` when this path does not answer (module conventions)."""
-    answer = quick_query(index, query, k)
+    documents, or ``None`` when this path does not answer (module conventions).
+
+    Raises
+    ------
+    ValueError
+        ``k`` below 1 (:func:`~quatmotion.retrieval.ranges.check_top`).
+    """
+    answer = quick_query(index, query, check_top(k))
     return None if answer is None else answer[1]
 
 
 def quick_query(
-    index: str | Path, query: str, k: int = 20
+    index: str | Path, query: str, k: int = DEFAULT_TOP
 ) -> tuple[str, list[dict[str, object]]] | None:
     """:func:`quick_search`'s results after the name of the clip ``query`` names (the clip
-    left out of them), or ``None``."""
+    left out of them), or ``None``. ``k`` is checked by the caller (the command line's
+    ``--top``, :func:`quick_search`)."""
     path = Path(index)
-    if k < 1 or not path.is_file():
+    if not path.is_file():
         return None
     try:
         db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)

@@ -22,6 +22,7 @@ from quatmotion.retrieval import distances as dist
 from quatmotion.retrieval.features import clip_features, feature_step, skeleton_fingerprint
 from quatmotion.retrieval.index_file import ClipRow, IndexFile, match_row
 from quatmotion.retrieval.methods import DEFAULT_METHOD, METHODS, QueryFeatures
+from quatmotion.retrieval.ranges import DEFAULT_TOP, check_top
 
 __all__ = [
     "DEFAULT_K",
@@ -34,9 +35,9 @@ __all__ = [
     "search_within",
 ]
 
-DEFAULT_K = 20
+DEFAULT_K = DEFAULT_TOP
 """Clips a search answers with when the caller names no number (``search``, ``search_within``
-and the web app's search)."""
+and the web app's search): :data:`quatmotion.retrieval.ranges.DEFAULT_TOP`."""
 
 
 @dataclass(frozen=True)
@@ -204,8 +205,7 @@ def search(
         An index of no clips; unknown method or clip name; a query skeleton without the 16
         pose joints; for the dictionary methods, no indexed clip of the query's skeleton.
     """
-    if k < 1:
-        raise ValueError(f"k must be at least 1, got {k}")
+    check_top(k)
     if method is None:
         method = default_method(index)
     rows, library, features, own = _query(index, query, method, sha256, path)
@@ -241,8 +241,7 @@ def search_within(
         With ``start_frame`` / ``stop_frame`` in frames of each clip's file (from 0, stop
         exclusive, to the resolution of the feature step).
     """
-    if k < 1:
-        raise ValueError(f"k must be at least 1, got {k}")
+    check_top(k)
     rows, library, features, own = _query(index, query, _WITHIN_METHOD, sha256, path)
     q = features.arrays["frames"]
     hits = []
