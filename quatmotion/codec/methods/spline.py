@@ -384,24 +384,43 @@ def read_rows_v3(model: SplineModel, payload: bytes, context: ClipContext) -> tu
     if max(abs(o_main), abs(o_start)) > _MAX_OFFSET:
         raise FormatError("a scale offset out of range")
     n_groups = -(-tables.n_rows // G)
-    lengths = r.uvarints(n_groups - 1).astype(np.int64)
+    ends = [0] * (n_groups + 1)
+    for g in range(1, n_groups):  # most clips are one group or a few
+        ends[g] = ends[g - 1] + r.uvarint(r.remaining)
     body = r.take(r.remaining)
-    ends = np.zeros(n_groups + 1, dtype=np.int64)
-    ends[1:-1] = np.cumsum(lengths)
-    ends[-1] = len(body)
-    if np.any(np.diff(ends) < 4):
+    ends[n_groups] = len(body)
+    if any(ends[g + 1] - ends[g] < 4 for g in range(n_groups)):
         raise FormatError("a group's stream is shorter than its state or past the payload")
     starts = np.zeros(tables.n_rows, dtype=np.bool_)
     starts[tables.rows[tables.length > 0]] = True
     starts[::G] = True
-    cols, initial, start_scale, a1, a2, scale, start_mean = _columns(model, context.active)
-    main, start = _scale_codes(model, cols, plan.step)
-    coder = rans.model_of(main + o_main, start + o_start)
-    step = step_value(plan.step)
-    mean = np.round(start_mean / step).astype(np.int64)
+    cols, a1, a2, scale, mean, coder = _clip_coder(model, context.active, plan.step, o_main,
+                                                   o_start)  # fmt: skip
     buf = np.frombuffer(body, dtype=np.uint8)
-    streams = RowStreams(plan, tables, G, buf, ends, starts, coder, mean, a1, a2, step)
+    streams = RowStreams(plan, tables, G, buf, np.array(ends, dtype=np.int64), starts, coder,
+                         mean, a1, a2, step_value(plan.step))  # fmt: skip
     return streams, cols, scale
+
+
+_CODERS: dict[tuple, tuple] = {}
+
+
+def _clip_coder(model: SplineModel, active, step: int, o_main: int, o_start: int) -> tuple:
+    """What decoding a clip's rows needs from its layout's model, its step and offsets: the
+    active channels, predictor, scales, start means in steps and the rANS model (cached: a
+    library's clips share a few of these)."""
+    key = (id(model), active.tobytes(), step, o_main, o_start)
+    hit = _CODERS.get(key)
+    if hit is not None and hit[0] is model:
+        return hit[1]
+    cols, _, _, a1, a2, scale, start_mean = _columns(model, active)
+    main, start = _scale_codes(model, cols, step)
+    mean = np.round(start_mean / step_value(step)).astype(np.int64)
+    out = (cols, a1, a2, scale, mean, rans.model_of(main + o_main, start + o_start))
+    if len(_CODERS) > 1024:
+        _CODERS.clear()
+    _CODERS[key] = (model, out)
+    return out
 
 
 @numba.njit(cache=True)
