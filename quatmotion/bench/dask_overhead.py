@@ -32,7 +32,12 @@ from typing import Any
 
 from quatmotion._atomic import atomic_write_json
 from quatmotion.bench import provenance
-from quatmotion.bench.scale import _write_clips, codec_clip_jobs, retrieval_features
+from quatmotion.bench.scale import (
+    _write_clips,
+    codec_clip_jobs,
+    loopback_cluster,
+    retrieval_features,
+)
 from quatmotion.codec.writer import code_clip
 from quatmotion.parallel import Runner, shutdown_pools
 
@@ -40,42 +45,24 @@ REPEATS = 3
 WORKERS = 2
 CHUNK = 4
 
+
+def _overhead(name: str, job: str) -> dict[str, Any]:
+    """The headline of a job's Dask overhead (``jobs.JOB.overhead``, lower is better)."""
+    return {
+        "name": f"Dask overhead, {name}",
+        "path": ["jobs", job, "overhead"],
+        "unit": "",
+        "better": "lower",
+        "format": "percent",
+    }
+
+
 HEADLINES = [
-    {
-        "name": "Dask overhead, codec job (models as context, 4 clips a task)",
-        "path": ["jobs", "codec_context_chunked", "overhead"],
-        "unit": "",
-        "better": "lower",
-        "format": "percent",
-    },
-    {
-        "name": "Dask overhead, codec job (models as context)",
-        "path": ["jobs", "codec_context", "overhead"],
-        "unit": "",
-        "better": "lower",
-        "format": "percent",
-    },
-    {
-        "name": "Dask overhead, codec job (models in every task)",
-        "path": ["jobs", "codec_models_in_tasks", "overhead"],
-        "unit": "",
-        "better": "lower",
-        "format": "percent",
-    },
-    {
-        "name": "Dask overhead, index job (4 clips a task)",
-        "path": ["jobs", "index_chunked", "overhead"],
-        "unit": "",
-        "better": "lower",
-        "format": "percent",
-    },
-    {
-        "name": "Dask overhead, index job",
-        "path": ["jobs", "index", "overhead"],
-        "unit": "",
-        "better": "lower",
-        "format": "percent",
-    },
+    _overhead("codec job (models as context, 4 clips a task)", "codec_context_chunked"),
+    _overhead("codec job (models as context)", "codec_context"),
+    _overhead("codec job (models in every task)", "codec_models_in_tasks"),
+    _overhead("index job (4 clips a task)", "index_chunked"),
+    _overhead("index job", "index"),
 ]
 
 
@@ -95,8 +82,6 @@ def _fastest(runner: Runner, func: Any, items: list, context: Any, chunk: int) -
 
 def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
     """Measure and write the JSON to ``out``; return it."""
-    from distributed import LocalCluster
-
     out = pathlib.Path(out)
     n_clips = 12 if quick else 48
     result: dict[str, Any] = provenance("dask_overhead", out, quick, seed)
@@ -118,14 +103,7 @@ def run(out: pathlib.Path, quick: bool = False, seed: int = 0) -> dict:
         for name, (func, items, context, chunk) in jobs.items():
             rows[name]["local"] = _fastest(local, func, items, context, chunk)
         shutdown_pools()
-        with LocalCluster(
-            n_workers=WORKERS,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            scheduler_port=0,
-            dashboard_address=None,
-        ) as cluster:
+        with loopback_cluster(WORKERS) as cluster:
             dask = Runner.dask(cluster.scheduler_address)
             for name, (func, items, context, chunk) in jobs.items():
                 rows[name]["dask"] = _fastest(dask, func, items, context, chunk)

@@ -212,6 +212,21 @@ def _measure_once(job: Any, items: list, n_frames: int, **where: Any) -> dict[st
     }
 
 
+def loopback_cluster(n_workers: int) -> Any:
+    """A Dask ``LocalCluster`` of ``n_workers`` single-threaded worker processes on loopback
+    (no dashboard, any free port): the cluster the benchmarks measure, a context manager."""
+    from distributed import LocalCluster
+
+    return LocalCluster(
+        n_workers=n_workers,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        scheduler_port=0,
+        dashboard_address=None,
+    )
+
+
 def _tree_cpu_seconds() -> dict[int, float]:
     """CPU seconds (user + system) of this process and each descendant, by pid; empty
     without psutil."""
@@ -247,18 +262,9 @@ def _throughput(job: Any, items: list, n_frames: int, dask_ok: bool) -> dict[str
             )
     shutdown_pools()
     if dask_ok:
-        from distributed import LocalCluster
-
         for n in (1, 2):
             start = time.perf_counter()
-            with LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                scheduler_port=0,
-                dashboard_address=None,
-            ) as cluster:
+            with loopback_cluster(n) as cluster:
                 # A cluster outlives its batches: its workers import the job's modules once,
                 # in a first batch, as the batches of a long-lived cluster would have.
                 address = cluster.scheduler_address

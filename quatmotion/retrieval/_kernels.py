@@ -24,6 +24,22 @@ import numpy as np
 _INF = 1e30
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def _extend(prev, cur, j, cost):  # pragma: no cover - compiled
+    """Cell ``j`` of the row ``cur`` (the row before: ``prev``): its frame ``cost`` plus the
+    least path cost of its three predecessors, diagonal (``prev[j - 1]``), above
+    (``prev[j]``) and left (``cur[j - 1]``), the first of equals in that order; stored and
+    returned. One addition in the arrays' precision, as each DTW here wrote it inline."""
+    best = prev[j - 1]
+    if prev[j] < best:
+        best = prev[j]
+    if cur[j - 1] < best:
+        best = cur[j - 1]
+    v = cost + best
+    cur[j] = v
+    return v
+
+
 @nb.njit(cache=True, nogil=True)
 def dtw_banded(a, b, band, dims, max_radius):  # pragma: no cover - compiled
     """DTW of ``a`` (n, d) and ``b`` (m, d) on their first ``dims`` columns: squared Euclidean
@@ -51,12 +67,7 @@ def dtw_banded(a, b, band, dims, max_radius):  # pragma: no cover - compiled
             for k in range(dims):
                 t = a[i - 1, k] - b[j - 1, k]
                 s += t * t
-            best = prev[j - 1]
-            if prev[j] < best:
-                best = prev[j]
-            if cur[j - 1] < best:
-                best = cur[j - 1]
-            cur[j] = s + best
+            _extend(prev, cur, j, s)
         prev, cur = cur, prev
     return prev[m] / (n + m)
 
@@ -163,13 +174,7 @@ def dtw_euclidean(a, b, weights, cutoff):  # pragma: no cover - compiled
             for k in range(d):
                 t = a[i - 1, k] - b[j - 1, k]
                 s += weights[k] * t * t
-            best = prev[j - 1]
-            if prev[j] < best:
-                best = prev[j]
-            if cur[j - 1] < best:
-                best = cur[j - 1]
-            v = np.sqrt(s) + best
-            cur[j] = v
+            v = _extend(prev, cur, j, np.sqrt(s))
             if v < row_min:
                 row_min = v
         if row_min > limit:
@@ -238,13 +243,7 @@ def dtw_band32(a, bt, start, m, r, cutoff):  # pragma: no cover - compiled
         cur[lo - 1] = _INF32
         row_min = _INF32
         for j in range(lo, hi + 1):
-            best = prev[j - 1]
-            if prev[j] < best:
-                best = prev[j]
-            if cur[j - 1] < best:
-                best = cur[j - 1]
-            v = np.float32(np.sqrt(cost[j])) + best
-            cur[j] = v
+            v = _extend(prev, cur, j, np.float32(np.sqrt(cost[j])))
             if v < row_min:
                 row_min = v
         if row_min > limit:

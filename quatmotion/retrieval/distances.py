@@ -115,6 +115,26 @@ def dtw_to_library(
     -------
     ndarray, shape (len(candidates),)
     """
+    q, cand = _query_and_candidates(query, frames, offsets, candidates)
+    d = q.shape[1] if dims is None else int(dims)
+    return _kernels.dtw_to_candidates(q, frames, offsets, cand, float(band), d, float(max_radius))
+
+
+def _query_and_candidates(
+    query: ArrayLike,
+    frames: NDArray[np.float32],
+    offsets: NDArray[np.int64],
+    candidates: ArrayLike | None,
+) -> tuple[NDArray[np.float32], NDArray[np.int64]]:
+    """The query as frames of the library's width and the clip numbers to compare with
+    (default all), checked.
+
+    Raises
+    ------
+    ValueError
+        Library frames of another width or dtype than the query's; a candidate that is not a
+        clip number of the library.
+    """
     q = _as_frames(query, "query")
     if frames.ndim != 2 or frames.shape[1] != q.shape[1] or frames.dtype != np.float32:
         raise ValueError(f"library frames {frames.shape} {frames.dtype} do not match the query")
@@ -126,8 +146,7 @@ def dtw_to_library(
     )
     if cand.size and (cand.min() < 0 or cand.max() >= n_clips):
         raise ValueError(f"candidates must be clip numbers in 0..{n_clips - 1}")
-    d = q.shape[1] if dims is None else int(dims)
-    return _kernels.dtw_to_candidates(q, frames, offsets, cand, float(band), d, float(max_radius))
+    return q, cand
 
 
 def dtw_euclidean_to_library(
@@ -150,17 +169,7 @@ def dtw_euclidean_to_library(
     -------
     ndarray, shape (len(candidates),)
     """
-    q = _as_frames(query, "query")
-    if frames.ndim != 2 or frames.shape[1] != q.shape[1] or frames.dtype != np.float32:
-        raise ValueError(f"library frames {frames.shape} {frames.dtype} do not match the query")
-    n_clips = offsets.shape[0] - 1
-    cand = (
-        np.arange(n_clips, dtype=np.int64)
-        if candidates is None
-        else np.ascontiguousarray(candidates, dtype=np.int64)
-    )
-    if cand.size and (cand.min() < 0 or cand.max() >= n_clips):
-        raise ValueError(f"candidates must be clip numbers in 0..{n_clips - 1}")
+    q, cand = _query_and_candidates(query, frames, offsets, candidates)
     weights = np.ones(q.shape[1], dtype=np.float32)
     return _kernels.dtw_euclidean_to_candidates(q, frames, offsets, cand, weights)
 
