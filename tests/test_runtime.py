@@ -117,3 +117,34 @@ def test_rotation_channels_not_coded_are_refused():
                      np.ones(5), rows.fix_frames, rows.fix_channels, rows.fix_values)  # fmt: skip
     with pytest.raises(ValueError, match="rotation channels"):
         clip_rotations(short, _rig())
+
+
+def test_a_first_pose_decodes_only_the_groups_it_needs():
+    """Format 3's rows decode by group: a sampler's first pose decodes the one or two groups
+    its rows lie in, and every pose equals the pose from rows all decoded, to the bit."""
+    from quatmotion import codec
+    from quatmotion.synthetic import generate_clip
+
+    clip = generate_clip("walk", 4, n_frames=1200)
+    data = codec.Archive.build(
+        [clip], None, codec.CompressSettings(max_error=0.05, method="best")
+    ).details["data"]
+    archive = codec.Archive.open(data)
+    rows = archive.clip_rows(0, lazy=True)
+    assert rows.decode_groups is not None and rows.n_groups >= 3
+    lazy = ClipSampler(rows, archive.rig(0)).bound()
+    full = ClipSampler(archive.clip_rows(0), archive.rig(0)).bound()
+    t = 0.5 * (clip.n_frames - 1) / clip.fps
+    root, rot = lazy.pose(t)
+    assert 1 <= lazy._flags.sum() <= 2  # the groups of this pose's rows, no more
+    f_root, f_rot = full.pose(t)
+    assert np.array_equal(root, f_root) and np.array_equal(rot, f_rot)
+    times = np.random.default_rng(0).uniform(-0.5, clip.n_frames / clip.fps, 60)
+    for t in times:
+        root, rot = lazy.pose(t)
+        f_root, f_rot = full.pose(t)
+        assert np.array_equal(root, f_root) and np.array_equal(rot, f_rot)
+    b_root, b_rot = lazy.poses(times)  # a batch decodes every group
+    assert lazy._flags.all()
+    f_root, f_rot = full.poses(times)
+    assert np.array_equal(b_root, f_root) and np.array_equal(b_rot, f_rot)

@@ -609,14 +609,34 @@ class ArchiveReader:
             raise FormatError(f"clip {rows.name!r}: decoded channels are invalid", self._name)
         return decoded
 
-    def clip_rows(self, clip: int | str) -> ClipRows:
+    def clip_rows(self, clip: int | str, *, lazy: bool = False) -> ClipRows:
         """A clip decoded to its coefficient rows (:class:`~quatmotion.runtime.clip.ClipRows`,
         what the runtime samples and decodes from): a spline method's control points, no frame
-        evaluated; any other method's decoded frames, one row each."""
+        evaluated; any other method's decoded frames, one row each. ``lazy``: a format 3
+        file's rows are left in their groups, each decoded when a sampler first needs it."""
         parts = self.clip_parts(clip)
         T, C = parts.entry.n_frames, parts.layout.layout.n_channels
+        group_rows, decode_groups = 0, None
         try:
-            if hasattr(self.method, "decode_coefficients"):
+            if lazy and parts.context.version >= 3 and hasattr(self.method, "decode_coefficients"):
+                from quatmotion.codec.methods.spline import read_rows_v3
+
+                streams, cols, scale = read_rows_v3(parts.model, parts.payload, parts.context)
+                tables = streams.tables
+                P = np.zeros((tables.n_rows, len(cols)))
+                group_rows = streams.group_rows
+                method_error = self.method_error
+
+                def decode_groups(P, first, stop, streams=streams, parts=parts):
+                    try:
+                        streams.decode(P, first, stop)
+                    except FormatError as error:
+                        raise method_error(parts, error) from None
+
+                fix = parts.corrections
+                lever = correction_lever(parts.layout)
+                fixes = (fix.frames, fix.channels, fix.values * fix.quantum / lever[fix.channels])
+            elif hasattr(self.method, "decode_coefficients"):
                 _, tables, P, cols, scale = self.method.decode_coefficients(
                     parts.model, parts.payload, parts.context
                 )
@@ -636,7 +656,7 @@ class ArchiveReader:
             parts.entry.name, T, float(parts.entry.fps), tables.packed(),
             np.ascontiguousarray(tables.knots), np.ascontiguousarray(P, dtype=np.float64),
             np.asarray(cols, dtype=np.int64), np.ascontiguousarray(scale, dtype=np.float64),
-            *(np.ascontiguousarray(a) for a in fixes),
+            *(np.ascontiguousarray(a) for a in fixes), group_rows, decode_groups,
         )  # fmt: skip
 
     def rig(self, clip: int | str) -> Rig:

@@ -25,7 +25,7 @@ def sampler_for(archive, clip: int | str) -> ClipSampler:
     i = archive.index_of(clip)
     sampler = cache.get(i)
     if sampler is None:
-        sampler = ClipSampler(archive.clip_rows(i), archive.rig(i))
+        sampler = ClipSampler(archive.clip_rows(i, lazy=True), archive.rig(i))
         cache[i] = sampler
         if len(cache) > _CACHED_CLIPS:
             cache.popitem(last=False)

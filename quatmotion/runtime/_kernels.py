@@ -424,11 +424,12 @@ def _unpack(B):  # pragma: no cover - compiled
     """The tables of a packed clip, views of one float64 buffer ``B`` whose first ``I[9]``
     slots are int64 ``I``: a head (segments ``S``, channels ``c``, rows ``n``, joints ``J``,
     correction rows, layout channels ``C``, selected joints ``k``, knots, loop flag, ``I``'s
-    length), then ``segs``, ``cols``, ``sel``, ``kinds``, ``starts``, ``counts``,
-    ``dof_axes``; the floats after ``I``: ``fps``, ``knots``, ``P``, ``scale``, ``corr``,
-    ``pre``, ``ref``, two scratch rows ``X`` and ``Y`` ``(C,)``, scratch angles, sines and
-    cosines ``(3 J,)`` each and rotations ``(k, 4)``, then one pose's output (``root``
-    ``(3,)``, ``rot`` ``(k, 4)``)."""
+    length, rows a group and groups when the rows decode by group), then ``segs``, ``cols``,
+    ``sel``, ``kinds``, ``starts``, ``counts``, ``dof_axes``; the floats after ``I``: ``fps``,
+    ``knots``, ``P``, ``scale``, ``corr``, ``pre``, ``ref``, a flag per group of rows (1.0:
+    decoded), two scratch rows ``X`` and ``Y`` ``(C,)``, scratch angles, sines and cosines
+    ``(3 J,)`` each and rotations ``(k, 4)``, then one pose's output (``root`` ``(3,)``,
+    ``rot`` ``(k, 4)``)."""
     I = B[:PACK_HEAD].view(np.int64)
     S, c, n, J, nc, C, k, nk, ni = I[0], I[1], I[2], I[3], I[4], I[5], I[6], I[7], I[9]
     I = B[:ni].view(np.int64)
@@ -459,6 +460,8 @@ def _unpack(B):  # pragma: no cover - compiled
     f += 12 * J
     ref = _rows(B[f : f + 4 * J], J, 4)
     f += 4 * J
+    flags = B[f : f + I[11]]
+    f += I[11]
     X = _rows(B[f : f + C], 1, C)
     f += C
     Y = _rows(B[f : f + C], 1, C)
@@ -469,7 +472,7 @@ def _unpack(B):  # pragma: no cover - compiled
     f += 3
     rot = _rows(B[f : f + 4 * k], k, 4)
     return segs, cols, sel, kinds, starts, counts, dof_axes, B[ni], knots, P, scale, corr, \
-        pre, ref, X, Y, A, root, rot  # fmt: skip
+        pre, ref, X, Y, A, root, rot, flags  # fmt: skip
 
 
 @numba.njit(inline="always", cache=True)
@@ -557,16 +560,22 @@ def _nlerp(f, aw, ax, ay, az, bw, bx, by, bz):  # pragma: no cover - compiled
 def pose(t, B):  # pragma: no cover - compiled
     """One pose of a packed clip (:func:`_unpack`) at ``t`` seconds into its output slots:
     clamped to the clip, or wrapped with period ``T / fps`` if its loop flag is set. Returns
-    False for a time that is not finite (nothing written)."""
+    1; 0 for a time that is not finite, ``2 + g`` when the pose needs group ``g`` of rows,
+    not decoded yet (nothing written either way)."""
     segs, cols, sel, kinds, starts, counts, dof_axes, fps, knots, P, scale, corr, pre, ref, \
-        X, Y, A, root, rot = _unpack(B)  # fmt: skip
+        X, Y, A, root, rot, flags = _unpack(B)  # fmt: skip
     x = t * fps
     if not np.isfinite(x):
-        return False
+        return 0
     S = segs.shape[0]
     T = segs[S - 1, 0] + segs[S - 1, 1]
-    loop = B[:PACK_HEAD].view(np.int64)[8] != 0
+    head = B[:PACK_HEAD].view(np.int64)
+    loop = head[8] != 0
     x = x % T if loop else min(max(x, 0.0), T - 1.0)
+    if head[10] > 0:
+        g = _missing_group(x, loop, segs, knots, flags, head[10])
+        if g >= 0:
+            return 2 + g
     Xc = as_strided(X[0], shape=(X.shape[1], 1), strides=(8, 8))
     if _spline_at(x, segs, knots, P, cols, scale, corr, Xc, 0):
         root[0] = X[0, 0]
@@ -594,7 +603,41 @@ def pose(t, B):  # pragma: no cover - compiled
                 rot[jj, 1] = qx
                 rot[jj, 2] = qy
                 rot[jj, 3] = qz
-    return True
+    return 1
+
+
+@numba.njit(inline="always", cache=True)
+def _rows_of_frame(i, segs, knots):  # pragma: no cover - compiled
+    """The first and last coefficient row frame ``i`` is evaluated from."""
+    s = _segment_of(segs, i)
+    if segs[s, 3] != 0:
+        b = _weights(float(i), s, segs, knots)[0]
+        return b, b + 3
+    r = segs[s, 2] + i - segs[s, 0]
+    return r, r
+
+
+@numba.njit(inline="always", cache=True)
+def _missing_group(x, loop, segs, knots, flags, G):  # pragma: no cover - compiled
+    """The first group of rows (``G`` a group) the pose at ``x`` needs whose flag is not
+    set, or -1."""
+    s = _spline_segment(x, segs)
+    if s >= 0:
+        b = _weights(x, s, segs, knots)[0]
+        lo, hi = b, b + 3
+    else:
+        T = segs[segs.shape[0] - 1, 0] + segs[segs.shape[0] - 1, 1]
+        i0 = min(int(np.floor(x)), T - 1)
+        i1 = (i0 + 1) % T if loop else min(i0 + 1, T - 1)
+        lo, hi = _rows_of_frame(i0, segs, knots)
+        lo1, hi1 = _rows_of_frame(i1, segs, knots)
+        for g in range(lo1 // G, hi1 // G + 1):
+            if flags[g] == 0.0:
+                return g
+    for g in range(lo // G, hi // G + 1):
+        if flags[g] == 0.0:
+            return g
+    return -1
 
 
 @functools.cache
@@ -613,7 +656,7 @@ def poses(u, B, out_root, out_rot):  # pragma: no cover - compiled
     ``out_root`` ``(n, 3)`` and ``out_rot`` ``(n, k, 4)``, a block of poses at a time: each
     pose's channels, then each joint's rotations in one loop over the block."""
     segs, cols, sel, kinds, starts, counts, dof_axes, fps, knots, P, scale, corr, pre, ref, \
-        X, Y, _, _, _ = _unpack(B)  # fmt: skip
+        X, Y, _, _, _, _ = _unpack(B)  # fmt: skip
     loop = B[:PACK_HEAD].view(np.int64)[8] != 0
     C = X.shape[1]
     Xc = np.zeros((C, BLOCK))

@@ -16,6 +16,7 @@ Conventions
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,6 +51,13 @@ class ClipRows:
         The corrections' frames (ascending) and channels.
     fix_values : ndarray of float64, shape (m,)
         What each adds to its channel of its frame, in the channel's units.
+    group_rows : int
+        With ``decode_groups``: rows ``[g G, (g + 1) G)`` are group ``g``, which decodes
+        alone; 0 when ``rows`` holds every row decoded.
+    decode_groups : callable or None
+        ``decode_groups(P, first, stop)`` decodes groups ``first .. stop - 1`` into their rows
+        of ``P`` (``rows`` itself is then not decoded: a sampler decodes a group when a pose
+        first needs it).
     """
 
     name: str
@@ -63,6 +71,23 @@ class ClipRows:
     fix_frames: NDArray[np.int64]
     fix_channels: NDArray[np.int64]
     fix_values: NDArray[np.float64]
+    group_rows: int = 0
+    decode_groups: Callable[[NDArray[np.float64], int, int], None] | None = None
+
+    @property
+    def n_groups(self) -> int:
+        """Groups of rows that decode alone (0: every row decoded)."""
+        return -(-len(self.rows) // self.group_rows) if self.group_rows else 0
+
+    def decoded(self) -> ClipRows:
+        """These rows with every group decoded (itself when they are)."""
+        if self.decode_groups is None:
+            return self
+        P = np.zeros_like(self.rows)
+        self.decode_groups(P, 0, self.n_groups)
+        return ClipRows(self.name, self.n_frames, self.fps, self.segs, self.knots, P,
+                        self.cols, self.scale, self.fix_frames, self.fix_channels,
+                        self.fix_values)  # fmt: skip
 
     def dense_corrections(self, n_channels: int) -> NDArray[np.float64]:
         """The corrections as a ``(T, C)`` array (no rows when there are none)."""
@@ -122,6 +147,7 @@ def clip_rotations(
     """Root translation ``(T, 3)`` cm and local rotations ``(T, J, 4)`` of a whole clip, one
     compiled call from its rows; ``None`` if a channel is not finite (a damaged clip)."""
     m = rig.rotation_channels
+    rows = rows.decoded()
     if len(rows.cols) < m or rows.cols[m - 1] != m - 1:  # not the first coded ones
         raise ValueError(f"clip {rows.name!r}: its rotation channels are not all coded")
     root = np.empty((rows.n_frames, 3))

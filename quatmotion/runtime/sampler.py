@@ -58,6 +58,17 @@ class ClipSampler:
         self._bound: Sampler | None = None
         self._samplers: dict[tuple, Sampler] = {}
 
+    @property
+    def lazy(self) -> bool:
+        """Whether this clip's rows decode by group, when a pose first needs one."""
+        return self.rows.decode_groups is not None
+
+    def decode_all(self) -> None:
+        """Every group of rows decoded (samplers made from now on start with them)."""
+        if self.lazy:
+            self.rows = self.rows.decoded()
+            self._P = self.rows.rows
+
     # ------------------------------------------------------------------ arguments
     def _joints(self, joints) -> NDArray[np.int64]:
         J = self.rig.n_joints
@@ -107,6 +118,7 @@ class ClipSampler:
         """The coefficient columns the joints ``sel`` need (cached per selection)."""
         if sel is self._all:  # every joint: every decoded column, as decoded (no copy)
             return self._P, self._cols, self._scale, sel
+        self.decode_all()  # a subset's columns are copied: from every row
         key = sel.tobytes()
         cached = self._selections.get(key)
         if cached is not None:
@@ -185,9 +197,11 @@ class Sampler:
         head = np.zeros(compiled.PACK_HEAD, dtype=np.int64)
         ints = (head, segs, cols, sel, kinds, starts, counts, dof_axes)
         n_ints = sum(a.size for a in ints)
-        head[:10] = (len(segs), len(cols), len(P), J, corr.shape[0], C, k, len(knots),
-                     mode == "loop", n_ints)  # fmt: skip
-        floats = (knots, P, scale, corr, pre, ref)
+        lazy = clip.lazy and sel is clip._all
+        G, n_groups = (clip.rows.group_rows, clip.rows.n_groups) if lazy else (0, 0)
+        head[:12] = (len(segs), len(cols), len(P), J, corr.shape[0], C, k, len(knots),
+                     mode == "loop", n_ints, G, n_groups)  # fmt: skip
+        floats = (knots, P, scale, corr, pre, ref, np.zeros(n_groups))
         scratch = 2 * C + 9 * J + 4 * k + 3 + 4 * k  # X, Y, angles, rotations; the output
         self._B = np.zeros(n_ints + 1 + sum(a.size for a in floats) + scratch)
         # each table written into its slot (one allocation: the clip's first pose pays this)
@@ -198,9 +212,16 @@ class Sampler:
             o += a.size
         self._B[n_ints] = clip.fps
         o = n_ints + 1
+        at = []
         for a in floats:
+            at.append(o)
             self._B[o : o + a.size] = a.reshape(-1)
             o += a.size
+        # with rows that decode by group: the rows and the flags in the buffer, which
+        # _decode fills when a pose first needs a group (made once per sampler)
+        self._decode_groups = clip.rows.decode_groups if lazy else None
+        self._rows_view = self._B[at[1] : at[1] + P.size].reshape(P.shape)
+        self._flags = self._B[at[6] : at[6] + n_groups]
         out = len(self._B) - 3 - 4 * k
         self._root = self._B[out : out + 3]
         self._rot = self._B[out + 3 :].reshape(k, 4)
@@ -221,9 +242,18 @@ class Sampler:
         ValueError
             A time that is not a finite number.
         """
-        if not self._pose(float(t), self._B):
-            raise ValueError("times: every time must be finite (seconds)")
+        status = self._pose(float(t), self._B)
+        while status != 1:
+            if status == 0:
+                raise ValueError("times: every time must be finite (seconds)")
+            self._decode(status - 2, status - 1)  # a group this pose needs, first
+            status = self._pose(float(t), self._B)
         return self._root, self._rot
+
+    def _decode(self, first: int, stop: int) -> None:
+        """Groups ``first .. stop - 1`` of rows decoded into this sampler's buffer."""
+        self._decode_groups(self._rows_view, first, stop)
+        self._flags[first:stop] = 1.0
 
     def poses(self, times) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Root translations ``(n, 3)`` and rotations ``(n, k, 4)`` at ``times`` ``(n,)``
@@ -234,6 +264,8 @@ class Sampler:
 
     def poses_at(self, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """:meth:`poses` at frame positions ``u`` already clamped or wrapped."""
+        if self._decode_groups is not None and not self._flags.all():
+            self._decode(0, len(self._flags))  # a batch: every group
         root = np.empty((len(u), 3))
         rot = np.empty((len(u), len(self.joints), 4))
         self._poses(u, self._B, root, rot)
