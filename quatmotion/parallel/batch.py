@@ -455,7 +455,14 @@ def run_batch(
         progress=progress,
         connect_timeout=connect_timeout,
     )
-    results: list[T | None] = [None] * len(items)
+    return collect(stream, len(items))
+
+
+def collect(stream: BatchStream[T], n_items: int) -> BatchResult[T]:
+    """Every outcome of ``stream`` (a batch of ``n_items`` items) collected in input order:
+    ``results[i]`` the value of item ``i`` (``None`` where it failed), the failures, the
+    stats; the stream closed."""
+    results: list[T | None] = [None] * n_items
     failures: list[Failure] = []
     with stream:
         for outcome in stream:

@@ -21,8 +21,8 @@ from quatmotion.parallel.batch import (
     DEFAULT_CONNECT_TIMEOUT,
     BatchResult,
     BatchStream,
-    Failure,
     ProgressCallback,
+    collect,
     open_stream,
 )
 from quatmotion.parallel.scheduler import Scheduler, SchedulerError, resolve_scheduler
@@ -160,15 +160,7 @@ class Runner:
         failed), the failures, the stats. Items are handed out as fast as workers take them."""
         items = list(items)
         runner = self if self.window is not None else _with_window(self, max(1, len(items)))
-        results: list[T | None] = [None] * len(items)
-        failures: list[Failure] = []
-        with runner.map(func, items, context=context, progress=progress) as stream:
-            for outcome in stream:
-                if outcome.failure is None:
-                    results[outcome.index] = outcome.value
-                else:
-                    failures.append(outcome.failure)
-        return BatchResult(results, failures, stream.stats())
+        return collect(runner.map(func, items, context=context, progress=progress), len(items))
 
 
 def _with_window(runner: Runner, window: int) -> Runner:
