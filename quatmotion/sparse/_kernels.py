@@ -545,12 +545,21 @@ def _cholesky_solve(G, g, out, m):  # type: ignore[no-untyped-def]
         for t in range(a):
             acc -= G[a, t] * out[t]
         out[a] = acc / G[a, a]
-    for a in range(m - 1, -1, -1):
-        acc = out[a]
-        for t in range(a + 1, m):
-            acc -= G[t, a] * out[t]
-        out[a] = acc / G[a, a]
+    back_substitute(G, out, out, m)
     return True
+
+
+@njit(cache=True, inline="always")
+def back_substitute(L, y, x, m):  # type: ignore[no-untyped-def]
+    """Solve ``L^T x = y`` for lower-triangular ``L`` ``(m, m)``, the last row first (``x``
+    may be ``y``: each ``y[a]`` is read before ``x[a]`` is written); the second half of a
+    Cholesky solve, written once for QSSD's and linear K-SVD's kernels (inlined: their flags,
+    the same arithmetic in the same order)."""
+    for a in range(m - 1, -1, -1):
+        acc = y[a]
+        for t in range(a + 1, m):
+            acc -= L[t, a] * x[t]
+        x[a] = acc / L[a, a]
 
 
 @njit(cache=True)

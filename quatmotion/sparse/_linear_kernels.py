@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from quatmotion.sparse._kernels import _FM_SUM
+from quatmotion.sparse._kernels import _FM_SUM, back_substitute
 from quatmotion.sparse._kernels import _sort_slots as sort_slots
 
 
@@ -102,11 +102,7 @@ def batch_omp(G, Xy, sparsity, tol, idx, coef, count):  # type: ignore[no-untype
                 for t in range(r):
                     acc -= Lc[r, t] * z[t]
                 z[r] = acc / Lc[r, r]
-            for r in range(m - 1, -1, -1):
-                acc = z[r]
-                for t in range(r + 1, m):
-                    acc -= Lc[t, r] * c[t]
-                c[r] = acc / Lc[r, r]
+            back_substitute(Lc, z, c, m)
             # alpha = Xy - G[:, sel] c, by rows of G (symmetric): contiguous reads, where its
             # columns are K strided ones per selected atom.
             for k in range(K):
