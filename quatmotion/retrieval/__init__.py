@@ -32,18 +32,14 @@ from __future__ import annotations
 
 from quatmotion._lazy import lazy_exports
 
-_EXPORTS = {
-    "clip_features": "features",
-    "motion_frames": "features",
-    "DEFAULT_METHOD": "methods",
-    "METHODS": "methods",
-    "Library": "methods",
-    "ClipIndex": "index",
-    "IndexSettings": "index",
-    "build_index": "build",
-    "search_within": "search",
-    "query_features": "search",
+_MODULE_EXPORTS = {
+    "features": ("clip_features", "motion_frames"),
+    "methods": ("DEFAULT_METHOD", "METHODS", "Library"),
+    "index": ("ClipIndex", "IndexSettings"),
+    "build": ("build_index",),
+    "search": ("search_within", "query_features"),
 }
+_EXPORTS = {name: module for module, names in _MODULE_EXPORTS.items() for name in names}
 
 __all__ = sorted(_EXPORTS)
 

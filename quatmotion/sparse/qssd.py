@@ -538,20 +538,12 @@ class QSSD(DictionaryLearner):
         Atoms, unit quaternions with ``w > 0``.
     dictionary_log_ : ndarray, shape (K, n, 3)
         Their logs, each of unit norm as a ``3n``-vector.
-    n_iter_ : int
-        Iterations run.
-    errors_ : ndarray, shape (n_iter_,)
-        Training reconstruction error after each coding stage: mean rotation angle between
-        sample and reconstruction, degrees per quaternion (Eq. 11 with the factor 2 of the
-        rotation angle; halve it for the paper's ``arccos``).
     objective_ : ndarray, shape (n_iter_,)
         The objective ``sum 1 - |<Y, Yhat>|`` after each coding stage.
-    iteration_seconds_ : ndarray, shape (n_iter_,)
-        Wall time of each iteration (coding + dictionary update).
-    iteration_cpu_seconds_ : ndarray, shape (n_iter_,)
-        Processor time of each iteration summed over threads (robust to a shared machine).
-    n_features_in_ : int
-        ``n``, quaternions per sample.
+    n_iter_, errors_, iteration_seconds_, iteration_cpu_seconds_, n_features_in_
+        As every :class:`~quatmotion.sparse._base.DictionaryLearner`'s: iterations run, the
+        training error after each coding stage (mean rotation angle, degrees per
+        quaternion), wall and processor seconds of each iteration, quaternions per sample.
     """
 
     _parameter_constraints: ClassVar[dict[str, list[Any]]] = {
