@@ -112,6 +112,8 @@ def npy_header(fh: BinaryIO) -> tuple[tuple[int, ...], Any]:
     ValueError
         A stream that is no ``.npy`` (NumPy's message).
     """
+    import tokenize
+
     import numpy as np  # here: the module is imported where no array is read
 
     version = np.lib.format.read_magic(fh)
@@ -120,5 +122,8 @@ def npy_header(fh: BinaryIO) -> tuple[tuple[int, ...], Any]:
         if version == (1, 0)
         else np.lib.format.read_array_header_2_0
     )
-    shape, _, dtype = read_header(fh)
+    try:
+        shape, _, dtype = read_header(fh)
+    except (SyntaxError, tokenize.TokenError) as error:  # NumPy tokenises the header's text
+        raise ValueError(f"the .npy header is no Python literal ({error})") from None
     return shape, dtype

@@ -58,16 +58,41 @@ def flips(data: bytes, rng: np.random.Generator, n: int) -> Iterator[tuple[str, 
 
 def rewrite_qmz(source: Path, out: Path, edit: Callable[[object], object]) -> Path:
     """``source`` written again to ``out`` with its header changed by ``edit(header)`` (a new
-    :class:`~quatmotion.codec.container.Header`), every chunk's CRC valid."""
+    :class:`~quatmotion.codec.container.Header`), every chunk's CRC valid, in its own format
+    version (2 or the current one)."""
     from quatmotion.codec import Archive
     from quatmotion.codec.container import write_container
 
     with Archive.open(source) as archive:
         header = archive.header
+        version = archive.version
         records, layouts, clips = archive.payloads()
     with open(out, "wb") as fh:
-        write_container(fh, edit(header), records, layouts, clips)
+        if version == 2:
+            _write_version_2(fh, edit(header), records, layouts, clips)
+        else:
+            write_container(fh, edit(header), records, layouts, clips)
     return out
+
+
+def _write_version_2(fh, header, records, layouts, clips) -> None:
+    """A version 2 file (``docs/format.md``): version 3's header without the take fields."""
+    from unittest import mock
+
+    from quatmotion.codec import container
+
+    def ref_v2(w, entry) -> None:
+        ref = entry.ref
+        w.raw(bytes.fromhex(ref.sha256)).string(ref.path or "").string(ref.skeleton_path or "")
+        w.string(ref.skeleton).string(ref.units).u8(int(ref.units_guessed))
+
+    with mock.patch.object(container, "_write_ref", ref_v2):
+        head = header.to_bytes()
+    fh.write(container.MAGIC + (2).to_bytes(2, "little"))
+    container.write_chunk(fh, b"H", head)
+    for tag, chunks in ((b"S", records), (b"L", layouts), (b"C", clips)):
+        for payload in chunks:
+            container.write_chunk(fh, tag, payload)
 
 
 def _clip(header, i: int, **changes):

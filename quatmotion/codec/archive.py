@@ -478,8 +478,9 @@ class ArchiveReader:
             packed = read_chunk(self._file, self._layout_chunks[k], self._name)
             data = inflate(packed, "library chunk", self._name)
             r = Reader(data, self._name, "library chunk")
-            info = LayoutInfo.read(r, self.skeleton(self.header.layouts[k].skeleton))
-            try:
+            skeleton = self.skeleton(self.header.layouts[k].skeleton)
+            try:  # the parts' errors name no file: this one's
+                info = LayoutInfo.read(r, skeleton)
                 model = self.method.load_model(r.take(r.remaining), info)
             except FormatError as error:
                 raise FormatError(error.reason, self._name) from None
@@ -509,8 +510,9 @@ class ArchiveReader:
             at_rest, corrections = read_clip_prefix(
                 r, len(layout.translation_joints), entry.n_frames, layout.n_channels, self.version
             )
-        except FormatError as error:
-            raise FormatError(f"clip {entry.name!r}: {error.reason}", self._name) from None
+        except FormatError as error:  # names no file, nor the header's frame count it checks
+            where = f"clip {entry.name!r} (frames: {entry.n_frames:,} in the header)"
+            raise FormatError(f"{where}: {error.reason}", self._name) from None
         active = np.ones(layout.n_channels, dtype=bool)
         for k in range(len(layout.translation_joints)):
             if at_rest[k]:
@@ -530,8 +532,11 @@ class ArchiveReader:
         return X
 
     def method_error(self, parts: ClipParts, error: FormatError) -> FormatError:
-        """A method's :class:`FormatError` restated with the clip and file names."""
-        return FormatError(f"clip {parts.entry.name!r}: {error.reason}", self._name)
+        """A method's :class:`FormatError` restated with the clip and file names, and the
+        header's frame count (what a payload that does not decode most often contradicts)."""
+        entry = parts.entry
+        where = f"clip {entry.name!r} (frames: {entry.n_frames:,} in the header)"
+        return FormatError(f"{where}: {error.reason}", self._name)
 
     def read_channels(self, clip: int | str) -> DecodedChannels:
         """A clip decoded to channels (corrections applied)."""

@@ -152,9 +152,10 @@ def _cached_left(cum, stamp, k, c, x, b, key):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def _decode_kernel(words, initial, start_scale, starts, R):  # pragma: no cover - compiled
+def _decode_kernel(words, initial, start_scale, starts, R, used):  # pragma: no cover - compiled
     """Decode ``R`` ``(n, C)`` in place; 0, or -1 for data no encoder wrote (a quantile out of
     range), or 1 when a symbol is an escape (the caller decodes the stream with constriction).
+    ``used`` receives the words read and the words wanted past the end (read as zeros).
 
     A channel's scale holds for a block (start rows: for the stream), so the cumulatives of its
     few common symbols are computed once per block; the search for a symbol walks from 0 over
@@ -170,6 +171,7 @@ def _decode_kernel(words, initial, start_scale, starts, R):  # pragma: no cover 
         got += 1
     if got == 1:
         point = point << np.uint64(32)
+    beyond = 2 - got
     lower = np.uint64(0)
     rng = np.uint64(0xFFFFFFFFFFFFFFFF)
     one24 = np.uint64(1 << _PRECISION)
@@ -226,11 +228,21 @@ def _decode_kernel(words, initial, start_scale, starts, R):  # pragma: no cover 
                     if pos < nw:
                         point = point | np.uint64(words[pos])
                         pos += 1
+                    else:
+                        beyond += 1
                 R[i, c] = x
                 if x == LIMIT or x == -LIMIT:
                     escaped = True
         _update_mean(R, starts, a, b, mean)
+    used[0] = pos
+    used[1] = beyond
     return 1 if escaped else 0
+
+
+_SEAL_WORDS = 2
+"""Words a decoder of exactly the rows coded may want past the stream's end: its look-ahead
+beyond the encoder's last word (1), and a last word of zeros, stripped (1; two such words
+would come once in 2**64 streams)."""
 
 
 def decode_rows(
@@ -254,11 +266,18 @@ def decode_rows(
     start_scale = np.maximum(np.asarray(start_scale, dtype=np.float64), _MIN_SCALE)
     starts = np.ascontiguousarray(starts, dtype=np.bool_)
     R = np.empty((n, C), dtype=np.int64)
-    status = _decode_kernel(words, mean, start_scale, starts, R)
-    if status == 0:
-        return R
+    used = np.zeros(2, dtype=np.int64)
+    status = _decode_kernel(words, mean, start_scale, starts, R, used)
     if status < 0:
         raise ValueError("corrupt entropy-coded stream (a quantile out of range)")
+    if status == 0:
+        # A stream is its rows' to the word: one that goes on after them, or ends before them,
+        # holds other rows than asked for (a header's frame count the data contradict).
+        if used[0] < len(words):
+            raise ValueError(f"corrupt entropy-coded stream (it goes on after its {n:,} rows)")
+        if used[1] > _SEAL_WORDS:
+            raise ValueError(f"corrupt entropy-coded stream (it ends before its {n:,} rows)")
+        return R
     return _decode_rows_constriction(words, n, mean, start_scale, starts)
 
 

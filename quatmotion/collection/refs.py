@@ -145,16 +145,25 @@ def _locate(stored: str | None, base: str | Path | None) -> Path | None:
     if not stored:
         return None
     path = Path(stored)
-    if path.is_file():
+    if _is_file(path):
         return path
     if base is not None:
         # the sources moved with the collection file: keep the stored path's last parts
         parts = path.parts[1:] if path.is_absolute() else path.parts
         for k in range(len(parts)):
             candidate = Path(base, *parts[k:])
-            if candidate.is_file():
+            if _is_file(candidate):
                 return candidate
     return None
+
+
+def _is_file(path: Path) -> bool:
+    """Whether ``path`` is a file; a stored path no file system takes (a name too long, a
+    NUL) is none."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def content_hash(

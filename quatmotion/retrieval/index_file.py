@@ -397,12 +397,13 @@ class IndexFile:
         rows = [r for r in rows if all(k in arrays[r.id] for k in keys)]
         stored = {}
         if self._reader.blobs:
-            stored = {
-                str(key): bytes(data)
-                for key, data in self._db.execute(
-                    "SELECT key, data FROM blobs WHERE key LIKE 'model:%'"
-                )
-            }
+            for key, data in self._db.execute(
+                "SELECT key, data FROM blobs WHERE key LIKE 'model:%'"
+            ):
+                if not isinstance(data, bytes):  # bytes(10**9) would make a gigabyte
+                    what = f"stored model {key!r} is a {type(data).__name__}, not bytes"
+                    raise FormatError(what, self.path)
+                stored[str(key)] = data
         library = Library(
             [arrays[r.id] for r in rows],
             [r.rotation_key for r in rows],
@@ -562,17 +563,41 @@ def _rows_v2(db: sqlite3.Connection, path: Path, take: str = "NULL") -> list[Cli
     ``take="take"``."""
     base = path.resolve().parent
     out = []
-    for row in db.execute(
-        "SELECT id, name, sha256, path, skeleton_path, skeleton, units, units_guessed, "
-        f"{take}, label, frames, fps, rotation_key FROM clips ORDER BY id"
-    ):
-        (clip, name, sha, stored, asf, skeleton, units, guessed, take_name, label, *rest) = row
-        frames, fps, key = rest
-        ref = ClipRef(name, sha, stored, asf, skeleton, units, bool(guessed), take_name)
-        found = ref.locate(base)[0]
-        where = str(found) if found is not None else (stored or "")
-        out.append(ClipRow(int(clip), ref, label, int(frames), float(fps), key, where))
+    with _row_errors(path):
+        for row in db.execute(
+            "SELECT id, name, sha256, path, skeleton_path, skeleton, units, units_guessed, "
+            f"{take}, label, frames, fps, rotation_key FROM clips ORDER BY id"
+        ):
+            (clip, name, sha, stored, asf, skeleton, units, guessed, take_name, label, *rest) = row
+            frames, fps, key = rest
+            _texts(path, clip, name=name, sha256=sha, path=stored, skeleton_path=asf,
+                   skeleton=skeleton, units=units, take=take_name, label=label,
+                   rotation_key=key)  # fmt: skip
+            ref = ClipRef(name, sha, stored, asf, skeleton, units, bool(guessed), take_name)
+            found = ref.locate(base)[0]
+            where = str(found) if found is not None else (stored or "")
+            out.append(ClipRow(int(clip), ref, label, int(frames), float(fps), key, where))
     return out
+
+
+@contextlib.contextmanager
+def _row_errors(path: Path) -> Iterator[None]:
+    """A clip row no writer made (text that is no UTF-8, a reference that is no reference) as
+    a FormatError naming the index."""
+    try:
+        yield
+    except sqlite3.Error as error:
+        raise FormatError(f"the clips table cannot be read ({error})", path) from None
+    except (ValueError, TypeError) as error:
+        raise FormatError(f"a clip row is invalid: {error}", path) from None
+
+
+def _texts(index: Path, clip: Any, **values: Any) -> None:
+    """Each of ``values`` (a clip row's text columns) text or NULL, never a blob or a number."""
+    for column, value in values.items():
+        if value is not None and not isinstance(value, str):
+            kind = type(value).__name__
+            raise FormatError(f"clip row {clip!r}: {column} is a {kind}, not text", index)
 
 
 def _rows_v1(db: sqlite3.Connection, path: Path) -> list[ClipRow]:
@@ -580,9 +605,12 @@ def _rows_v1(db: sqlite3.Connection, path: Path) -> list[ClipRow]:
     stems (not unique), no settings. Paths resolve against the index's folder when they are
     found there; names are made unique as a v2 build would make them."""
     base = path.resolve().parent
-    raw = db.execute(
-        "SELECT id, name, path, sha256, label, frames, fps, skeleton FROM clips ORDER BY id"
-    ).fetchall()
+    with _row_errors(path):
+        raw = db.execute(
+            "SELECT id, name, path, sha256, label, frames, fps, skeleton FROM clips ORDER BY id"
+        ).fetchall()
+    for clip, name, stored, sha, label, *_ in raw:
+        _texts(path, clip, name=name, path=stored, sha256=sha, label=label)
     paths = []
     for _, _, stored, *_ in raw:
         p = Path(stored)
@@ -591,9 +619,12 @@ def _rows_v1(db: sqlite3.Connection, path: Path) -> list[ClipRow]:
         paths.append(Path(os.path.abspath(p)))
     names = unique_names(paths)
     out = []
-    for (clip, _, _, sha, label, frames, fps, key), p, name in zip(raw, paths, names, strict=True):
-        ref = ClipRef(name, sha, str(p))
-        out.append(ClipRow(int(clip), ref, label, int(frames), float(fps), key, str(p)))
+    with _row_errors(path):
+        for (clip, _, _, sha, label, frames, fps, key), p, name in zip(
+            raw, paths, names, strict=True
+        ):
+            ref = ClipRef(name, sha, str(p))
+            out.append(ClipRow(int(clip), ref, label, int(frames), float(fps), key, str(p)))
     return out
 
 

@@ -115,8 +115,11 @@ def read_array(data: Any, path: Path | None = None, what: str = "a feature array
     Raises
     ------
     FormatError
-        Naming ``path`` and ``what``.
+        Naming ``path`` and ``what``: no bytes, no array of numbers, a size its bytes do not
+        hold, values that are not finite.
     """
+    if not isinstance(data, bytes | bytearray | memoryview):  # bytes(10**9) makes a gigabyte
+        raise FormatError(f"{what} is a {type(data).__name__}, not a stored array", path)
     data = bytes(data)
     fh = io.BytesIO(data)
     try:
@@ -126,6 +129,9 @@ def read_array(data: Any, path: Path | None = None, what: str = "a feature array
         if int(np.prod(shape, dtype=object)) * dtype.itemsize != len(data) - fh.tell():
             raise ValueError(f"shape {shape} does not match its {len(data)} bytes")
         fh.seek(0)
-        return np.load(fh, allow_pickle=False)
+        array = np.load(fh, allow_pickle=False)
+        if dtype.kind in "fc" and not np.all(np.isfinite(array)):
+            raise ValueError("values that are not finite")  # no feature has them
+        return array
     except (ValueError, OSError, EOFError) as error:
         raise FormatError(f"{what} is not a stored array ({error})", path) from None

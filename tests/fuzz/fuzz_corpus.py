@@ -25,9 +25,12 @@ from quatmotion.synthetic import generate_clip
 
 DATA = data_root(must_exist=False)
 N_FRAMES = 20
-READERS = ("bvh", "asf", "amc", "gltf", "glb")
-ISOLATED = ("fbx",)
-"""Readers of C code (ufbx): fuzzed in a process of their own, where a crash is a finding."""
+READERS = ("bvh", "asf", "amc", "gltf", "glb", "qmz", "qidx")
+ISOLATED = ("fbx", "pose")
+"""Readers of C or C++ code (ufbx, hnswlib): fuzzed in a process of their own, where a crash is
+a finding."""
+OWN = ("qmz", "qidx", "pose")
+"""quatmotion's own files: seeds, mutations and readers in ``fuzz_files``."""
 FBX_SEEDS = ("bandai_bvh_names.fbx", "cmu_mixamo.fbx")  # tests/data/fbx, made by Blender
 NASTY_TOKENS = [
     "", "nan", "-inf", "1e999", "-", "abc", "{", "}", "JOINT", "End", "Site", "ROOT", "MOTION",
@@ -159,6 +162,10 @@ before it samples a frame or allocates what a count implies."""
 
 def hostile(reader: str) -> list[bytes]:
     """The issue's proofs of concept for a reader (all must be refused)."""
+    if reader in OWN:
+        import fuzz_files
+
+        return list(fuzz_files.hostile(reader))
     if reader == "fbx":
         return [make() for name, make in HOSTILE_FBX.items() if name != "joints_200k"]
     made = generated()
@@ -226,6 +233,10 @@ def _as(reader: str, document: dict, made: dict[str, bytes]) -> bytes:
 @cache
 def seeds(reader: str) -> tuple[bytes, ...]:
     """Every seed of a reader: real heads, generated files, the hostile files."""
+    if reader in OWN:
+        import fuzz_files
+
+        return fuzz_files.seeds(reader)
     if reader == "fbx":
         folder = Path(__file__).parents[1] / "data" / "fbx"
         made = [(folder / name).read_bytes() for name in FBX_SEEDS]
@@ -259,7 +270,12 @@ def amc_skeleton():
 
 def mutate(reader: str, data: bytes, rng: random.Random) -> bytes:
     """One to three mutations: byte and line edits for every reader, token swaps for text,
-    structural edits of the JSON for glTF (a .glb rebuilt around it, or its bytes cut)."""
+    structural edits of the JSON for glTF (a .glb rebuilt around it, or its bytes cut); for
+    quatmotion's own files, ``fuzz_files.mutate``."""
+    if reader in OWN:
+        import fuzz_files
+
+        return fuzz_files.mutate(reader, data, rng)
     if reader in ("gltf", "glb") and rng.random() < 0.7:
         document = _json_of(reader, data)
         if document is not None:

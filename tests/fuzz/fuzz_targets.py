@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import warnings
 
+import fuzz_files
 import numpy as np
-from fuzz_corpus import amc_skeleton
+from fuzz_corpus import OWN, amc_skeleton
 
 from quatmotion import io, limits
 from quatmotion.errors import FormatError
@@ -42,15 +43,24 @@ def run(reader: str, data: bytes) -> str:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # what a reader tolerated is no finding
+            if reader in OWN:
+                fuzz_files.read(reader, data)
+                return "read"
             result = _read(reader, data)
     except FormatError as error:
-        if not str(error).startswith(NAMES[reader]):
+        if not _names_the_file(reader, str(error)):
             raise FindingError(f"{reader}: a FormatError that names no file: {error}") from error
         return "refused"
     except Exception as error:  # noqa: BLE001 (anything else is what the fuzzer looks for)
         raise FindingError(f"{reader}: {type(error).__name__}: {error}") from error
     _check(reader, result)
     return "read"
+
+
+def _names_the_file(reader: str, message: str) -> bool:
+    if reader in OWN:  # read from bytes, or from a temporary file of fuzz_files
+        return message.startswith("<bytes>") or "quatmotion-fuzz-" in message.split(":", 1)[0]
+    return message.startswith(NAMES[reader])
 
 
 def _check(reader: str, result: Motion | Skeleton) -> None:

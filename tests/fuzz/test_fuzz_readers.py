@@ -57,9 +57,10 @@ def test_regressions(path: Path):
 
 @pytest.mark.parametrize("reader", ISOLATED)
 def test_mutated_files_of_c_readers_in_a_process_of_their_own(reader):
-    """ufbx is C: a mutated FBX that crashed it would end the test run; in a child process it
-    is one failed test (a negative exit code: the signal), and a finding is kept as a file."""
-    pytest.importorskip("ufbx")
+    """ufbx is C, hnswlib C++: a mutated FBX or pose library that crashed one would end the
+    test run; in a child process it is one failed test (a negative exit code: the signal), and
+    a finding is kept as a file."""
+    pytest.importorskip({"fbx": "ufbx", "pose": "hnswlib"}[reader])
     run_py = Path(__file__).parent / "run.py"
     done = subprocess.run(
         [sys.executable, str(run_py), "--examples", "30", "--seed", "1", reader],
@@ -69,3 +70,20 @@ def test_mutated_files_of_c_readers_in_a_process_of_their_own(reader):
     )
     assert done.returncode == 0, done.stdout + done.stderr[-2000:]
     assert "'found': 0" in done.stdout
+
+
+def test_the_coverage_guided_engine_runs_a_reader_for_its_seconds():
+    """``make fuzz``'s engine where atheris is installed (the ``fuzz`` extra): libFuzzer in a
+    child process, quatmotion instrumented, stopped by its time budget."""
+    pytest.importorskip("atheris")
+    run_py = Path(__file__).parent / "run.py"
+    done = subprocess.run(
+        [sys.executable, str(run_py), "--seconds", "15", "--engine", "atheris", "asf"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr[-2000:]
+    assert "'found': 0" in done.stdout and "atheris" in done.stdout
+    runs = int(done.stdout.split("'runs': ")[1].split(",")[0])
+    assert runs > 0

@@ -100,17 +100,35 @@ def cached_fit_seconds() -> float:
     return sum(entry[3] for entry in _FIT_CACHE.values())
 
 
+def _coarse_length(T: int) -> int:
+    """Samples :func:`_coarse` keeps of ``T`` frames."""
+    n = T
+    for _ in range(OMITTED_LEVELS):
+        n = pywt.dwt_coeff_len(n, pywt.Wavelet(WAVELET).dec_len, MODE)
+    return n
+
+
 def _fine(coarse: NDArray[np.float64], T: int) -> NDArray[np.float64]:
     """Inverse of :func:`_coarse` with every omitted detail zero: ``(n, c) -> (T, c)``."""
-    lengths = [coarse.shape[0]]
-    n = T
     sizes = []
+    n = T
     for _ in range(OMITTED_LEVELS):
         n = pywt.dwt_coeff_len(n, pywt.Wavelet(WAVELET).dec_len, MODE)
         sizes.append(n)
-    del lengths
     details = [np.zeros((s, coarse.shape[1])) for s in reversed(sizes)]
     return pywt.waverec([coarse, *details], WAVELET, mode=MODE, axis=0)[:T]
+
+
+def _check_samples(name: str, what: str, n: int, T: int) -> None:
+    """The clip's frame count (the header's) against the coarse samples its payload holds: a
+    count the data contradict is refused (pywt's ValueError, or frames made up, otherwise);
+    counts the wavelet's rounding maps to the same samples cannot be told apart."""
+    expected = _coarse_length(T)
+    if n != expected:
+        raise FormatError(
+            f"{name} clip: {n:,} {what}, where the header's {T:,} frames make {expected:,} "
+            "(a frame count the data contradict)"
+        )
 
 
 def _displacements(X: NDArray[np.float64], info: LayoutInfo, joints) -> NDArray[np.float64]:
@@ -320,6 +338,7 @@ class SparseMethod(Method):
         r = Reader(payload, what=f"{self.name} clip")
         quality = r.f32()
         N = r.uvarint(1 << 32)
+        _check_samples(self.name, "coarse samples", N, context.n_frames)
         words = r.blob()
         words = np.frombuffer(words + b"\0" * (-len(words) % 4), dtype="<u4").astype(np.uint32)
         dec = constriction.stream.queue.RangeDecoder(words)
@@ -341,6 +360,7 @@ class SparseMethod(Method):
                 np.zeros(len(indices), dtype=bool),
             )[:, 0]
             n_root = r.uvarint(1 << 32)
+            _check_samples(self.name, "coarse root samples", n_root, context.n_frames)
             cols = _root_columns(info)
             Rd = entropy.decode_rows(
                 r.take(r.remaining),
