@@ -80,12 +80,14 @@ def seeds(kind: str) -> tuple[bytes, ...]:
 
 def _qmz_seeds() -> tuple[bytes, ...]:
     from quatmotion.codec import Archive, CompressSettings
+    from quatmotion.parallel import Runner
 
     made = []
     for method in ("best", "naive"):
         out = _clips()[0].parent / f"{method}.qmz"
-        if not out.exists():
-            Archive.build(list(_clips()), out, CompressSettings(max_error=2.0, method=method))
+        if not out.exists():  # inline: a pool's forkserver kept run.py's workers from ending
+            settings = CompressSettings(max_error=2.0, method=method)
+            Archive.build(list(_clips()), out, settings, runner=Runner.inline())
         made.append(out.read_bytes())
     # the whole files chosen more often than the crafted ones (refused whatever is mutated)
     return tuple(made) * 4 + tuple(hostile("qmz"))
