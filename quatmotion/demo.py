@@ -520,29 +520,21 @@ def build_library(
     workers : int, optional
         Processes of the batch steps (default: every core).
     labels : mapping, optional
-        Clip (name, file name, stem or path) -> label, before every other source of labels;
-        the clips' sidecars, their folders (with ``label_folders``) and the data folder's
-        catalogue label the others (:func:`quatmotion.collection.label_sources`, as
-        ``index build`` does).
+        Clip (name, file name, stem or path) -> label, before every other source of labels
+        (:func:`quatmotion.collection.label_sources`, as ``index build`` does).
     label_folders : bool
         Label a clip without another label by its folder's name.
     on_stage : callable, optional
         See :data:`StageReady`.
-    joint_map : sequence of str
-        A user's humanoid map for the index and the pose index, ``"Canonical=joint"``
-        entries (:attr:`quatmotion.collection.ReadSettings.joint_map`).
-    take : str, optional
-        The take every FBX file is read at (:attr:`quatmotion.collection.ReadSettings.take`);
-        None: every take of an FBX file of several is a clip of its own.
+    joint_map, take
+        A user's humanoid map and the FBX take read (None: every take a clip), as
+        :class:`quatmotion.collection.ReadSettings` says.
 
     Returns
     -------
     BuiltLibrary
 
-    Raises
-    ------
-    ValueError
-        No clip could be read (naming the sources).
+    Raises ``ValueError`` naming the sources where no clip could be read.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
