@@ -55,6 +55,7 @@ __all__ = [
     "EMBEDDING_DIM",
     "FEATURE_FPS",
     "FRAME_DIM",
+    "PATH_DIM",
     "HEIGHT_CM",
     "HORIZON_S",
     "clip_dictionary",
@@ -88,6 +89,8 @@ FRAME_DIM = 52
 """Numbers per motion frame: 48 body-frame coordinates, 3 Hip velocity, 1 yaw rate."""
 POSITION_DIM = 48
 """The body-frame coordinates: the first columns of a motion frame."""
+PATH_DIM = POSITION_DIM + 3
+"""Numbers per path frame: 48 Hip-relative coordinates and the Hip's route (3)."""
 EMBEDDING_DIM = 3 * FRAME_DIM
 DICTIONARY_ATOMS = 5
 DICTIONARY_SPARSITY = 2

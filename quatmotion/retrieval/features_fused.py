@@ -73,6 +73,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion.errors import FormatError
+from quatmotion.retrieval.features import FRAME_DIM, PATH_DIM
 
 __all__ = [
     "DIRECTION_SIGMA_S",
@@ -177,6 +178,19 @@ def direction_part(travel: NDArray[np.float64], route: NDArray[np.float64]) -> N
 def shape_part(route: NDArray[np.float64]) -> NDArray[np.float64]:
     """The ``shape`` part ``(T, 3)`` (module conventions) of a clip's route ``(T, 3)``."""
     return route / max(_reach(route), LOCOMOTION_LEG_LENGTHS)
+
+
+def streams_mismatch(frames: NDArray[np.floating], path: NDArray[np.floating]) -> str | None:
+    """Why a clip's motion and path frames cannot make one fused stream, for a message about a
+    stored clip (None: they can): :func:`stream_parts` reads ``(T, 52)`` and ``(T, 51)`` of
+    one ``T`` and trusts them."""
+    shapes = f"{tuple(np.shape(frames))} and {tuple(np.shape(path))}"
+    expected = f"(T, {FRAME_DIM}) and (T, {PATH_DIM}) of one T"
+    if np.ndim(frames) != 2 or np.ndim(path) != 2:
+        return f"its motion and path frames are {shapes}, not {expected}"
+    if frames.shape[1] != FRAME_DIM or path.shape[1] != PATH_DIM or len(frames) != len(path):
+        return f"its motion and path frames are {shapes}, not {expected}"
+    return None
 
 
 def stream_parts(

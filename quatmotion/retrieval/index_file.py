@@ -55,6 +55,7 @@ from quatmotion.collection import ClipRef, ReadSettings, unique_names
 from quatmotion.collection.refs import content_hash
 from quatmotion.errors import ClipNameError, FormatError
 from quatmotion.io.names import match_clip
+from quatmotion.retrieval.features_fused import streams_mismatch
 from quatmotion.retrieval.methods import FEATURE_KINDS, Library
 from quatmotion.retrieval.stored import FEATURE_PARAMETERS, FORMAT, check_index, read_array
 
@@ -395,6 +396,10 @@ class IndexFile:
             ):
                 arrays[int(clip)][key] = read_array(data, self.path, f"feature {key!r}")
         rows = [r for r in rows if all(k in arrays[r.id] for k in keys)]
+        for r in rows:
+            a = arrays[r.id]
+            if "frames" in a and "path" in a and (why := streams_mismatch(a["frames"], a["path"])):
+                raise FormatError(f"clip {r.name!r}: {why}", self.path)
         stored = {}
         if self._reader.blobs:
             for key, data in self._db.execute(

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from quatmotion._names import rule_matches
-from quatmotion.retrieval.features_fused import MODEL_KEY, FusedModel
+from quatmotion.retrieval.features_fused import MODEL_KEY, FusedModel, streams_mismatch
 from quatmotion.retrieval.ranges import DEFAULT_TOP, check_top
 from quatmotion.retrieval.stored import check_index, read_array
 
@@ -208,6 +208,8 @@ def _search(
     rows = [r for r in rows if len(arrays[int(r[0])]) == 2]
     if not rows:
         return None  # an index without the default's features: the full path chooses
+    if any(streams_mismatch(a["frames"], a["path"]) for a in arrays.values() if len(a) == 2):
+        return None  # a damaged clip: the full path names it
     blob = db.execute("SELECT data FROM blobs WHERE key = ?", (MODEL_KEY,)).fetchone()
     if blob is None:
         return None
