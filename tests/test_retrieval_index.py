@@ -299,3 +299,16 @@ def test_index_build_computes_the_dictionaries_only_for_a_method_that_needs_them
         assert "ksvd" in set().union(*idx.feature_keys().values())
     bad = _build(clip_folder, tmp_path / "bad.qidx", "--method", "nonesuch")
     assert bad.exit_code == 2 and "unknown method" in bad.output
+
+
+def test_a_search_of_an_index_holding_only_the_query_says_so(tmp_path):
+    """A position method ranks every clip but the query: with nothing else indexed the error
+    says that, not the dictionary methods' 'same skeleton' explanation."""
+    from quatmotion.parallel import Runner
+
+    out = tmp_path / "one.qidx"
+    ClipIndex.build([generate_clip("walk", 0, n_frames=60)], out, runner=Runner.inline())
+    with ClipIndex.open(out) as index:
+        name = index.rows()[0].name
+        with pytest.raises(ValueError, match="the only indexed clip with its features"):
+            index.search(name, k=3)

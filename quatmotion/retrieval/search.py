@@ -211,6 +211,16 @@ def search(
     rows, library, features, own = _query(index, query, method, sha256, path)
     ranking = METHODS[method].rank(library, features, exclude=own, k=k)  # type: ignore[arg-type]
     if ranking.clips.size == 0 and len(rows):
+        if not set(METHODS[method].kinds) & {"qssd", "ksvd"}:
+            # a position method ranks every clip but the query: none is the query alone or
+            # distances that were never defined
+            why = (
+                "the query is the only indexed clip with its features"
+                if len(rows) == 1 and own >= 0
+                else "no distance to it is defined (the index's stored features may be "
+                "damaged: build it again)"
+            )
+            raise ValueError(f"no indexed clip compares with the query under {method}: {why}")
         raise ValueError(
             f"no indexed clip compares with the query under {method}: it compares joint "
             "rotations, so only clips of the same skeleton (use a position-based method such "
